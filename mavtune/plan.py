@@ -1,0 +1,102 @@
+"""The plan of a run, known before take-off: rounds, flights, flight time and batteries.
+
+Two round counts: `rounds` is what the run takes on any unimodal cost (worst case over where the minimiser
+lies, speculation included), `rounds_max` is the guarantee whatever the costs (as if no speculative point
+were ever used). Without speculation — avg, or reuse off — the two are equal.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from mavtune.search import make_search
+from mavtune.tuner import Settings
+
+MINIMISER_PROBES = 64  # minimiser positions tried per line search for the unimodal worst case
+
+
+@dataclass(frozen=True)
+class Plan:
+    """How long a run takes, before it starts."""
+
+    rounds: int
+    rounds_max: int
+    vehicles: int
+    evaluations: int  # points the searches need (without speculative or replicate flights)
+    bootstraps: int  # planned bootstraps (the cap, for the paper's stop rule)
+    primitive_s: float
+    settle_s: float
+    battery_s: float
+    stop_rule: bool = False  # bootstraps end early when a point repeats (paper's rule)
+
+    @property
+    def flights(self) -> int:
+        return self.rounds * self.vehicles
+
+    @property
+    def round_s(self) -> float:
+        return self.primitive_s + self.settle_s
+
+    @property
+    def flight_time_s(self) -> float:
+        return self.rounds * self.round_s
+
+    @property
+    def flight_time_max_s(self) -> float:
+        return self.rounds_max * self.round_s
+
+    @property
+    def batteries(self) -> int:
+        """Battery packs per vehicle for the guaranteed flight time (a round never straddles two packs)."""
+        per_pack = max(1, int(self.battery_s // self.round_s))
+        return math.ceil(self.rounds_max / per_pack)
+
+    def describe(self) -> str:
+        lines = [
+            f"bootstraps    {self.bootstraps}" + (" at most (the paper's stop rule may end the run sooner)"
+                                                   if self.stop_rule else ""),
+            f"rounds        {self.rounds}" + (f" (at most {self.rounds_max} whatever the costs)"
+                                              if self.rounds_max != self.rounds else ""),
+            f"flights       {self.flights} ({self.vehicles} vehicles × {self.rounds} rounds; "
+            f"{self.evaluations} points searched)",
+            f"flight time   {_clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
+            f"primitive + {self.settle_s:g} s settle)",
+            f"batteries     {self.batteries} per vehicle of {_clock(self.battery_s)} each",
+        ]
+        return "\n".join(lines)
+
+
+def _clock(seconds: float) -> str:
+    m, s = divmod(int(round(seconds)), 60)
+    return f"{m} min {s:02d} s" if m else f"{s} s"
+
+
+def _rounds_of_search(settings: Settings, lo: float, hi: float, minimiser: float | None) -> int:
+    """Rounds one line search takes on |x − minimiser| (or, with None, without any speculative point)."""
+    search = make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse, points=settings.points)
+    if minimiser is None:
+        slots = settings.strategy_rule.slots(settings.vehicles)
+        return sum(math.ceil(n / slots) for n in search.needs() if n)
+    rounds = 0
+    while not search.done:
+        points = settings.strategy_rule.assign(search, settings.vehicles)
+        unique = sorted(set(points))
+        search.tell(unique, [abs(p - minimiser) for p in unique])
+        rounds += 1
+    return rounds
+
+
+def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.0, battery_s: float = 600.0) -> Plan:
+    """Count rounds for these settings; each gain's line search is counted once, times the bootstraps."""
+    bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
+    rounds = rounds_max = evaluations = 0
+    for lo, hi in settings.space.values():
+        probes = [lo + (hi - lo) * (i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]
+        rounds += max(_rounds_of_search(settings, lo, hi, m) for m in probes)
+        rounds_max += _rounds_of_search(settings, lo, hi, None)
+        evaluations += make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse,
+                                   points=settings.points).budget()
+    return Plan(rounds * bootstraps, max(rounds, rounds_max) * bootstraps, settings.vehicles,
+                evaluations * bootstraps, bootstraps, primitive_s, settle_s, battery_s,
+                stop_rule=settings.bootstraps is None)

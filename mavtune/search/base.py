@@ -1,0 +1,207 @@
+"""The ask/tell interface shared by every zero-order line search over one interval [lo, hi].
+
+Each method is a deterministic state machine over brackets: a state names the points to compare
+(`_points`), the index of the best of them moves it on (`_advance`), and the final state gives the result
+(`_result`). Everything else — asking only what is not known yet (reuse), telling in any order,
+the exact evaluation budget, speculating which points the next iterations will need — is written once here.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar, Hashable, Sequence
+
+from mavtune.errors import MavtuneError
+
+State = Hashable
+
+
+@dataclass(frozen=True)
+class Iteration:
+    """One finished comparison: the bracket it started from, its points and their costs, the index kept."""
+
+    bracket: tuple[float, float]
+    points: tuple[float, ...]
+    costs: tuple[float, ...]
+    best: int
+
+
+class LineSearch(ABC):
+    """Minimise a cost over [lo, hi] by comparisons; `ask()` what to fly, `tell()` what it cost."""
+
+    name: ClassVar[str]
+
+    def __init__(self, lo: float, hi: float, epsilon: float, *, reuse: bool = True):
+        lo, hi, epsilon = float(lo), float(hi), float(epsilon)
+        if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
+            raise MavtuneError(f"search interval [{lo}, {hi}] is empty: lo must be below hi")
+        if not 0.0 < epsilon < 0.5:
+            raise MavtuneError(f"epsilon {epsilon} is outside (0, 0.5)")
+        self.lo, self.hi, self.epsilon, self.reuse = lo, hi, epsilon, reuse
+        self.width0 = hi - lo
+        self._registry: dict[int, list[tuple[float, int]]] = {}
+        self._next_key = 0
+        self._state = self._initial()
+        self._costs: dict[int, float] = {}  # key -> cost of the points usable now
+        self.history: list[Iteration] = []
+        self.evaluations = 0  # points the finished iterations needed flown (as counted by budget())
+        self._used: set[int] = set()
+        self._settle()
+
+    # ----- what each method defines -------------------------------------------------------------
+
+    @abstractmethod
+    def _initial(self) -> State:
+        """The state before the first comparison."""
+
+    @abstractmethod
+    def _points(self, state: State) -> tuple[float, ...] | None:
+        """The points compared in this state, ascending; None once the search is finished."""
+
+    @abstractmethod
+    def _advance(self, state: State, best: int) -> State:
+        """The state after the comparison in which point `best` had the lowest cost."""
+
+    @abstractmethod
+    def _bracket(self, state: State) -> tuple[float, float]:
+        """The interval still holding the minimiser in this state."""
+
+    def _result(self, state: State) -> float:
+        """The estimate of the minimiser at the end: the midpoint of the last bracket."""
+        lo, hi = self._bracket(state)
+        return 0.5 * (lo + hi)
+
+    def _finished(self, width: float) -> bool:
+        """True once a bracket is narrow enough that its midpoint is within epsilon of the minimiser."""
+        return width <= 2.0 * self.epsilon * self.width0 * (1.0 + 1e-9)
+
+    # ----- ask / tell ---------------------------------------------------------------------------
+
+    def key(self, x: float) -> int:
+        """A point's identity: points closer than 1e-9 of the initial width are the same point.
+
+        Different paths through a search compute the same point with different float rounding; a bucketed
+        registry makes them one key without the boundary misses of plain rounding.
+        """
+        scaled = (x - self.lo) / self.width0 * 1e8
+        bucket = round(scaled)
+        for b in (bucket - 1, bucket, bucket + 1):
+            for y, k in self._registry.get(b, ()):
+                if abs(y - scaled) <= 0.1:
+                    return k
+        k = self._next_key
+        self._next_key += 1
+        self._registry.setdefault(bucket, []).append((scaled, k))
+        return k
+
+    @property
+    def done(self) -> bool:
+        return self._points(self._state) is None
+
+    @property
+    def result(self) -> float:
+        if not self.done:
+            raise MavtuneError(f"{self.name} search is not finished yet")
+        return self._result(self._state)
+
+    @property
+    def bracket(self) -> tuple[float, float]:
+        return self._bracket(self._state)
+
+    def ask(self) -> list[float]:
+        """The points of the current iteration whose cost is not known yet (all of them without reuse)."""
+        points = self._points(self._state)
+        if points is None:
+            return []
+        return [p for p in points if self.key(p) not in self._costs]
+
+    def tell(self, points: Sequence[float], costs: Sequence[float]) -> None:
+        """Record costs (NaN or infinite count as the worst); points of later iterations are kept for reuse."""
+        if len(points) != len(costs):
+            raise MavtuneError(f"told {len(costs)} costs for {len(points)} points")
+        current = {self.key(p) for p in (self._points(self._state) or ())}
+        for p, c in zip(points, costs):
+            k = self.key(p)
+            if not self.reuse and k not in current:
+                continue  # without reuse only the current iteration's points count
+            c = float(c)
+            self._costs[k] = c if not math.isnan(c) else math.inf
+        self._settle()
+
+    def _settle(self) -> None:
+        """Advance through every iteration whose points are all known."""
+        while (points := self._points(self._state)) is not None:
+            keys = [self.key(p) for p in points]
+            if any(k not in self._costs for k in keys):
+                return
+            costs = tuple(self._costs[k] for k in keys)
+            best = min(range(len(costs)), key=lambda i: costs[i])  # ties keep the leftmost
+            for k in keys:
+                if not self.reuse or k not in self._used:
+                    self.evaluations += 1
+                    self._used.add(k)
+            self.history.append(Iteration(self._bracket(self._state), tuple(points), costs, best))
+            self._state = self._advance(self._state, best)
+            if not self.reuse:
+                self._costs.clear()
+
+    # ----- planning -----------------------------------------------------------------------------
+
+    def needs(self, reuse: bool | None = None) -> list[int]:
+        """New points each iteration asks for, in order (every method here is path-independent in this)."""
+        reuse = self.reuse if reuse is None else reuse
+        state, known, counts = self._initial(), set(), []
+        while (points := self._points(state)) is not None:
+            keys = {self.key(p) for p in points} if reuse else [self.key(p) for p in points]
+            counts.append(sum(1 for k in keys if not reuse or k not in known))
+            known.update(keys)
+            state = self._advance(state, 0)
+        return counts
+
+    def budget(self, reuse: bool | None = None) -> int:
+        """Exactly how many cost evaluations a whole search needs."""
+        return sum(self.needs(reuse))
+
+    def speculate(self, n: int, exclude: Sequence[float] = (), max_nodes: int = 4096) -> list[float]:
+        """Up to `n` unknown points most likely to be needed by later iterations, most likely first.
+
+        Walks the tree of comparison outcomes from the current state; an outcome whose costs are all known
+        is followed for certain, otherwise each outcome gets an equal share of its parent's probability.
+        A point's score is the probability that the search will ask for it. Only meaningful with reuse.
+        """
+        if n <= 0 or not self.reuse or self.done:
+            return []
+        taken = {self.key(p) for p in exclude} | {self.key(p) for p in self.ask()}
+        score: dict[int, float] = {}
+        where: dict[int, float] = {}
+        depth_of: dict[int, int] = {}
+        heap: list[tuple[float, int, int, Any, frozenset]] = [(-1.0, 0, 0, self._state, frozenset(taken))]
+        counter, expanded = 1, 0
+        while heap and expanded < max_nodes:
+            neg_p, depth, _, state, flown = heapq.heappop(heap)
+            expanded += 1
+            prob = -neg_p
+            points = self._points(state)
+            if points is None:
+                continue
+            keys = [self.key(p) for p in points]
+            for p, k in zip(points, keys):
+                if k not in self._costs and k not in flown:
+                    score[k] = score.get(k, 0.0) + prob
+                    where[k] = p
+                    depth_of[k] = min(depth_of.get(k, depth), depth)
+            if all(k in self._costs for k in keys):
+                costs = [self._costs[k] for k in keys]
+                outcomes = [min(range(len(costs)), key=lambda i: costs[i])]
+            else:
+                outcomes = list(range(len(points)))
+            now_flown = flown | frozenset(keys)
+            for best in outcomes:
+                child = self._advance(state, best)
+                heapq.heappush(heap, (-prob / len(outcomes), depth + 1, counter, child, now_flown))
+                counter += 1
+        ranked = sorted(score, key=lambda k: (-score[k], depth_of[k], k))
+        return [where[k] for k in ranked[:n]]

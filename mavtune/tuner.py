@@ -1,0 +1,298 @@
+"""The tuning loop: bootstraps of one line search per gain ("shoe-lacing"), one round at a time.
+
+    for each bootstrap, for each gain in order:
+        search over the gain's full range, the other gains held at their latest values
+        each round: strategy.assign → fleet.fly (or the journal's record) → strategy.reduce → search.tell
+        → journal.append, durable before the next round
+
+The loop is deterministic given the costs, which is what makes resume-by-replay exact.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import CallableFleet, Evaluate, Fleet, Flight, Gains
+from mavtune.journal import Journal, RoundRecord
+from mavtune.search import Iteration, make_search
+from mavtune.strategy import Strategy
+
+MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
+
+
+@dataclass
+class Round:
+    """One round: what every vehicle flew and what it measured."""
+
+    index: int
+    bootstrap: int  # 1-based
+    gain: str
+    bracket: tuple[float, float]  # of the line search when the round was planned
+    assignments: list[Gains]
+    flights: list[Flight]
+    started_s: float
+    finished_s: float
+    replayed: bool = False  # taken from the journal, not flown in this process
+
+    @property
+    def costs(self) -> list[float]:
+        return [f.cost for f in self.flights]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "index": self.index,
+            "bootstrap": self.bootstrap,
+            "gain": self.gain,
+            "bracket": list(self.bracket),
+            "assignments": self.assignments,
+            "flights": [{k: v for k, v in f.to_dict().items() if k != "trace"} for f in self.flights],
+            "started_s": self.started_s,
+            "finished_s": self.finished_s,
+        }
+
+
+@dataclass
+class LineSearchRecord:
+    """One finished line search: which gain, in which bootstrap, its iterations and result."""
+
+    bootstrap: int
+    gain: str
+    held: Gains
+    iterations: list[Iteration]
+    result: float
+    evaluations: int
+
+
+@dataclass
+class TuningResult:
+    """The outcome of a tuning run."""
+
+    gains: Gains
+    rounds: list[Round]
+    searches: list[LineSearchRecord]
+    bootstraps: int
+    stop_reason: str
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def flights(self) -> int:
+        """Vehicle flights made, lost ones included."""
+        return sum(len(r.flights) for r in self.rounds)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "gains": self.gains,
+            "rounds": len(self.rounds),
+            "flights": self.flights,
+            "bootstraps": self.bootstraps,
+            "stop_reason": self.stop_reason,
+            "settings": self.settings,
+            "searches": [
+                {"bootstrap": s.bootstrap, "gain": s.gain, "held": s.held, "result": s.result,
+                 "evaluations": s.evaluations,
+                 "brackets": [list(i.bracket) for i in s.iterations]}
+                for s in self.searches
+            ],
+        }
+
+
+@dataclass
+class Settings:
+    """Validated tuning settings (everything of `tune()` but the fleet, the journal and callbacks)."""
+
+    space: dict[str, tuple[float, float]]
+    method: str = "eql"
+    epsilon: float = 0.125
+    bootstraps: int | None = 2
+    vehicles: int = 2
+    strategy: str = "avg"
+    reuse: bool = True
+    initial: Gains = field(default_factory=dict)
+    replicates: int | None = None
+    points: int | None = None
+    max_bootstraps: int = 10
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        if not self.space:
+            raise MavtuneError("space is empty: give at least one gain and its range, e.g. {'kp': (0.0, 1.0)}")
+        space = {}
+        for name, bounds in self.space.items():
+            try:
+                lo, hi = (float(b) for b in bounds)
+            except (TypeError, ValueError):
+                raise MavtuneError(f"range of gain {name!r} must be two numbers (lo, hi), got {bounds!r}") from None
+            if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
+                raise MavtuneError(f"range of gain {name!r} is [{lo}, {hi}]: lo must be below hi")
+            space[name] = (lo, hi)
+        self.space = space
+        if not 0.0 < float(self.epsilon) < 0.5:
+            raise MavtuneError(f"epsilon {self.epsilon} is outside (0, 0.5)")
+        if self.bootstraps is not None and int(self.bootstraps) < 1:
+            raise MavtuneError(f"bootstraps must be at least 1 (or None for the paper's stop rule), got {self.bootstraps}")
+        if int(self.vehicles) < 1:
+            raise MavtuneError(f"vehicles must be at least 1, got {self.vehicles}")
+        for name, value in self.initial.items():
+            if name not in self.space:
+                raise MavtuneError(f"initial value given for {name!r}, which is not in the space ({', '.join(self.space)})")
+            lo, hi = self.space[name]
+            if not lo <= float(value) <= hi:
+                raise MavtuneError(f"initial {name} = {value} is outside its range [{lo}, {hi}]")
+        self.strategy_rule = Strategy.make(self.strategy, int(self.vehicles), self.replicates)
+        if self.points is None:
+            self.points = max(2, self.strategy_rule.slots(int(self.vehicles)))
+        make_search(self.method, 0.0, 1.0, self.epsilon, reuse=self.reuse, points=self.points)  # validates
+
+    def start_gains(self) -> Gains:
+        """The gains before tuning: the given initial values, mid-range for the rest."""
+        return {n: float(self.initial.get(n, 0.5 * (lo + hi))) for n, (lo, hi) in self.space.items()}
+
+    def fingerprint(self) -> dict[str, Any]:
+        """What a journal must agree on to be resumed by this run."""
+        return {
+            "space": {n: list(b) for n, b in self.space.items()},
+            "method": self.method,
+            "epsilon": float(self.epsilon),
+            "bootstraps": self.bootstraps,
+            "strategy": self.strategy,
+            "replicates": self.strategy_rule.replicates if self.strategy == "groups" else None,
+            "points": self.points if self.method == "nsection" else None,
+            "reuse": bool(self.reuse),
+            "initial": self.start_gains(),
+            "max_bootstraps": self.max_bootstraps if self.bootstraps is None else None,
+        }
+
+
+class Tuner:
+    """Runs the bootstrap over a fleet, journaling each round; a journal with rounds is replayed first."""
+
+    def __init__(self, settings: Settings, fleet: Fleet, journal: Journal | None = None,
+                 on_round: Callable[[Round], None] | None = None):
+        self.settings, self.fleet, self.journal, self.on_round = settings, fleet, journal, on_round
+        self.recorded = journal.rounds() if journal is not None else {}
+        self.rounds: list[Round] = []
+        self._dry_rounds = 0
+
+    def run(self) -> TuningResult:
+        s = self.settings
+        gains = s.start_gains()
+        searches: list[LineSearchRecord] = []
+        found: list[Gains] = []
+        limit = s.bootstraps if s.bootstraps is not None else s.max_bootstraps
+        stop_reason = f"ran {limit} bootstraps"
+        bootstrap = 0
+        for bootstrap in range(1, limit + 1):
+            for name, (lo, hi) in s.space.items():
+                search = make_search(s.method, lo, hi, s.epsilon, reuse=s.reuse, points=s.points)
+                held = {n: v for n, v in gains.items() if n != name}
+                while not search.done:
+                    self._round(search, bootstrap, name, gains)
+                gains[name] = search.result
+                searches.append(LineSearchRecord(bootstrap, name, held, list(search.history), search.result,
+                                                 search.evaluations))
+            if s.bootstraps is None:
+                if any(all(math.isclose(gains[n], g[n], abs_tol=1e-12) for n in gains) for g in found):
+                    stop_reason = f"bootstrap {bootstrap} found a point already found before (paper's stop rule)"
+                    break
+                found.append(dict(gains))
+                stop_reason = f"reached the cap of {limit} bootstraps without a repeated point"
+        return TuningResult(gains=gains, rounds=self.rounds, searches=searches, bootstraps=bootstrap,
+                            stop_reason=stop_reason, settings=s.fingerprint())
+
+    def _round(self, search, bootstrap: int, name: str, gains: Gains) -> None:
+        """Plan, fly (or replay) and account one round of the current line search."""
+        index = len(self.rounds)
+        record = self.recorded.get(index)
+        vehicles = len(record.flights) if record is not None else self.fleet.size
+        if vehicles < 1:
+            raise MavtuneError(f"no vehicle is available to fly round {index}")
+        points = self.settings.strategy_rule.assign(search, vehicles)
+        assignments = [{**gains, name: p} for p in points]
+        bracket = search.bracket
+        if record is not None:
+            self._check_replay(record, assignments)
+            flights, started, finished, replayed = record.flights, record.started_s, record.finished_s, True
+        else:
+            started = time.time()
+            flights = list(self.fleet.fly(assignments, index))
+            finished = time.time()
+            if len(flights) != len(assignments):
+                raise MavtuneError(f"the fleet returned {len(flights)} flights for {len(assignments)} assignments "
+                                   f"in round {index}")
+            replayed = False
+            if self.journal is not None:
+                self.journal.append(RoundRecord(index, bootstrap, name, assignments, flights, started, finished))
+        rnd = Round(index, bootstrap, name, bracket, assignments, flights, started, finished, replayed)
+        self.rounds.append(rnd)
+        told_points, costs = Strategy.reduce(search, points, flights)
+        search.tell(told_points, costs)
+        self._dry_rounds = 0 if told_points else self._dry_rounds + 1
+        if self.on_round is not None:
+            self.on_round(rnd)
+        if self._dry_rounds >= MAX_ROUNDS_WITHOUT_RESULT:
+            raise MavtuneError(f"no vehicle returned a result in {MAX_ROUNDS_WITHOUT_RESULT} consecutive rounds "
+                               f"(last: round {index}); the journal keeps every round so far")
+
+    def _check_replay(self, record: RoundRecord, assignments: list[Gains]) -> None:
+        same = len(record.assignments) == len(assignments) and all(
+            set(a) == set(b) and all(math.isclose(a[k], b[k], abs_tol=1e-12) for k in a)
+            for a, b in zip(record.assignments, assignments)
+        )
+        if not same:
+            raise MavtuneError(f"journal round {record.index} does not match this run's round "
+                               f"(recorded {record.assignments}, now {assignments}); use a new journal")
+
+
+def tune(
+    evaluate: Evaluate | Fleet | None = None,
+    space: Mapping[str, tuple[float, float]] | None = None,
+    method: str = "eql",
+    epsilon: float = 0.125,
+    bootstraps: int | None = 2,
+    vehicles: int | None = None,
+    strategy: str = "avg",
+    reuse: bool = True,
+    initial: Gains | None = None,
+    journal: str | Path | None = None,
+    seed: int | None = None,
+    *,
+    replicates: int | None = None,
+    points: int | None = None,
+    max_bootstraps: int = 10,
+    on_round: Callable[[Round], None] | None = None,
+) -> TuningResult:
+    """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
+
+    `evaluate` is a function (one round: list of assignments → one cost per vehicle), a `Fleet`, or None
+    for the built-in simulator (`vehicles` simulated vehicles, default scenario, `seed`). `replicates` is r
+    of the groups strategy, `points` the points per iteration of nsection (default: one per slot),
+    `max_bootstraps` caps the paper's stop rule (`bootstraps=None`), `on_round` sees every round as it ends.
+    """
+    space = dict(space if space is not None else {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
+    if evaluate is None:
+        from mavtune.sim import SimFleet
+
+        fleet: Fleet = SimFleet(vehicles or 2, seed=seed or 0)
+    elif isinstance(evaluate, Fleet):
+        fleet = evaluate
+    elif callable(evaluate):
+        fleet = CallableFleet(evaluate, vehicles or 2)
+    else:
+        raise MavtuneError(f"evaluate must be a function, a Fleet or None, got {type(evaluate).__name__}")
+    settings = Settings(space=space, method=method, epsilon=epsilon, bootstraps=bootstraps,
+                        vehicles=vehicles if vehicles is not None else fleet.size, strategy=strategy, reuse=reuse,
+                        initial=dict(initial or {}), replicates=replicates, points=points,
+                        max_bootstraps=max_bootstraps, seed=seed)
+    book = Journal(journal) if journal is not None else None
+    try:
+        if book is not None:
+            book.bind(settings.fingerprint())
+        return Tuner(settings, fleet, book, on_round).run()
+    finally:
+        if book is not None:
+            book.close()
