@@ -1,0 +1,149 @@
+"""Journal and resume: an interrupted run continues to the identical result, flying no recorded round again."""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import mavtune
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Flight, Status
+from mavtune.journal import Journal
+
+
+class Crash(Exception):
+    """Stands for the process dying in the middle of a round."""
+
+
+def noisy_cost(g):
+    """Deterministic in the gains but bumpy, so the path depends on every recorded cost."""
+    return (g["kp"] - 0.7) ** 2 + (g["kd"] - 0.4) ** 2 + 0.05 * math.sin(37 * g["kp"] + 91 * g["kd"])
+
+
+class CountingFleet:
+    """A fleet that logs what it flies and can crash in the middle of a given round."""
+
+    def __init__(self, vehicles, crash_at=None):
+        self.vehicles, self.crash_at, self.flown = vehicles, crash_at, []
+
+    @property
+    def size(self):
+        return self.vehicles
+
+    def fly(self, assignments, round_id):
+        if round_id == self.crash_at:
+            raise Crash(round_id)
+        self.flown.append(round_id)
+        return [Flight(f"v{i}", g, noisy_cost(g)) for i, g in enumerate(assignments)]
+
+    def close(self):
+        pass
+
+
+SETTINGS = dict(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, initial={"kd": 0.2}, bootstraps=2)
+
+
+@given(st.integers(0, 19), st.sampled_from(["avg", "split"]), st.integers(1, 4))
+@settings(max_examples=20)
+def test_resume_after_a_crash_mid_round_is_identical(tmp_path_factory, crash_at, strategy, vehicles):
+    path = tmp_path_factory.mktemp("j") / "journal.sqlite"
+    reference = mavtune.tune(CountingFleet(vehicles), strategy=strategy, **SETTINGS)
+    crash_at = min(crash_at, len(reference.rounds) - 1)
+    with pytest.raises(Crash):
+        mavtune.tune(CountingFleet(vehicles, crash_at=crash_at), strategy=strategy, journal=path, **SETTINGS)
+    with Journal(path) as j:
+        assert sorted(j.rounds()) == list(range(crash_at))  # the crashed round was not recorded
+    fleet = CountingFleet(vehicles)
+    resumed = mavtune.tune(fleet, strategy=strategy, journal=path, **SETTINGS)
+    assert fleet.flown == list(range(crash_at, len(reference.rounds)))  # no recorded round flown again
+    assert resumed.gains == reference.gains
+    assert [r.assignments for r in resumed.rounds] == [r.assignments for r in reference.rounds]
+    assert [r.replayed for r in resumed.rounds] == [i < crash_at for i in range(len(reference.rounds))]
+
+
+def test_finished_journal_replays_without_flying(tmp_path):
+    path = tmp_path / "j.sqlite"
+    first = mavtune.tune(CountingFleet(2), journal=path, **SETTINGS)
+    fleet = CountingFleet(2)
+    again = mavtune.tune(fleet, journal=path, **SETTINGS)
+    assert fleet.flown == [] and again.gains == first.gains
+
+
+def test_journal_keeps_non_finite_costs_and_lost_flights(tmp_path):
+    path = tmp_path / "j.sqlite"
+    with Journal(path) as j:
+        from mavtune.journal import RoundRecord
+        flights = [Flight("a", {"kp": 0.1}, math.inf, Status.FAILED), Flight("b", {"kp": 0.1}, math.nan, Status.LOST)]
+        j.append(RoundRecord(0, 1, "kp", [{"kp": 0.1}] * 2, flights, 1.0, 2.0))
+    with Journal(path) as j:
+        back = j.rounds()[0].flights
+    assert back[0].cost == math.inf and back[0].status is Status.FAILED
+    assert math.isnan(back[1].cost) and back[1].status is Status.LOST
+
+
+def test_resume_with_other_settings_is_refused_and_keeps_the_journal(tmp_path):
+    path = tmp_path / "j.sqlite"
+    mavtune.tune(CountingFleet(2), journal=path, **SETTINGS)
+    size = path.stat().st_size
+    with pytest.raises(MavtuneError, match="epsilon was 0.125, now 0.1"):
+        mavtune.tune(CountingFleet(2), journal=path, epsilon=0.1, **SETTINGS)
+    assert path.stat().st_size == size
+    with Journal(path) as j:
+        assert len(j.rounds()) == 36
+
+
+def test_a_file_that_is_not_a_journal_is_named(tmp_path):
+    path = tmp_path / "notes.sqlite"
+    path.write_text("these are my flight notes, not a database\n" * 50)
+    with pytest.raises(MavtuneError, match="not a readable SQLite journal"):
+        mavtune.tune(CountingFleet(2), journal=path, **SETTINGS)
+    assert path.read_text().startswith("these are my flight notes")
+
+
+def test_rounds_are_durable_before_the_next_round(tmp_path):
+    path = tmp_path / "j.sqlite"
+    counts = []
+
+    class Peeking(CountingFleet):
+        def fly(self, assignments, round_id):
+            with sqlite3.connect(path) as db:  # another reader sees every earlier round already committed
+                counts.append(db.execute("SELECT COUNT(*) FROM rounds").fetchone()[0])
+            return super().fly(assignments, round_id)
+
+    mavtune.tune(Peeking(2), journal=path, **SETTINGS)
+    assert counts == list(range(len(counts)))
+
+
+class DroppingFleet(CountingFleet):
+    """Vehicle 1 is lost in every odd round; in round 3 every vehicle is lost."""
+
+    def fly(self, assignments, round_id):
+        flights = super().fly(assignments, round_id)
+        for i, f in enumerate(flights):
+            if round_id == 3 or (i == 1 and round_id % 2):
+                flights[i] = Flight(f.vehicle, f.gains, math.nan, Status.LOST)
+        return flights
+
+
+def test_lost_flights_are_flown_again_and_the_result_does_not_change():
+    reference = mavtune.tune(CountingFleet(2), strategy="split", reuse=False, **SETTINGS)
+    dropped = mavtune.tune(DroppingFleet(2), strategy="split", reuse=False, **SETTINGS)
+    assert dropped.gains == reference.gains
+    assert len(dropped.rounds) > len(reference.rounds)
+    lost_points = [a["kp"] for a, f in zip(dropped.rounds[3].assignments, dropped.rounds[3].flights)]
+    assert [a["kp"] for a in dropped.rounds[4].assignments][:1] == lost_points[:1]
+
+
+def test_a_fleet_that_never_returns_stops_with_a_clear_error(tmp_path):
+    class Gone(CountingFleet):
+        def fly(self, assignments, round_id):
+            return [Flight(f"v{i}", g, math.nan, Status.LOST) for i, g in enumerate(assignments)]
+
+    path = tmp_path / "j.sqlite"
+    with pytest.raises(MavtuneError, match="no vehicle returned a result in 5 consecutive rounds"):
+        mavtune.tune(Gone(2), journal=path, **SETTINGS)
+    with Journal(path) as j:
+        assert len(j.rounds()) == 5

@@ -1,0 +1,132 @@
+"""Line searches: tolerance, exact budgets, reuse, and the authors' EQL sequence."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import example, given, strategies as st
+
+from mavtune.errors import MavtuneError
+from mavtune.search import EQL, METHODS, make_search
+
+
+def run(search, cost):
+    """Fly every asked point once; return the points flown in order."""
+    flown = []
+    while not search.done:
+        points = search.ask()
+        assert points, "an unfinished search must ask for something"
+        flown += points
+        search.tell(points, [cost(p) for p in points])
+    return flown
+
+
+unimodal = st.tuples(
+    st.floats(-100, 100), st.floats(0.01, 100),  # lo, width
+    st.floats(0, 1),  # where the minimiser lies, as a fraction of the width
+    st.floats(0.5, 4),  # shape exponent
+    st.floats(0.2, 5),  # asymmetry of the two sides
+)
+
+
+@given(unimodal, st.floats(0.01, 0.49), st.sampled_from(sorted(METHODS)), st.booleans(), st.integers(2, 9))
+@example((0.0, 1.0, 0.05, 2.0, 1.0), 0.4, "eql", True, 2)
+@example((0.0, 1.0, 0.95, 2.0, 1.0), 0.4, "eql", True, 2)
+@example((0.0, 1.0, 0.5, 2.0, 1.0), 0.125, "nsection", True, 3)
+def test_every_method_ends_within_tolerance_using_exactly_its_budget(shape, epsilon, method, reuse, n):
+    lo, width, frac, power, asym = shape
+    hi = lo + width
+    m = lo + frac * width
+
+    def cost(x):
+        d = x - m
+        return (abs(d) ** power) * (asym if d > 0 else 1.0)
+
+    search = make_search(method, lo, hi, epsilon, reuse=reuse, points=n)
+    budget = search.budget()
+    flown = run(search, cost)
+    assert len(flown) == budget == search.evaluations
+    assert abs(search.result - m) <= epsilon * width * (1 + 1e-9)
+    assert lo <= search.result <= hi
+
+
+@given(st.floats(0.01, 0.49))
+def test_eql_general_rule_iterations_and_reuse_saving(epsilon):
+    s = EQL(0.0, 1.0, epsilon)
+    n = s.full_iterations
+    assert s.budget(reuse=False) == 2 * (n + 1)
+    # with reuse the first and the half-step iteration ask two points, every other full iteration one; the
+    # half step can land on an earlier point when 1/ε is a half-integer (ε = 0.4), saving one more
+    assert s.budget(reuse=True) in ({n + 3, n + 2} if n else {2})
+
+
+def test_eql_authors_sequence_and_counts():
+    s = EQL(0.0, 1.0, 0.125, reuse=False)
+    assert s.budget() == 14 and s.budget(reuse=True) == 9
+    flown = run(s, lambda x: (x - 0.9) ** 2)
+    assert flown[:4] == [0.125, 0.875, 0.25, 0.875]
+    # six full cuts of 1/8 leave 1/4; the last iteration steps 1/16; the result lies on the 1/32 grid
+    assert flown[-2:] == [0.8125, 0.9375]
+    assert s.result == 0.90625
+    last = s.history[-1]
+    assert last.bracket == (0.75, 1.0)
+
+
+def test_eql_ties_cut_from_the_right():
+    s = EQL(0.0, 1.0, 0.125, reuse=False)
+    s.tell([0.125, 0.875], [1.0, 1.0])
+    assert s.bracket == (0.0, 0.875)
+
+
+def test_reuse_takes_the_kept_point_and_saves_almost_40_percent():
+    with_reuse = EQL(0.0, 1.0, 0.125, reuse=True)
+    flown = run(with_reuse, lambda x: abs(x - 0.3))
+    assert len(flown) == len(set(flown)) == 9
+    assert 1 - 9 / 14 == pytest.approx(0.357, abs=1e-3)
+
+
+def test_non_finite_cost_counts_as_the_worst():
+    s = EQL(0.0, 1.0, 0.125)
+    s.tell([0.125, 0.875], [math.nan, 5.0])
+    assert s.bracket == (0.125, 1.0)
+    s2 = EQL(0.0, 1.0, 0.125)
+    s2.tell([0.125, 0.875], [3.0, math.inf])
+    assert s2.bracket == (0.0, 0.875)
+
+
+def test_told_points_of_later_iterations_are_reused():
+    s = EQL(0.0, 1.0, 0.125)
+    s.tell([0.125, 0.875, 0.75], [2.0, 1.0, 0.5])  # 0.75 is speculative
+    assert s.bracket == (0.125, 1.0)
+    assert s.ask() == [0.25]
+
+
+def test_speculation_covers_the_whole_grid_with_eight_vehicles():
+    s = EQL(0.0, 1.0, 0.125)
+    extra = s.speculate(6, exclude=s.ask())
+    # the 1/8 grid holds every point of the six full iterations: all of it is flown in the first round
+    assert set(s.ask()) | set(extra) >= {0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875}
+
+
+@pytest.mark.parametrize("lo, hi", [(1.0, 1.0), (2.0, 1.0), (0.0, math.inf)])
+def test_empty_interval_is_refused(lo, hi):
+    with pytest.raises(MavtuneError, match="empty"):
+        make_search("eql", lo, hi, 0.125)
+
+
+@pytest.mark.parametrize("epsilon", [0.0, 0.5, -0.1, 0.7])
+def test_epsilon_outside_range_is_refused(epsilon):
+    with pytest.raises(MavtuneError, match="epsilon"):
+        make_search("golden", 0.0, 1.0, epsilon)
+
+
+def test_unknown_method_is_named():
+    with pytest.raises(MavtuneError, match="unknown method 'newton'"):
+        make_search("newton", 0.0, 1.0, 0.1)
+
+
+def test_eql_half_integer_epsilon_reuses_the_half_step_point():
+    s = EQL(0.0, 1.0, 0.4)
+    assert s.budget(reuse=True) == 3
+    assert len(run(s, lambda x: abs(x - 0.05))) == 3

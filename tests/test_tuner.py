@@ -1,0 +1,126 @@
+"""The bootstrap, the strategies and the public API on noise-free and broken costs."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import mavtune
+from mavtune.errors import MavtuneError
+
+PAPER = dict(method="eql", epsilon=0.125, bootstraps=2, initial={"kd": 0.2}, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
+
+
+def bowl(kp0=0.9, kd0=0.33):
+    """A noise-free cost, coupled between the gains, minimum at (kp0, kd0)."""
+    def evaluate(assignments):
+        return [(g["kp"] - kp0) ** 2 + 0.5 * (g["kd"] - kd0) ** 2 + 0.3 * (g["kp"] - kp0) * (g["kd"] - kd0)
+                for g in assignments]
+    return evaluate
+
+
+def points(result):
+    return [tuple(a.values()) for r in result.rounds for a in r.assignments]
+
+
+def test_avg_without_reuse_is_the_authors_sequence():
+    result = mavtune.tune(bowl(), vehicles=2, strategy="avg", reuse=False, **PAPER)
+    assert len(result.rounds) == 56 and result.flights == 112
+    firsts = [tuple(r.assignments[0].values()) for r in result.rounds[:4]]
+    assert firsts == [(0.125, 0.2), (0.875, 0.2), (0.25, 0.2), (0.875, 0.2)]
+    assert all(r.assignments[0] == r.assignments[1] for r in result.rounds)
+    assert [r.gain for r in result.rounds] == (["kp"] * 14 + ["kd"] * 14) * 2
+    # the second bootstrap searches kp over its full range again, kd held at its first result
+    assert result.rounds[28].assignments[0] == {"kp": 0.125, "kd": result.searches[1].result}
+
+
+def test_reuse_and_split_keep_the_final_gains():
+    reference = mavtune.tune(bowl(), vehicles=2, strategy="avg", reuse=False, **PAPER)
+    with_reuse = mavtune.tune(bowl(), vehicles=2, strategy="avg", reuse=True, **PAPER)
+    split = mavtune.tune(bowl(), vehicles=2, strategy="split", reuse=False, **PAPER)
+    assert len(with_reuse.rounds) == 36 and len(split.rounds) == 28
+    assert with_reuse.gains == split.gains == reference.gains
+
+
+@given(st.floats(0.02, 0.98), st.floats(0.02, 0.98))
+@settings(max_examples=25)
+def test_speculation_meets_the_round_goals_at_equal_cost(kp0, kd0):
+    reference = mavtune.tune(bowl(kp0, kd0), vehicles=2, strategy="split", reuse=False, **PAPER)
+    two = mavtune.tune(bowl(kp0, kd0), vehicles=2, strategy="split", reuse=True, **PAPER)
+    eight = mavtune.tune(bowl(kp0, kd0), vehicles=8, strategy="split", reuse=True, **PAPER)
+    assert len(two.rounds) <= 20 and len(eight.rounds) <= 8
+    assert two.gains == eight.gains == reference.gains
+
+
+def test_groups_fly_each_point_on_r_vehicles():
+    result = mavtune.tune(bowl(), vehicles=6, strategy="groups", replicates=3, **PAPER)
+    first = [a["kp"] for a in result.rounds[0].assignments]
+    assert first[:3] == [0.125] * 3 and first[3:] == [0.875] * 3
+    assert result.gains == mavtune.tune(bowl(), vehicles=2, strategy="avg", **PAPER).gains
+
+
+def test_avg_takes_the_mean_over_vehicles():
+    seen = []
+
+    def evaluate(assignments):
+        seen.append(len(assignments))
+        return [1.0 if i == 0 else 3.0 for i, _ in enumerate(assignments)]  # mean 2.0 everywhere: ties
+
+    result = mavtune.tune(evaluate, vehicles=2, bootstraps=1, **{k: v for k, v in PAPER.items() if k != "bootstraps"})
+    assert set(seen) == {2}
+    assert result.rounds[0].costs == [1.0, 3.0]
+
+
+def test_paper_stop_rule_ends_when_a_point_repeats():
+    result = mavtune.tune(bowl(), vehicles=1, bootstraps=None, **{k: v for k, v in PAPER.items() if k != "bootstraps"})
+    assert 2 <= result.bootstraps < 10
+    assert "already found" in result.stop_reason
+    ends = [(s.bootstrap, s.gain, s.result) for s in result.searches]
+    last = {g: r for b, g, r in ends if b == result.bootstraps}
+    earlier = {g: r for b, g, r in ends if b == result.bootstraps - 1}
+    assert last == earlier
+
+
+def test_any_number_of_gains_in_the_given_order():
+    space = {"a": (-1.0, 1.0), "b": (0.0, 10.0), "c": (5.0, 6.0)}
+    target = {"a": 0.3, "b": 7.0, "c": 5.2}
+    result = mavtune.tune(lambda gs: [sum((g[k] - target[k]) ** 2 for k in g) for g in gs], space=space,
+                          method="golden", epsilon=0.05, bootstraps=1, vehicles=3, strategy="split")
+    assert [s.gain for s in result.searches] == ["a", "b", "c"]
+    for k, (lo, hi) in space.items():
+        assert abs(result.gains[k] - target[k]) <= 0.05 * (hi - lo)
+
+
+def test_nan_cost_is_recorded_and_counts_as_worst():
+    def evaluate(assignments):
+        return [math.nan if g["kp"] == 0.125 else (g["kp"] - 0.1) ** 2 for g in assignments]
+
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, vehicles=1, bootstraps=1)
+    assert math.isnan(result.rounds[0].costs[0])
+    assert result.rounds[0].flights[0].status is mavtune.Status.FAILED
+    assert result.rounds[1].assignments[0]["kp"] == 0.875
+    assert result.gains["kp"] > 0.125  # NaN lost the first comparison
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(space={}), "space is empty"),
+    (dict(space={"kp": (1.0, 0.0)}), "lo must be below hi"),
+    (dict(epsilon=0.5), "epsilon 0.5 is outside"),
+    (dict(vehicles=0), "vehicles must be at least 1"),
+    (dict(vehicles=3, strategy="groups", replicates=2), "do not divide"),
+    (dict(strategy="fastest"), "unknown strategy"),
+    (dict(initial={"ki": 0.1}), "'ki', which is not in the space"),
+    (dict(initial={"kd": 2.0}), "outside its range"),
+    (dict(bootstraps=0), "bootstraps must be at least 1"),
+])
+def test_bad_input_is_one_line_naming_the_problem(kwargs, message):
+    with pytest.raises(MavtuneError, match=message) as info:
+        mavtune.tune(bowl(), **{"vehicles": 2, **kwargs})
+    assert "\n" not in str(info.value)
+
+
+def test_wrong_number_of_costs_is_named():
+    with pytest.raises(MavtuneError, match="returned 1 costs for 2 assignments"):
+        mavtune.tune(lambda gs: [0.0], vehicles=2, strategy="split")
