@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import sys
+import time
+from pathlib import Path
+from typing import List, Optional
 
 import typer
 
@@ -16,7 +19,88 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-# Commands are registered below, one line each: app.command("name")(function).
+
+def _overrides(**flags) -> dict:
+    """Flags given on the command line, as dotted config keys (unset flags are None and left out)."""
+    return {k.replace("__", "."): v for k, v in flags.items() if v is not None}
+
+
+def _bootstraps(value: Optional[str]) -> int | str | None:
+    if value is None or value == "auto":
+        return value
+    try:
+        return int(value)
+    except ValueError:
+        raise MavtuneError(f"--bootstraps must be a whole number or 'auto', got {value!r}") from None
+
+
+ConfigOpt = typer.Option(None, "--config", "-c", help="TOML config file ([tuning], [flight], [sim], [fleet], ...).")
+VehiclesOpt = typer.Option(None, "--vehicles", "-n", help="Vehicles flying each round.")
+StrategyOpt = typer.Option(None, "--strategy", help="avg | split | groups.")
+ReplicatesOpt = typer.Option(None, "--replicates", help="groups: vehicles per point (r).")
+MethodOpt = typer.Option(None, "--method", help="eql | fibonacci | golden | dichotomy | nsection.")
+EpsilonOpt = typer.Option(None, "--epsilon", help="Tolerance as a fraction of each gain's range, in (0, 0.5).")
+BootstrapsOpt = typer.Option(None, "--bootstraps", help="Passes over the gains, or 'auto' for the paper's stop rule.")
+ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twice in one line search.")
+BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
+
+
+def _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, **more):
+    from mavtune.config import load_config
+
+    return load_config(config, _overrides(
+        tuning__vehicles=vehicles, tuning__strategy=strategy, tuning__replicates=replicates, tuning__method=method,
+        tuning__epsilon=epsilon, tuning__bootstraps=_bootstraps(bootstraps), tuning__reuse=reuse,
+        flight__battery_s=battery_s, **more))
+
+
+@app.command("plan")
+def plan_command(
+    config: Optional[Path] = ConfigOpt, vehicles: Optional[int] = VehiclesOpt, strategy: Optional[str] = StrategyOpt,
+    replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
+    epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
+    reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
+) -> None:
+    """Print, before anything flies, the rounds, flights, flight time and batteries a run needs."""
+    from mavtune.run import plan_of, _plan_panel
+    from rich.console import Console
+
+    cfg = _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s)
+    Console().print(_plan_panel(cfg, plan_of(cfg)))
+
+
+@app.command("tune")
+def tune_command(
+    config: Optional[Path] = ConfigOpt, vehicles: Optional[int] = VehiclesOpt, strategy: Optional[str] = StrategyOpt,
+    replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
+    epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
+    reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
+    seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the simulated vehicles (vehicle j: seed + j)."),
+    payload: Optional[float] = typer.Option(None, "--payload", help="sim: payload mass, kg (paper: 0.9)."),
+    fleet: Optional[str] = typer.Option(None, "--fleet", help="sim (built in) | zenoh (swarm agents) | mavlink."),
+    listen: Optional[str] = typer.Option(None, "--listen", help="zenoh: endpoint to listen on, e.g. tcp/0.0.0.0:7447."),
+    mavlink: Optional[List[str]] = typer.Option(None, "--mavlink", help="mavlink: a vehicle URL (repeat for more)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder (default runs/tune-<time>); "
+                                       "a folder holding a journal is resumed."),
+    resume: bool = typer.Option(False, "--resume", help="Require --out to hold a journal and continue it."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No per-round lines or progress bar."),
+) -> None:
+    """Tune the gains: the paper's setting on 2 simulated vehicles unless told otherwise."""
+    from mavtune.run import JOURNAL, run
+
+    cfg = _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
+                  tuning__seed=seed, sim__payload_kg=payload, fleet__kind=fleet, swarm__listen=listen,
+                  mavlink__urls=mavlink or None)
+    if out is None:
+        if resume:
+            raise MavtuneError("--resume needs --out naming the run folder to continue")
+        out = Path("runs") / time.strftime("tune-%Y%m%d-%H%M%S")
+    if resume and not (out / JOURNAL).exists():
+        raise MavtuneError(f"--resume: {out / JOURNAL} does not exist")
+    run(cfg, out, quiet=quiet)
+
+
+# Other commands are registered below, one line each: app.command("name")(function).
 from mavtune.swarm.cli import agent_command, coordinator_command  # noqa: E402
 
 app.command("agent")(agent_command)

@@ -60,14 +60,15 @@ class Plan:
                                               if self.rounds_max != self.rounds else ""),
             f"flights       {self.flights} ({self.vehicles} vehicles × {self.rounds} rounds; "
             f"{self.evaluations} points searched)",
-            f"flight time   {_clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
+            f"flight time   {clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
             f"primitive + {self.settle_s:g} s settle)",
-            f"batteries     {self.batteries} per vehicle of {_clock(self.battery_s)} each",
+            f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each",
         ]
         return "\n".join(lines)
 
 
-def _clock(seconds: float) -> str:
+def clock(seconds: float) -> str:
+    """Seconds as '5 min 24 s'."""
     m, s = divmod(int(round(seconds)), 60)
     return f"{m} min {s:02d} s" if m else f"{s} s"
 

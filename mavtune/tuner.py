@@ -288,6 +288,12 @@ def tune(
                         vehicles=vehicles if vehicles is not None else fleet.size, strategy=strategy, reuse=reuse,
                         initial=dict(initial or {}), replicates=replicates, points=points,
                         max_bootstraps=max_bootstraps, seed=seed)
+    return run_tuning(settings, fleet, journal, on_round)
+
+
+def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,
+               on_round: Callable[[Round], None] | None = None) -> TuningResult:
+    """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds)."""
     book = Journal(journal) if journal is not None else None
     try:
         if book is not None:

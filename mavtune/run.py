@@ -1,0 +1,150 @@
+"""A tuning run as the `mavtune tune` command does it: plan, fleet, live progress, run folder, report.
+
+The run folder holds `journal.sqlite` (every round, durable), `config.json`, `result.json` and the report.
+Pointing a new run at a folder that has a journal resumes it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from mavtune.config import Config
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Fleet, Status
+from mavtune.journal import Journal
+from mavtune.plan import Plan, clock as _clock_s, make_plan
+from mavtune.tuner import Round, TuningResult, run_tuning
+
+JOURNAL = "journal.sqlite"
+
+
+def plan_of(config: Config) -> Plan:
+    """The plan of a configuration, with its flight timing."""
+    f = config.flight
+    return make_plan(config.settings(), f.primitive_s, f.settle_s, f.battery_s)
+
+
+def build_fleet(config: Config, out_dir: Path) -> Fleet:
+    """The vehicles the configuration names: the built-in simulator, swarm agents or MAVLink vehicles."""
+    kind = config.fleet.kind
+    vehicles = config.tuning.vehicles
+    if kind == "sim":
+        from mavtune.sim import SimFleet
+
+        return SimFleet(vehicles, config.scenario(), seed=config.tuning.seed)
+    if kind == "zenoh":
+        from mavtune.swarm.coordinator import fleet_from_config
+
+        return fleet_from_config(config, out_dir)
+    from mavtune.vehicles.mavlink.fleet import fleet_from_config as mavlink_fleet
+
+    return mavlink_fleet(config, out_dir)
+
+
+class RoundView:
+    """Live progress: a bar over the planned rounds and one line per round (gain, bracket, points, costs)."""
+
+    def __init__(self, console: Console, plan: Plan, quiet: bool = False):
+        self.console, self.plan, self.quiet = console, plan, quiet
+        self.progress = Progress(
+            TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+            console=console, disable=quiet, transient=False,
+        )
+        self.task = self.progress.add_task("tuning", total=plan.rounds)
+
+    def __enter__(self) -> "RoundView":
+        self.progress.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.progress.stop()
+
+    def __call__(self, rnd: Round) -> None:
+        total = max(self.plan.rounds, rnd.index + 1)
+        lo, hi = rnd.bracket
+        self.progress.update(self.task, completed=rnd.index + 1, total=total,
+                             description=f"bootstrap {rnd.bootstrap} · {rnd.gain} in [{lo:.4g}, {hi:.4g}]")
+        if self.quiet:
+            return
+        points = " ".join(f"{a[rnd.gain]:.4g}" for a in rnd.assignments)
+        costs = " ".join(_cost_text(f.cost, f.status) for f in rnd.flights)
+        tag = " (journal)" if rnd.replayed else ""
+        self.progress.console.print(
+            f"[dim]round {rnd.index + 1:>3}/{total}[/] b{rnd.bootstrap} {rnd.gain:<4} "
+            f"[{lo:.4g}, {hi:.4g}]  {rnd.gain} = {points}  cost {costs}{tag}", highlight=False)
+
+
+def _cost_text(cost: float, status: Status) -> str:
+    if status is Status.LOST:
+        return "[yellow]lost[/]"
+    if status is Status.FAILED or not math.isfinite(cost):
+        return f"[red]failed({cost:.3g})[/]"
+    return f"{cost:.4g}"
+
+
+def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bool = False,
+        report: bool = True) -> TuningResult:
+    """Plan, fly and record one tuning run into `out_dir`; an existing journal there is resumed."""
+    console = console or Console()
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise MavtuneError(f"output path {out_dir} is a file, not a folder")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    journal = out_dir / JOURNAL
+    settings = config.settings()
+    plan = plan_of(config)
+    if journal.exists():
+        with Journal(journal) as j:
+            recorded = len(j.rounds())
+        console.print(f"resuming {journal}: {recorded} rounds recorded will not be flown again")
+    console.print(_plan_panel(config, plan))
+    (out_dir / "config.json").write_text(json.dumps(config.model_dump(mode="json"), indent=2))
+    fleet = build_fleet(config, out_dir)
+    started = time.time()
+    try:
+        with RoundView(console, plan, quiet) as view:
+            result = run_tuning(settings, fleet, journal, on_round=view)
+    finally:
+        fleet.close()
+    summary = {**result.to_dict(), "fleet": config.fleet.kind, "wall_s": time.time() - started,
+               "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s},
+               "flight_time_s": len(result.rounds) * plan.round_s, "events": _events(fleet)}
+    (out_dir / "result.json").write_text(json.dumps(summary, indent=2))
+    if report:
+        from mavtune.report import write_run_report
+
+        write_run_report(out_dir, result, config)
+    console.print(f"tuned after {len(result.rounds)} rounds, {result.flights} flights "
+                  f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
+    console.print(_result_table(result))
+    console.print(f"run folder: {out_dir}")
+    return result
+
+
+def _events(fleet: Fleet) -> list[Any]:
+    """What the fleet saw happen (drop-outs, rejoins, aborts), when it keeps such a log."""
+    return list(getattr(fleet, "events", []) or [])
+
+
+def _plan_panel(config: Config, plan: Plan) -> str:
+    t = config.tuning
+    head = (f"[bold]plan[/]  {t.method} ε={t.epsilon:g} over {', '.join(t.space)} · {t.vehicles} × "
+            f"{config.fleet.kind} vehicles · strategy {t.strategy}{'' if t.reuse else ' (no reuse)'}")
+    return head + "\n" + "\n".join("  " + line for line in plan.describe().splitlines())
+
+
+def _result_table(result: TuningResult) -> Table:
+    table = Table()
+    table.add_column("gain")
+    table.add_column("value", justify="right")
+    for name, value in result.gains.items():
+        table.add_row(name, f"{value:.5g}")
+    return table
