@@ -117,6 +117,7 @@ class Settings:
     points: int | None = None
     max_bootstraps: int = 10
     seed: int | None = None
+    strategy_rule: Strategy = field(init=False)
 
     def __post_init__(self) -> None:
         if not self.space:
