@@ -1,0 +1,104 @@
+"""Per-round overhead of the Zenoh swarm path against the in-process fleet, in milliseconds.
+
+Starts a ZenohFleet (router) here and N agent processes on 127.0.0.1, flies the same rounds both ways and prints
+the median and 90th-percentile wall time per round. With `--backend toy` (zero flight time) the network time is
+pure protocol overhead (assign → ack → start → result); with `--backend sim` it includes the simulator.
+
+    python benchmarks/network_overhead.py --vehicles 2 --rounds 50 --backend toy
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _in_process_fleet(backend: str, n: int, seed: int):
+    if backend == "sim":
+        from mavtune.sim import Scenario, SimFleet
+
+        return SimFleet(n, Scenario.default(), seed=seed)
+    from mavtune.fleet import Flight
+    from mavtune.swarm.vehicles import toy_cost
+
+    class Toy:
+        size = n
+
+        def fly(self, assignments, round_id):
+            return [Flight(f"v{j}", dict(g), toy_cost(g, seed + j, round_id)) for j, g in enumerate(assignments)]
+
+        def close(self):
+            pass
+
+    return Toy()
+
+
+def _ms(samples: list[float]) -> str:
+    q = statistics.quantiles(samples, n=10)
+    return f"median {statistics.median(samples) * 1e3:7.2f} ms   p90 {q[-1] * 1e3:7.2f} ms"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vehicles", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=50)
+    ap.add_argument("--backend", choices=["toy", "sim"], default="toy")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+
+    from mavtune.swarm import SwarmConfig, ZenohFleet
+
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    config = SwarmConfig(session="bench", token="bench", settle_s=0.0, result_timeout_s=30.0)
+    fleet = ZenohFleet(endpoint, config)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    agents = [subprocess.Popen([sys.executable, "-c", "from mavtune.cli import main; main()", "agent",
+                                "--id", f"v{j}", "--connect", endpoint, "--vehicle", args.backend,
+                                "--seed", str(args.seed + j), "--session", "bench", "--token", "bench"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, start_new_session=True)
+              for j in range(args.vehicles)]
+    try:
+        fleet.wait_for(args.vehicles, timeout_s=60)
+        local = _in_process_fleet(args.backend, args.vehicles, args.seed)
+        rounds = [[{"kp": (0.1 + 0.37 * (k + j)) % 1.0, "kd": 0.2} for j in range(args.vehicles)]
+                  for k in range(args.rounds)]
+        fleet.fly(rounds[0], 10_000)  # warm up (first flight compiles the simulator in each agent)
+        local.fly(rounds[0], 10_000)
+        net, inproc = [], []
+        for k, assignments in enumerate(rounds):
+            t0 = time.perf_counter()
+            flights = fleet.fly(assignments, k)
+            net.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            twins = local.fly(assignments, k)
+            inproc.append(time.perf_counter() - t0)
+            assert [f.cost for f in flights] == [f.cost for f in twins], f"round {k}: network and in-process differ"
+        diff = [a - b for a, b in zip(net, inproc)]
+        print(f"{args.vehicles} vehicles, {args.rounds} rounds, backend {args.backend}, settle 0 s")
+        print(f"  in-process : {_ms(inproc)}")
+        print(f"  zenoh      : {_ms(net)}")
+        print(f"  overhead   : {_ms(diff)}")
+    finally:
+        fleet.close()
+        for p in agents:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+if __name__ == "__main__":
+    main()

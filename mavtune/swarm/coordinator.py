@@ -1,0 +1,311 @@
+"""The coordinator: a Fleet whose vehicles are agents over Zenoh — the paper's IDLE / FLYING / OPTIMIZE machine.
+
+Each round: publish the assignments → wait for every acknowledgement → settle → one start signal → collect the
+results with a timeout → hand the flights to the engine (OPTIMIZE). A vehicle that leaves (liveliness DELETE) or
+does not answer in time yields a LOST flight; the engine flies that point again later. Every event is kept.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import re
+import time
+from enum import Enum
+from typing import Any, Sequence
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Flight, Gains, Status
+from mavtune.swarm.config import SwarmConfig
+from mavtune.swarm.messages import Ack, Assignment, Hello, Probe, Result, Start, State, decode, encode
+from mavtune.swarm.transport import Keys, Link, open_router
+
+log = logging.getLogger(__name__)
+
+
+class CoordinatorState(str, Enum):
+    """The coordinator's state machine in the paper."""
+
+    IDLE = "idle"
+    FLYING = "flying"
+    OPTIMIZE = "optimize"
+
+
+def vehicle_order(vehicle_id: str) -> list[Any]:
+    """Natural sort key: v2 before v10."""
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", vehicle_id)]
+
+
+class ZenohFleet:
+    """Fleet over Zenoh: assignment j of a round goes to the j-th present vehicle sorted by id."""
+
+    def __init__(self, listen: str, config: SwarmConfig, link: Link | None = None):
+        self.config = config
+        self.keys = Keys(config.session)
+        self.listen = listen
+        self.state = CoordinatorState.IDLE
+        self.events: list[dict[str, Any]] = []
+        self.dropped = 0
+        self._t0 = time.monotonic()
+        self._inbox: queue.Queue[tuple[str, str, Any]] = queue.Queue()
+        self._alive: set[str] = set()
+        self._hello: dict[str, Hello] = {}
+        self._round: _Round | None = None
+        self.link = link if link is not None else open_router(listen, lease_ms=config.lease_ms, tls=config.tls)
+        self.link.subscribe(self.keys.frm("*"), lambda k, p: self._inbox.put(("msg", k, p)))
+        self.link.watch_liveliness(self.keys.alive("*"), lambda k, a: self._inbox.put(("live", k, a)))
+        log.info("coordinator listening on %s, session %s", listen, config.session)
+
+    # --- Fleet protocol ----------------------------------------------------------------------------------------
+    @property
+    def present(self) -> list[str]:
+        """Vehicles present now (alive and introduced), sorted by id."""
+        self._drain()
+        return sorted((v for v in self._alive if v in self._hello), key=vehicle_order)
+
+    @property
+    def size(self) -> int:
+        """How many vehicles are present now (waits, up to presence_timeout_s, while none is)."""
+        if not self.present:
+            self.wait_for(1)
+        return len(self.present)
+
+    def wait_for(self, n: int, timeout_s: float | None = None) -> list[str]:
+        """Block until at least n vehicles are present; MavtuneError after timeout_s (default presence_timeout_s)."""
+        timeout_s = self.config.presence_timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout_s
+        announced = -1
+        while True:
+            present = self.present
+            if len(present) >= n:
+                return present
+            if len(present) != announced:
+                log.info("waiting for vehicles: %d of %d present %s", len(present), n, present)
+                announced = len(present)
+            if not self._pump(deadline):
+                raise MavtuneError(f"only {len(present)} of {n} vehicles joined session {self.config.session!r} "
+                                   f"on {self.listen} within {timeout_s:g} s: {present}")
+
+    def fly(self, assignments: Sequence[Gains], round_id: int) -> list[Flight]:
+        """Fly one round on the present vehicles; vehicles that leave or time out give LOST flights."""
+        present = self.present or self.wait_for(1)
+        crew = present[: len(assignments)]
+        self.state = CoordinatorState.FLYING
+        rnd = _Round(round_id, [dict(a) for a in assignments], crew)
+        self._round = rnd
+        for j in range(len(crew), len(assignments)):
+            self._event("unassigned", round_id, None, f"no vehicle present for assignment {j}")
+        try:
+            for vid, gains in zip(crew, rnd.assignments):
+                self._send(self.keys.to(vid), Assignment(session=self.config.session, token=self.config.token,
+                                                         round=round_id, vehicle=vid, gains=gains))
+            deadline = time.monotonic() + self.config.ack_timeout_s
+            while rnd.waiting_ack() and self._pump(deadline):
+                pass
+            for vid in rnd.waiting_ack():
+                rnd.lost[vid] = f"no acknowledgement within {self.config.ack_timeout_s:g} s"
+                self._event("lost", round_id, vid, rnd.lost[vid])
+            flyers = rnd.to_start()
+            if flyers:
+                settle_end = time.monotonic() + self.config.settle_s
+                while self._pump(settle_end):
+                    pass
+                flyers = rnd.to_start()
+            if flyers:
+                self._send(self.keys.start, Start(session=self.config.session, token=self.config.token,
+                                                  round=round_id, vehicles=flyers))
+                deadline = time.monotonic() + self.config.result_timeout_s
+                while rnd.waiting_result() and self._pump(deadline):
+                    pass
+                for vid in rnd.waiting_result():
+                    rnd.lost[vid] = f"no result within {self.config.result_timeout_s:g} s"
+                    self._event("lost", round_id, vid, rnd.lost[vid])
+            return rnd.flights()
+        finally:
+            self._round = None
+            self.state = CoordinatorState.OPTIMIZE
+
+    def close(self) -> None:
+        """Close the Zenoh router (agents notice and wait for the next coordinator)."""
+        self.state = CoordinatorState.IDLE
+        self.link.close()
+
+    # --- event handling ---------------------------------------------------------------------------------------
+    def _drain(self) -> None:
+        while True:
+            try:
+                item = self._inbox.get_nowait()
+            except queue.Empty:
+                return
+            self._handle(*item)
+
+    def _pump(self, deadline: float) -> bool:
+        """Handle one event (waiting until `deadline` for it); False once the deadline has passed."""
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            return False
+        try:
+            item = self._inbox.get(timeout=remaining)
+        except queue.Empty:
+            return False
+        self._handle(*item)
+        return True
+
+    def _handle(self, what: str, key: str, data: Any) -> None:
+        if what == "live":
+            self._on_liveliness(Keys.last_chunk(key), bool(data))
+        else:
+            self._on_message(key, data)
+
+    def _allowed(self, vid: str) -> bool:
+        return self.config.allowed_vehicles is None or vid in self.config.allowed_vehicles
+
+    def _on_liveliness(self, vid: str, alive: bool) -> None:
+        if not self._allowed(vid):
+            log.warning("ignored vehicle %r: not in the configured vehicle list", vid)
+            return
+        if alive:
+            if vid not in self._alive:
+                self._alive.add(vid)
+                if vid in self._hello:
+                    self._event("joined", None if self._round is None else self._round.id, vid,
+                                f"backend {self._hello[vid].backend or '?'}")
+                self._send(self.keys.to(vid), Probe(session=self.config.session, token=self.config.token, vehicle=vid))
+            return
+        was_present = vid in self._alive and vid in self._hello
+        self._alive.discard(vid)
+        self._hello.pop(vid, None)
+        if was_present:
+            self._event("left", None if self._round is None else self._round.id, vid, "liveliness token deleted")
+        if self._round is not None and vid in self._round.crew and self._round.open(vid):
+            self._round.lost[vid] = "vehicle left during the round"
+            self._event("lost", self._round.id, vid, self._round.lost[vid])
+
+    def _on_message(self, key: str, payload: bytes) -> None:
+        msg = decode(payload, session=self.config.session, token=self.config.token, where=f"coordinator <- {key}")
+        sender = Keys.last_chunk(key)
+        if msg is None:
+            self.dropped += 1
+            return
+        if getattr(msg, "vehicle", None) != sender:
+            self.dropped += 1
+            log.warning("dropped %s on %s: it claims to be from %r", msg.kind, key, getattr(msg, "vehicle", None))
+            return
+        if isinstance(msg, Hello):
+            if not self._allowed(sender):
+                self.dropped += 1
+                log.warning("dropped hello from %r: not in the configured vehicle list", sender)
+                return
+            if sender not in self._alive:
+                log.info("hello from %s before its liveliness token; waiting for the token", sender)
+            new = sender not in self._hello
+            self._hello[sender] = msg
+            if new and sender in self._alive:
+                self._event("joined", None if self._round is None else self._round.id, sender,
+                            f"backend {msg.backend or '?'}")
+            return
+        rnd = self._round
+        if isinstance(msg, State):
+            log.debug("%s: round %d %s", sender, msg.round, msg.state.name)
+            return
+        if isinstance(msg, Result) and (rnd is None or msg.round != rnd.id):
+            # nothing measured is discarded: a late result is kept in the events
+            self._event("late_result", msg.round, sender, f"cost {msg.cost!r} ({msg.status.value}) arrived after "
+                        "its round closed", cost=msg.cost, gains=msg.gains)
+            return
+        if rnd is None or msg.round != rnd.id or sender not in rnd.crew:
+            self.dropped += 1
+            log.warning("dropped %s from %s for round %d: not expected now", msg.kind, sender, msg.round)
+            return
+        if sender in rnd.lost:
+            if isinstance(msg, Result):
+                self._event("late_result", msg.round, sender, "result from a vehicle already counted lost",
+                            cost=msg.cost, gains=msg.gains)
+            return
+        if isinstance(msg, Ack):
+            if not msg.accepted:
+                rnd.refused[sender] = msg.reason
+                self._event("refused", rnd.id, sender, msg.reason)
+            else:
+                rnd.acked.add(sender)
+        elif isinstance(msg, Result):
+            rnd.acked.add(sender)
+            rnd.results[sender] = msg
+
+    def _event(self, event: str, round_id: int | None, vehicle: str | None, detail: str, **extra: Any) -> None:
+        entry = {"t_s": round(time.monotonic() - self._t0, 3), "event": event, "round": round_id,
+                 "vehicle": vehicle, "detail": detail, **extra}
+        self.events.append(entry)
+        log.warning("round %s: %s %s (%s)", round_id, vehicle or "", event, detail) if event in (
+            "lost", "left", "refused", "late_result", "unassigned") else log.info(
+            "round %s: %s %s (%s)", round_id, vehicle or "", event, detail)
+
+    def _send(self, key: str, msg: Any) -> None:
+        self.link.put(key, encode(msg))
+
+
+class _Round:
+    """Book-keeping of one round in flight: who was assigned what, who acknowledged, refused, answered, was lost."""
+
+    def __init__(self, round_id: int, assignments: list[Gains], crew: list[str]):
+        self.id = round_id
+        self.assignments = assignments
+        self.crew = crew
+        self.acked: set[str] = set()
+        self.refused: dict[str, str] = {}
+        self.results: dict[str, Result] = {}
+        self.lost: dict[str, str] = {}
+
+    def open(self, vid: str) -> bool:
+        """True while the vehicle's outcome for this round is not known."""
+        return vid not in self.results and vid not in self.refused and vid not in self.lost
+
+    def waiting_ack(self) -> list[str]:
+        return [v for v in self.crew if self.open(v) and v not in self.acked]
+
+    def to_start(self) -> list[str]:
+        return [v for v in self.crew if self.open(v) and v in self.acked]
+
+    def waiting_result(self) -> list[str]:
+        return [v for v in self.crew if self.open(v)]
+
+    def flights(self) -> list[Flight]:
+        """One flight per assignment, in order: the result, FAILED for a refusal, LOST otherwise."""
+        out = []
+        for j, gains in enumerate(self.assignments):
+            vid = self.crew[j] if j < len(self.crew) else None
+            if vid is not None and vid in self.results:
+                flight = self.results[vid].to_flight()
+                if flight.gains != gains:
+                    flight.info["requested_gains"] = dict(gains)
+                out.append(flight)
+            elif vid is not None and vid in self.refused:
+                out.append(Flight(vehicle=vid, gains=dict(gains), cost=math.nan, status=Status.FAILED,
+                                  info={"refused": self.refused[vid]}))
+            else:
+                reason = self.lost.get(vid, "no vehicle present") if vid else "no vehicle present"
+                out.append(Flight(vehicle=vid or "", gains=dict(gains), cost=math.nan, status=Status.LOST,
+                                  info={"lost": reason}))
+        return out
+
+
+def fleet_from_config(config: Any, out_dir: Any = None) -> ZenohFleet:
+    """The ZenohFleet a run configuration names ([swarm] section): listen, wait for tuning.vehicles agents, return it.
+
+    `mavtune tune --fleet zenoh` uses this; unless [swarm] says otherwise the settle time is [flight].settle_s.
+    """
+    from mavtune.swarm.config import load_swarm_config
+
+    swarm = dict(getattr(config, "swarm", {}) or {})
+    flight = getattr(config, "flight", None)
+    if flight is not None:
+        swarm.setdefault("settle_s", flight.settle_s)
+    cfg = load_swarm_config(None, **swarm)
+    fleet = ZenohFleet(cfg.listen, cfg)
+    try:
+        fleet.wait_for(int(config.tuning.vehicles))
+    except BaseException:
+        fleet.close()
+        raise
+    return fleet

@@ -1,0 +1,151 @@
+"""The Zenoh side of the swarm: session configuration (router / client), key layout, and a thin link object.
+
+The coordinator is a Zenoh router listening on an endpoint; every agent is a client connecting to it. Multicast
+scouting is off (only the configured endpoint is used), and a short link lease makes a frozen vehicle visible in
+about 1.5 s. Presence is a liveliness token per vehicle: PUT when it joins, DELETE when it leaves or dies.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from typing import Any, Callable
+
+import zenoh
+
+from mavtune.errors import MavtuneError
+
+log = logging.getLogger(__name__)
+
+ROOT = "mavtune"
+
+
+class Keys:
+    """Key expressions of one session: `mavtune/<session>/{alive,to,from}/<vehicle>` and `mavtune/<session>/start`."""
+
+    def __init__(self, session: str):
+        self.prefix = f"{ROOT}/{session}"
+
+    def alive(self, vehicle: str = "*") -> str:
+        """Liveliness token of a vehicle (or all of them with '*')."""
+        return f"{self.prefix}/alive/{vehicle}"
+
+    def to(self, vehicle: str) -> str:
+        """Coordinator → one agent (probe, assignment)."""
+        return f"{self.prefix}/to/{vehicle}"
+
+    def frm(self, vehicle: str = "*") -> str:
+        """One agent (or all with '*') → coordinator (hello, ack, result, state)."""
+        return f"{self.prefix}/from/{vehicle}"
+
+    @property
+    def start(self) -> str:
+        """Coordinator → all agents: the start signal of a round."""
+        return f"{self.prefix}/start"
+
+    @staticmethod
+    def last_chunk(key: str) -> str:
+        """The vehicle id at the end of a key."""
+        return key.rsplit("/", 1)[-1]
+
+
+def zenoh_config(mode: str, endpoint: str, *, lease_ms: int = 2000, connect_timeout_s: float = -1.0,
+                 tls: dict[str, Any] | None = None) -> zenoh.Config:
+    """A Zenoh config: `router` listening on `endpoint` or `client` connecting to it; no multicast scouting."""
+    if mode not in ("router", "client"):
+        raise MavtuneError(f"zenoh mode must be 'router' or 'client', not {mode!r}")
+    if "/" not in endpoint:
+        raise MavtuneError(f"endpoint {endpoint!r} is not a Zenoh locator like tcp/127.0.0.1:7447")
+    cfg = zenoh.Config()
+    try:
+        cfg.insert_json5("mode", json.dumps(mode))
+        if mode == "router":
+            cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
+        else:
+            cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
+            timeout_ms = -1 if connect_timeout_s < 0 else int(connect_timeout_s * 1000)
+            cfg.insert_json5("connect/timeout_ms", json.dumps(timeout_ms))
+        cfg.insert_json5("scouting/multicast/enabled", "false")
+        cfg.insert_json5("transport/link/tx/lease", json.dumps(int(lease_ms)))
+        for key, value in (tls or {}).items():
+            cfg.insert_json5(f"transport/link/tls/{key}", json.dumps(value))
+    except zenoh.ZError as exc:
+        raise MavtuneError(f"invalid Zenoh setting: {exc}") from None
+    return cfg
+
+
+class Link:
+    """One open Zenoh session with the few operations the swarm needs: put, subscribe, liveliness."""
+
+    def __init__(self, config: zenoh.Config, what: str):
+        try:
+            self._session = zenoh.open(config)
+        except zenoh.ZError as exc:
+            raise MavtuneError(f"cannot open the Zenoh {what}: {exc}") from None
+        self._keep: list[Any] = []
+        self._lock = threading.Lock()
+        self._closed = False
+
+    def put(self, key: str, payload: bytes) -> None:
+        """Publish one message (reliable; blocks rather than drops when congested)."""
+        if not self._closed:
+            self._session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def subscribe(self, key: str, on_message: Callable[[str, bytes], None]) -> None:
+        """Call on_message(key, payload) for every sample published on `key`."""
+
+        def _cb(sample: zenoh.Sample) -> None:
+            try:
+                on_message(str(sample.key_expr), sample.payload.to_bytes())
+            except Exception:  # a callback must never kill Zenoh's thread
+                log.exception("error handling a message on %s", sample.key_expr)
+
+        with self._lock:
+            self._keep.append(self._session.declare_subscriber(key, _cb))
+
+    def declare_token(self, key: str) -> None:
+        """Announce presence under `key` until this link closes (or the process dies)."""
+        with self._lock:
+            self._keep.append(self._session.liveliness().declare_token(key))
+
+    def watch_liveliness(self, key: str, on_change: Callable[[str, bool], None]) -> None:
+        """Call on_change(key, alive) for tokens matching `key`, including those present now."""
+
+        def _cb(sample: zenoh.Sample) -> None:
+            try:
+                on_change(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+            except Exception:
+                log.exception("error handling liveliness of %s", sample.key_expr)
+
+        with self._lock:
+            self._keep.append(self._session.liveliness().declare_subscriber(key, _cb, history=True))
+
+    def close(self) -> None:
+        """Undeclare everything and close the session (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        with self._lock:
+            for entity in reversed(self._keep):
+                try:
+                    entity.undeclare()
+                except Exception:
+                    pass
+            self._keep.clear()
+        try:
+            self._session.close()
+        except Exception:
+            pass
+
+
+def open_router(endpoint: str, *, lease_ms: int = 2000, tls: dict[str, Any] | None = None) -> Link:
+    """The coordinator's link: a Zenoh router listening on `endpoint`."""
+    return Link(zenoh_config("router", endpoint, lease_ms=lease_ms, tls=tls), f"router on {endpoint}")
+
+
+def open_client(endpoint: str, *, lease_ms: int = 2000, connect_timeout_s: float = -1.0,
+                tls: dict[str, Any] | None = None) -> Link:
+    """An agent's link: a Zenoh client connecting to the coordinator at `endpoint`."""
+    return Link(zenoh_config("client", endpoint, lease_ms=lease_ms, connect_timeout_s=connect_timeout_s, tls=tls),
+                f"client of {endpoint}")

@@ -1,0 +1,178 @@
+"""Vehicle backends an agent drives: the small interface, the simulator, a toy stand-in, and the MAVLink hook."""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Flight, Gains, Status, Trace
+
+
+@runtime_checkable
+class Vehicle(Protocol):
+    """One vehicle behind an agent: apply gains (then hover on them), fly the primitive, report the flight."""
+
+    backend: str
+
+    def apply(self, gains: Gains) -> None:
+        """Set the controller gains (normalised); the vehicle hovers on them until `fly`."""
+        ...
+
+    def fly(self, round_id: int) -> Flight:
+        """Fly the reference primitive with the applied gains and return the flight (cost, status, trace)."""
+        ...
+
+    def close(self) -> None:
+        """Land / release the vehicle."""
+        ...
+
+
+class FleetVehicle:
+    """One vehicle of a single-vehicle Fleet (SimFleet(1), MavlinkFleet([url])) behind the agent's interface.
+
+    `apply` keeps the gains; the fleet sets them on the vehicle, lets the transient settle and flies at `fly`.
+    """
+
+    def __init__(self, fleet: Any, backend: str):
+        if fleet.size != 1:
+            raise MavtuneError(f"an agent drives exactly one vehicle; its {backend} fleet has {fleet.size}")
+        self._fleet = fleet
+        self.backend = backend
+        self._gains: Gains | None = None
+
+    def apply(self, gains: Gains) -> None:
+        self._gains = dict(gains)
+
+    def fly(self, round_id: int) -> Flight:
+        if self._gains is None:
+            raise MavtuneError("fly() before any gains were applied")
+        return self._fleet.fly([self._gains], round_id)[0]
+
+    def close(self) -> None:
+        self._fleet.close()
+
+
+def sim_vehicle(scenario: Any = None, seed: int = 0, trace_hz: float = 10.0) -> FleetVehicle:
+    """A simulated vehicle: SimFleet of one, seeded so it reproduces vehicle j of an in-process fleet (seed S+j)."""
+    try:
+        from mavtune.sim import SimFleet
+    except ImportError as exc:
+        raise MavtuneError(f"the simulator (mavtune.sim.SimFleet) is not available: {exc}") from None
+    return FleetVehicle(SimFleet(1, scenario, seed=seed, trace_hz=trace_hz), "sim")
+
+
+def mavlink_vehicle(url: str, settings: dict[str, Any] | None = None) -> FleetVehicle:
+    """A MAVLink vehicle (PX4 / ArduPilot / mavsim) at `url`: MavlinkFleet of one; closing restores its gains."""
+    try:
+        from mavtune.vehicles.mavlink.config import load_mavlink_config
+        from mavtune.vehicles.mavlink.fleet import MavlinkFleet
+    except ImportError as exc:
+        raise MavtuneError(f"the MAVLink vehicle backend is not available: {exc}") from None
+    return FleetVehicle(MavlinkFleet([url], load_mavlink_config(dict(settings or {}))), "mavlink")
+
+
+def toy_cost(gains: Gains, seed: int, round_id: int, noise: float = 0.0) -> float:
+    """The toy vehicle's cost: a bowl with its minimum at kp=0.7, kd=0.4, plus noise fixed by (seed, round_id)."""
+    kp, kd = gains.get("kp", 0.5), gains.get("kd", 0.5)
+    rng = np.random.default_rng([seed, round_id])
+    return float(1.0 + (kp - 0.7) ** 2 + 2.0 * (kd - 0.4) ** 2 + noise * abs(rng.standard_normal()))
+
+
+class ToyVehicle:
+    """A stand-in vehicle with a known cost bowl (`toy_cost`), for testing the swarm without a simulator."""
+
+    backend = "toy"
+
+    def __init__(self, seed: int = 0, noise: float = 0.0):
+        self.seed = seed
+        self.noise = noise
+        self._gains: Gains | None = None
+
+    def apply(self, gains: Gains) -> None:
+        self._gains = dict(gains)
+
+    def fly(self, round_id: int) -> Flight:
+        if self._gains is None:
+            raise MavtuneError("fly() before any gains were applied")
+        cost = toy_cost(self._gains, self.seed, round_id, self.noise)
+        trace = Trace(t_s=[0.0, 1.0], z_ref_m=[1.0, 1.0], z_m=[1.0, 1.0 + cost * 1e-3])
+        return Flight(vehicle="toy", gains=dict(self._gains), cost=cost, status=Status.OK, trace=trace)
+
+    def close(self) -> None:
+        pass
+
+
+class PacedVehicle:
+    """Wraps a vehicle so each flight takes at least `min_flight_s` of wall time (a simulator flown like a real one)."""
+
+    def __init__(self, inner: Vehicle, min_flight_s: float):
+        self.inner = inner
+        self.min_flight_s = min_flight_s
+        self.backend = inner.backend
+
+    def apply(self, gains: Gains) -> None:
+        self.inner.apply(gains)
+
+    def fly(self, round_id: int) -> Flight:
+        t0 = time.monotonic()
+        flight = self.inner.fly(round_id)
+        remaining = self.min_flight_s - (time.monotonic() - t0)
+        if remaining > 0:
+            time.sleep(remaining)
+        return flight
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+def load_scenario(name: str | None) -> Any:
+    """A simulator scenario by name ('default', 'noise_free') or from a JSON file; None means the default."""
+    if name is None:
+        return None
+    try:
+        from mavtune.sim import Scenario
+    except ImportError as exc:
+        raise MavtuneError(f"the simulator (mavtune.sim.Scenario) is not available: {exc}") from None
+    key = name.replace("-", "_")
+    if key == "default":
+        return Scenario.default()
+    if key == "noise_free":
+        return Scenario.noise_free()
+    from pathlib import Path
+
+    path = Path(name)
+    if not path.exists():
+        raise MavtuneError(f"scenario {name!r} is neither 'default', 'noise_free' nor an existing JSON file")
+    try:
+        return Scenario.model_validate_json(path.read_text())
+    except Exception as exc:
+        raise MavtuneError(f"scenario file {path} is invalid: {str(exc).splitlines()[0]}") from None
+
+
+def make_vehicle(kind: str, *, seed: int = 0, scenario: str | None = None, mavlink: str | None = None,
+                 mavlink_settings: dict[str, Any] | None = None, noise: float = 0.0,
+                 min_flight_s: float = 0.0) -> Vehicle:
+    """Build the backend an agent drives: 'sim' (SimFleet of one), 'toy' (stand-in), or 'mavlink' (URL)."""
+    vehicle: Vehicle
+    if kind == "sim":
+        vehicle = sim_vehicle(load_scenario(scenario), seed=seed)
+    elif kind == "toy":
+        vehicle = ToyVehicle(seed=seed, noise=noise)
+    elif kind == "mavlink":
+        if not mavlink:
+            raise MavtuneError("--vehicle mavlink needs --mavlink URL (e.g. udpin:127.0.0.1:14540)")
+        vehicle = mavlink_vehicle(mavlink, mavlink_settings)
+    else:
+        raise MavtuneError(f"unknown vehicle backend {kind!r}; use sim, toy or mavlink")
+    if min_flight_s > 0:
+        vehicle = PacedVehicle(vehicle, min_flight_s)
+    return vehicle
+
+
+def finite_gains(gains: Gains) -> bool:
+    """True when every gain is a finite number."""
+    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in gains.values())

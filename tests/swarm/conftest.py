@@ -1,0 +1,139 @@
+"""Shared helpers for the swarm tests: free ports, an in-process toy fleet, agents in threads or processes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from mavtune.fleet import Flight, Status
+from mavtune.swarm.agent import Agent
+from mavtune.swarm.config import SwarmConfig
+from mavtune.swarm.vehicles import ToyVehicle, toy_cost
+
+PYTHON = sys.executable
+REPO = Path(__file__).resolve().parents[2]
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ToyFleet:
+    """In-process twin of N toy agents: vehicle j has seed seed+j (what `--vehicle toy --seed S+j` flies)."""
+
+    def __init__(self, vehicles: int, seed: int = 0, noise: float = 0.0):
+        self.vehicles, self.seed, self.noise = vehicles, seed, noise
+
+    @property
+    def size(self) -> int:
+        return self.vehicles
+
+    def fly(self, assignments, round_id):
+        return [Flight(vehicle=f"v{j}", gains=dict(g), cost=toy_cost(g, self.seed + j, round_id, self.noise),
+                       status=Status.OK) for j, g in enumerate(assignments)]
+
+    def close(self):
+        pass
+
+
+class ThreadAgents:
+    """Agents on toy vehicles running in threads of this process (real Zenoh clients)."""
+
+    def __init__(self, endpoint: str, config: SwarmConfig, n: int, seed: int = 0, noise: float = 0.0):
+        self.agents = []
+        self.threads = []
+        for j in range(n):
+            agent = Agent.connect(f"v{j}", ToyVehicle(seed=seed + j, noise=noise), config, endpoint)
+            t = threading.Thread(target=agent.run, daemon=True)
+            t.start()
+            self.agents.append(agent)
+            self.threads.append(t)
+
+    def close(self):
+        for a in self.agents:
+            a.close()
+        for t in self.threads:
+            t.join(timeout=5)
+
+
+class Procs:
+    """Child processes started by a test; every one is killed in teardown."""
+
+    def __init__(self, tmp: Path):
+        self.tmp = tmp
+        self.procs: dict[str, subprocess.Popen] = {}
+
+    def start(self, name: str, args: list[str]) -> subprocess.Popen:
+        log = open(self.tmp / f"{name}.log", "ab")
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        env["PYTHONPATH"] = os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])])
+        p = subprocess.Popen([PYTHON, "-c", "from mavtune.cli import main; main()", *args],
+                             stdout=log, stderr=subprocess.STDOUT, env=env, cwd=REPO, start_new_session=True)
+        self.procs[name] = p
+        return p
+
+    def log(self, name: str) -> str:
+        path = self.tmp / f"{name}.log"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def wait_log(self, name: str, text: str, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if text in self.log(name):
+                return True
+            time.sleep(0.05)
+        return False
+
+    def kill(self, name: str) -> None:
+        p = self.procs[name]
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait(timeout=10)
+
+    def close(self) -> None:
+        for name in list(self.procs):
+            try:
+                self.kill(name)
+            except Exception:
+                pass
+
+
+@pytest.fixture
+def procs(tmp_path):
+    """Start child processes; all are SIGKILLed at teardown."""
+    p = Procs(tmp_path)
+    yield p
+    p.close()
+
+
+def sim_available() -> bool:
+    """True once the simulator exports SimFleet (until then the tests fly the toy stand-in)."""
+    try:
+        from mavtune.sim import SimFleet  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def backend(vehicles: int, seed: int, noise_free: bool):
+    """(agent CLI args for vehicle j, in-process twin fleet): the simulator when available, else the toy."""
+    if sim_available():
+        from mavtune.sim import Scenario, SimFleet
+
+        scenario = "noise_free" if noise_free else "default"
+        twin = SimFleet(vehicles, Scenario.noise_free() if noise_free else Scenario.default(), seed=seed)
+        return (lambda j: ["--vehicle", "sim", "--seed", str(seed + j), "--scenario", scenario]), twin
+    noise = 0.0 if noise_free else 0.05
+    return (lambda j: ["--vehicle", "toy", "--seed", str(seed + j), "--toy-noise", str(noise)]), \
+        ToyFleet(vehicles, seed=seed, noise=noise)

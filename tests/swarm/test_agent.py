@@ -1,0 +1,95 @@
+"""The agent's state machine without a network: envelope, idempotence, start discipline."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from mavtune.swarm.agent import Agent, check_envelope, decimate
+from mavtune.swarm.config import SwarmConfig
+from mavtune.swarm.messages import Ack, Assignment, Result, Start, decode, encode
+from mavtune.swarm.transport import Keys
+from mavtune.swarm.vehicles import ToyVehicle
+from mavtune.fleet import Trace
+
+
+class Recorder:
+    """Stands in for the Zenoh link: keeps what the agent publishes."""
+
+    def __init__(self):
+        self.sent = []
+
+    def put(self, key, payload):
+        self.sent.append(decode(payload, session="s", token="t"))
+
+    def subscribe(self, *a):
+        pass
+
+    def declare_token(self, *a):
+        pass
+
+    def close(self):
+        pass
+
+
+def make(envelope=None, policy="refuse"):
+    cfg = SwarmConfig(session="s", token="t", envelope=envelope or {}, envelope_policy=policy)
+    vehicle = ToyVehicle(seed=1)
+    agent = Agent("v0", vehicle, cfg, Recorder())
+    return agent, vehicle, Keys("s")
+
+
+def send(agent, keys, msg):
+    agent.handle(keys.start if isinstance(msg, Start) else keys.to("v0"), encode(msg))
+
+
+def of(agent, kind):
+    return [m for m in agent.link.sent if isinstance(m, kind)]
+
+
+def test_assignment_then_start_flies_once_and_repeats_resend():
+    agent, _, keys = make()
+    a = Assignment(session="s", token="t", round=3, vehicle="v0", gains={"kp": 0.4, "kd": 0.2})
+    send(agent, keys, a)
+    assert of(agent, Ack)[-1].accepted and agent.flights_flown == 0  # no flight before the start
+    send(agent, keys, Start(session="s", token="t", round=3, vehicles=["v0"]))
+    send(agent, keys, Start(session="s", token="t", round=3, vehicles=["v0"]))
+    send(agent, keys, a)
+    results = of(agent, Result)
+    assert agent.flights_flown == 1 and len(results) == 3
+    assert results[1].resent and results[2].resent and results[0].cost == results[2].cost
+
+
+def test_start_without_assignment_or_for_others_does_nothing():
+    agent, _, keys = make()
+    send(agent, keys, Start(session="s", token="t", round=1, vehicles=["v0"]))
+    send(agent, keys, Assignment(session="s", token="t", round=2, vehicle="v0", gains={"kp": 0.4}))
+    send(agent, keys, Start(session="s", token="t", round=2, vehicles=["v1"]))
+    send(agent, keys, Start(session="s", token="t", round=1, vehicles=["v0"]))
+    assert agent.flights_flown == 0 and not of(agent, Result)
+
+
+@pytest.mark.parametrize("gains", [{"kp": 1.2}, {"kp": -0.1}, {"kp": math.nan}, {"kd": math.inf}])
+def test_out_of_envelope_or_non_finite_gains_are_never_applied(gains):
+    agent, vehicle, keys = make(envelope={"kp": (0.0, 1.0)})
+    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains=gains))
+    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    assert vehicle._gains is None and agent.flights_flown == 0
+    assert of(agent, Ack)[-1].accepted is False
+
+
+def test_clamp_policy_flies_the_clamped_gains():
+    gains, why = check_envelope({"kp": 1.5, "kd": 0.2}, {"kp": (0.0, 0.8)}, "clamp")
+    assert gains == {"kp": 0.8, "kd": 0.2} and "clamped" in why
+    agent, vehicle, keys = make(envelope={"kp": (0.0, 0.8)}, policy="clamp")
+    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 1.5, "kd": 0.2}))
+    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    assert vehicle._gains == {"kp": 0.8, "kd": 0.2} and of(agent, Result)[0].gains == {"kp": 0.8, "kd": 0.2}
+
+
+def test_decimate_keeps_at_most_n_points_and_the_last():
+    tr = Trace(list(range(1000)), [0.0] * 1000, list(range(1000)))
+    d = decimate(tr, 100)
+    assert len(d.t_s) <= 100 and d.t_s[0] == 0 and d.t_s[-1] == 999
+    assert decimate(tr, 0) is None and decimate(tr, 5000) is tr

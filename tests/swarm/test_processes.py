@@ -1,0 +1,147 @@
+"""Acceptance over real processes on 127.0.0.1: a coordinator and agents, fault-free and with kill -9."""
+
+from __future__ import annotations
+
+import json
+import re
+import sqlite3
+import time
+from collections import Counter
+
+import pytest
+
+import mavtune
+
+from .conftest import backend, free_port
+
+pytestmark = [pytest.mark.integration]
+
+SESSION = ["--session", "itest", "--token", "s3cret"]
+TUNE = {"initial": {"kd": 0.2}}  # the coordinator command's defaults: eql, eps 0.125, 2 bootstraps, avg, reuse
+
+
+def start_swarm(procs, tmp_path, n, *, seed, noise_free, min_flight_s=0.0, result_timeout_s=20.0, out=None,
+                port=None, agents=True, extra=()):
+    """Start the coordinator (and n agents v0..v{n-1} with seeds seed+j); return (endpoint, out dir, twin)."""
+    port = port or free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    out = out or tmp_path / "run"
+    args_of, twin = backend(n, seed, noise_free)
+    procs.start("coordinator", ["coordinator", "--listen", endpoint, "--vehicles", str(n), "--out", str(out),
+                                "--settle-s", "0", "--result-timeout-s", str(result_timeout_s),
+                                "--ack-timeout-s", "5", "--presence-timeout-s", "60", *SESSION, *extra])
+    if agents:
+        for j in range(n):
+            procs.start(f"v{j}", ["agent", "--id", f"v{j}", "--connect", endpoint, *args_of(j), *SESSION,
+                                  "--min-flight-s", str(min_flight_s)])
+    return endpoint, out, twin
+
+
+def wait_exit(procs, name, timeout_s):
+    p = procs.procs[name]
+    try:
+        return p.wait(timeout=timeout_s)
+    except Exception:
+        pytest.fail(f"{name} did not finish in {timeout_s} s; log:\n{procs.log(name)[-3000:]}")
+
+
+def flown_rounds(log: str) -> Counter:
+    """How often the agent entered FLYING for each round id."""
+    return Counter(int(m) for m in re.findall(r"round (\d+): FLYING", log))
+
+
+def journal_rounds(path) -> list[tuple[int, float]]:
+    with sqlite3.connect(path) as db:
+        return db.execute("SELECT idx, finished FROM rounds ORDER BY idx").fetchall()
+
+
+@pytest.mark.timeout(120)
+def test_two_agents_equal_in_process_run(procs, tmp_path):
+    _, out, twin = start_swarm(procs, tmp_path, 2, seed=11, noise_free=False)
+    assert wait_exit(procs, "coordinator", 100) == 0, procs.log("coordinator")[-3000:]
+    result = json.loads((out / "result.json").read_text())
+    local = mavtune.tune(twin, **TUNE)
+    assert result["gains"] == local.gains
+    assert result["rounds"] == len(local.rounds) and result["lost_flights"] == 0
+    assert [[f["cost"] for f in r["flights"]] for r in result["rounds_log"]] == [r.costs for r in local.rounds]
+
+
+@pytest.mark.timeout(150)
+def test_agent_killed_mid_flight_run_completes_with_fault_free_gains(procs, tmp_path):
+    _, out, twin = start_swarm(procs, tmp_path, 2, seed=3, noise_free=True, min_flight_s=0.25, result_timeout_s=10,
+                               extra=["--bootstraps", "1"])
+    assert procs.wait_log("v1", "round 3: FLYING", 60), procs.log("v1")[-2000:]
+    procs.kill("v1")
+    assert wait_exit(procs, "coordinator", 120) == 0, procs.log("coordinator")[-3000:]
+    result = json.loads((out / "result.json").read_text())
+    assert result["gains"] == mavtune.tune(twin, **TUNE, bootstraps=1).gains
+    assert result["lost_flights"] >= 1
+    assert any(e["event"] == "lost" and e["vehicle"] == "v1" for e in result["events"])
+    assert [i for i, _ in journal_rounds(out / "journal.sqlite")] == list(range(result["rounds"]))
+
+
+@pytest.mark.timeout(240)
+def test_coordinator_killed_then_resumed_flies_no_recorded_round_again(procs, tmp_path):
+    endpoint, out, twin = start_swarm(procs, tmp_path, 2, seed=5, noise_free=False, min_flight_s=0.2,
+                                      extra=["--bootstraps", "1"])
+    assert procs.wait_log("coordinator", "round 5 flown", 90), procs.log("coordinator")[-2000:]
+    procs.kill("coordinator")
+    before = journal_rounds(out / "journal.sqlite")
+    assert len(before) >= 6
+    port = int(endpoint.rsplit(":", 1)[1])
+    procs.procs["coordinator-crashed"] = procs.procs.pop("coordinator")
+    start_swarm(procs, tmp_path, 2, seed=5, noise_free=False, out=out, port=port, agents=False,
+                extra=["--resume", "--bootstraps", "1"])
+    assert wait_exit(procs, "coordinator", 200) == 0, procs.log("coordinator")[-3000:]
+    result = json.loads((out / "result.json").read_text())
+    assert result["gains"] == mavtune.tune(twin, **TUNE, bootstraps=1).gains
+    after = journal_rounds(out / "journal.sqlite")
+    assert after[: len(before)] == before  # recorded rounds untouched
+    assert sum(r["replayed"] for r in result["rounds_log"]) == len(before)
+    for v in ("v0", "v1"):
+        assert max(flown_rounds(procs.log(v)).values()) == 1  # no round flown twice by any vehicle
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(200)
+def test_four_agents_equal_in_process_run(procs, tmp_path):
+    _, out, twin = start_swarm(procs, tmp_path, 4, seed=21, noise_free=False)
+    assert wait_exit(procs, "coordinator", 180) == 0, procs.log("coordinator")[-3000:]
+    result = json.loads((out / "result.json").read_text())
+    local = mavtune.tune(twin, **TUNE)
+    assert result["gains"] == local.gains
+    assert [[f["cost"] for f in r["flights"]] for r in result["rounds_log"]] == [r.costs for r in local.rounds]
+
+
+@pytest.mark.timeout(120)
+def test_tune_command_with_zenoh_fleet_equals_in_process(procs, tmp_path):
+    """The lead's `mavtune tune --fleet zenoh` route reaches the same gains as the in-process run."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    config = tmp_path / "run.toml"
+    config.write_text('[swarm]\nsession = "itest"\ntoken = "s3cret"\nsettle_s = 0.0\nresult_timeout_s = 20.0\n')
+    args_of, twin = backend(2, 9, noise_free=False)
+    for j in range(2):
+        procs.start(f"v{j}", ["agent", "--id", f"v{j}", "--connect", endpoint, *args_of(j), *SESSION])
+    procs.start("coordinator", ["tune", "--config", str(config), "--fleet", "zenoh", "--listen", endpoint,
+                                "--vehicles", "2", "--seed", "9", "--out", str(tmp_path / "run"), "--quiet"])
+    assert wait_exit(procs, "coordinator", 100) == 0, procs.log("coordinator")[-3000:]
+    result = json.loads((tmp_path / "run" / "result.json").read_text())
+    assert result["gains"] == mavtune.tune(twin, **TUNE).gains
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(150)
+def test_frozen_agent_is_noticed_by_the_lease_and_the_run_completes(procs, tmp_path):
+    import os
+    import signal
+
+    _, out, twin = start_swarm(procs, tmp_path, 2, seed=4, noise_free=True, min_flight_s=0.2, result_timeout_s=30)
+    assert procs.wait_log("v1", "round 3: FLYING", 60)
+    t0 = time.monotonic()
+    os.killpg(procs.procs["v1"].pid, signal.SIGSTOP)  # frozen, socket still open: only the lease can tell
+    assert procs.wait_log("coordinator", "v1 left", 10), procs.log("coordinator")[-2000:]
+    assert time.monotonic() - t0 < 5.0
+    assert wait_exit(procs, "coordinator", 120) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["gains"] == mavtune.tune(twin, **TUNE).gains
