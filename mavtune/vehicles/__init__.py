@@ -1,0 +1,1 @@
+"""Vehicles that fly mavtune's primitives: real autopilots over MAVLink (`mavtune.vehicles.mavlink`)."""

@@ -1,0 +1,121 @@
+"""Configuration of MAVLink tuning: which parameter each normalised gain drives, the primitive, and safety limits."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from mavtune.errors import MavtuneError
+from mavtune.vehicles.mavlink.profiles import Autopilot
+
+
+class GainParam(BaseModel):
+    """One tuning-space gain: normalised g in [0, 1] sets `param` to min + g·(max − min) (the param's units)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    param: str = Field(min_length=1, max_length=16)  # MAVLink parameter ids are at most 16 characters
+    min: float
+    max: float
+
+    @model_validator(mode="after")
+    def _check(self) -> "GainParam":
+        if not (math.isfinite(self.min) and math.isfinite(self.max)) or not self.min < self.max:
+            raise ValueError(f"{self.param}: need finite min < max, got [{self.min}, {self.max}]")
+        return self
+
+    def physical(self, normalised: float) -> float:
+        """The parameter value (this model's units) for a normalised gain; refuses NaN and values outside [0, 1]."""
+        g = float(normalised)
+        if not math.isfinite(g) or g < -1e-9 or g > 1 + 1e-9:
+            raise MavtuneError(f"normalised gain for {self.param} must be a finite number in [0, 1], got {normalised!r}")
+        g = min(max(g, 0.0), 1.0)
+        return self.min + g * (self.max - self.min)
+
+
+DEFAULT_GAINS: dict[Autopilot, dict[str, GainParam]] = {
+    # PX4 cascade: kx = MPC_Z_P · MPC_Z_VEL_P_ACC, kv = MPC_Z_VEL_P_ACC (acceleration units).
+    Autopilot.PX4: {
+        "kp": GainParam(param="MPC_Z_P", min=0.1, max=1.5),
+        "kd": GainParam(param="MPC_Z_VEL_P_ACC", min=2.0, max=15.0),
+    },
+    # ArduCopter cascade, same structure: PSC_POSZ_P (1/s) then PSC_VELZ_P (1/s); 4.7 names are found by probing.
+    Autopilot.ARDUPILOT: {
+        "kp": GainParam(param="PSC_POSZ_P", min=0.5, max=3.0),
+        "kd": GainParam(param="PSC_VELZ_P", min=1.0, max=8.0),
+    },
+}
+
+
+class SafetyConfig(BaseModel):
+    """When to refuse to start and when to abort a primitive."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    max_altitude_error_m: float = Field(1.5, gt=0)  # abort when |z − z_ref| exceeds this
+    heartbeat_timeout_s: float = Field(3.0, gt=0)  # wall time without a HEARTBEAT that counts as link loss
+    min_altitude_m: float = Field(2.0, ge=0)  # airborne means at least this high (LOCAL_POSITION_NED, up)
+    require_armed: bool = True
+    allowed_modes: list[str] | None = None  # None: the autopilot's defaults (PX4 POSCTL/LOITER/OFFBOARD, …)
+    rejoin_after_link_loss: bool = True  # a vehicle whose link came back may fly later rounds
+    position_timeout_s: float = Field(1.0, gt=0)  # wall time without a position sample that aborts a primitive
+    ready_wait_s: float = Field(5.0, ge=0)  # when no vehicle is ready for a round, wait this long for one
+
+
+class MavlinkConfig(BaseModel):
+    """Everything a MAVLink tuning run needs besides the URLs (TOML table `[mavlink]`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    urls: list[str] = Field(default_factory=list)  # one per vehicle (udpin:HOST:PORT, tcp:HOST:PORT, serial:DEV:BAUD)
+    autopilot: Literal["auto", "px4", "ardupilot"] = "auto"
+    gains: dict[str, GainParam] | None = None  # None: DEFAULT_GAINS of the detected autopilot
+    primitive_s: float = Field(8.0, gt=0)  # one circle (paper: 8 s)
+    settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
+    calm_tolerance_m: float = Field(0.15, gt=0)  # after settle_s, also wait until |altitude error| is below this
+    calm_speed_mps: float = Field(0.3, gt=0)  # … and |vertical speed| below this (after an abort the vehicle recovers)
+    calm_timeout_s: float = Field(10.0, gt=0)  # vehicle seconds to wait for calm before the flight is lost
+    circle_diameter_m: float = Field(2.0, ge=0)
+    elevation_m: float = Field(1.0, ge=0)  # altitude difference over the circle
+    setpoint_hz: float = Field(20.0, ge=10.0, le=100.0)  # SET_POSITION_TARGET_LOCAL_NED rate (PX4 needs > 2 Hz)
+    filter_hz: float = Field(5.0, gt=0)  # low-pass cutoff of the cost, as the simulator's Scenario.filter_hz
+    altitude_source: Literal["local_position", "distance_sensor"] = "local_position"
+    keep_tuned: bool = False  # at the end leave the tuned gains on the vehicle instead of the originals
+    heartbeat_wait_s: float = Field(10.0, gt=0)  # how long to wait for the first HEARTBEAT
+    param_timeout_s: float = Field(1.0, gt=0)  # wait for PARAM_VALUE per attempt (raise for slow links)
+    param_retries: int = Field(5, ge=1)
+    mode_timeout_s: float = Field(3.0, gt=0)  # wait for the HEARTBEAT to show a commanded mode
+    target_system: int | None = Field(None, ge=1, le=255)  # None: the first vehicle that sends a HEARTBEAT
+    source_system: int = Field(255, ge=1, le=255)  # our (ground station) system id
+    safety: SafetyConfig = SafetyConfig()
+
+    def gain_map(self, autopilot: Autopilot) -> dict[str, GainParam]:
+        """The gain → parameter map in force for a vehicle of this autopilot."""
+        return dict(self.gains) if self.gains is not None else dict(DEFAULT_GAINS[autopilot])
+
+
+def load_mavlink_config(source: str | Path | dict[str, Any] | None) -> MavlinkConfig:
+    """A MavlinkConfig from a TOML file (its `[mavlink]` table, or the whole file), a dict, or None (defaults)."""
+    if source is None:
+        return MavlinkConfig()
+    if isinstance(source, dict):
+        data = source
+    else:
+        path = Path(source)
+        try:
+            data = tomllib.loads(path.read_text())
+        except FileNotFoundError:
+            raise MavtuneError(f"config file {path} does not exist") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise MavtuneError(f"config file {path} is not valid TOML: {exc}") from None
+    data = data.get("mavlink", data)
+    try:
+        return MavlinkConfig.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"])
+        raise MavtuneError(f"mavlink config: {where}: {first['msg']}") from None

@@ -1,0 +1,240 @@
+"""MavlinkFleet: a ground station flying several MAVLink vehicles at once (the Fleet protocol), one thread each."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Flight, Gains, Status
+from mavtune.vehicles.mavlink.config import MavlinkConfig, load_mavlink_config
+from mavtune.vehicles.mavlink.vehicle import MavlinkVehicle
+
+log = logging.getLogger(__name__)
+
+ORIGINALS_FILE = "original_params.json"
+_file_lock = threading.Lock()
+
+
+def write_originals(out_dir: str | Path, originals: Mapping[str, Mapping[str, float]]) -> Path:
+    """Merge {vehicle: {param: value}} into out_dir/original_params.json (atomic); entries already there win."""
+    path = Path(out_dir) / ORIGINALS_FILE
+    with _file_lock:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        stored = read_originals(out_dir)
+        merged = {**{k: dict(v) for k, v in originals.items()}, **stored}
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(merged, indent=2, sort_keys=True))
+        os.replace(tmp, path)
+    return path
+
+
+def read_originals(out_dir: str | Path | None) -> dict[str, dict[str, float]]:
+    """The originals saved by an earlier run in out_dir ({} when none)."""
+    if out_dir is None:
+        return {}
+    path = Path(out_dir) / ORIGINALS_FILE
+    if not path.exists():
+        return {}
+    try:
+        return {k: {p: float(v) for p, v in d.items()} for k, d in json.loads(path.read_text()).items()}
+    except (ValueError, AttributeError) as exc:
+        raise MavtuneError(f"{path} is not a valid originals file ({exc}); move it away to start afresh") from None
+
+
+class MavlinkFleet:
+    """Vehicles behind MAVLink URLs flown concurrently; closing restores every vehicle's original gains.
+
+    Connecting checks every vehicle (heartbeat, autopilot, gain parameters, armed, airborne, allowed mode) and
+    refuses to start, naming the vehicle, if one is not fit. The originals are saved before any change, to
+    `out_dir/original_params.json` when out_dir is given (and reused from there when a run is resumed).
+    """
+
+    def __init__(
+        self,
+        urls: Sequence[str],
+        config: MavlinkConfig | None = None,
+        *,
+        out_dir: str | Path | None = None,
+        names: Sequence[str] | None = None,
+        check_ready: bool = True,
+    ):
+        self.config = config or MavlinkConfig()
+        urls = list(urls) or list(self.config.urls)
+        if not urls:
+            raise MavtuneError("no MAVLink vehicle given: pass at least one URL (--mavlink udpin:127.0.0.1:14540)")
+        if len(set(urls)) != len(urls):
+            raise MavtuneError("the same MAVLink URL is given twice")
+        names = list(names) if names is not None else list(urls)
+        if len(names) != len(urls):
+            raise MavtuneError(f"{len(names)} names for {len(urls)} MAVLink URLs")
+        self.out_dir = Path(out_dir) if out_dir is not None else None
+        self.events: list[dict[str, Any]] = []
+        self.tuned: Gains | None = None  # set by the caller to keep tuned gains at the end (config.keep_tuned)
+        self._closed = False
+        self._problems: dict[str, str | None] = {}
+        self.restored: bool | None = None  # set by finish(): every vehicle confirmed its final gains
+        saved = read_originals(self.out_dir)
+        self.vehicles: list[MavlinkVehicle] = []
+        with ThreadPoolExecutor(max_workers=len(urls)) as pool:
+            futures = [
+                pool.submit(MavlinkVehicle, url, self.config, name=name, originals=saved.get(name))
+                for url, name in zip(urls, names)
+            ]
+            errors = []
+            for fut in futures:
+                try:
+                    self.vehicles.append(fut.result())
+                except Exception as exc:
+                    errors.append(exc)
+        if errors:
+            for v in self.vehicles:
+                v.link.close()
+            raise errors[0] if isinstance(errors[0], MavtuneError) else MavtuneError(str(errors[0]))
+        if check_ready:
+            problems = [f"{v.name}: {p}" for v in self.vehicles if (p := v.ready_problem())]
+            if problems:
+                for v in self.vehicles:
+                    v.link.close()
+                raise MavtuneError("refusing to start: " + "; ".join(problems))
+        if self.out_dir is not None:
+            write_originals(self.out_dir, self.original_params)
+        self._event("connected", vehicles=[v.name for v in self.vehicles])
+
+    def _event(self, kind: str, **data: Any) -> None:
+        self.events.append({"t": time.time(), "event": kind, **data})
+
+    @property
+    def original_params(self) -> dict[str, dict[str, float]]:
+        """{vehicle name: {parameter: original value}} as read before any change (or from an earlier run)."""
+        return {v.name: dict(v.original_params) for v in self.vehicles}
+
+    @property
+    def size(self) -> int:
+        """Vehicles fit to fly the next round (a vehicle left to its pilot, or whose link is down, is not).
+
+        When none is ready, wait up to safety.ready_wait_s for one (a link hiccup should not end the run).
+        """
+        deadline = time.monotonic() + self.config.safety.ready_wait_s
+        while True:
+            n = len(self._ready())
+            if n or time.monotonic() >= deadline or all(v.ready_problem() == v.released for v in self.vehicles):
+                return n
+            time.sleep(0.05)
+
+    def _ready(self) -> list[MavlinkVehicle]:
+        ready = []
+        for v in self.vehicles:
+            problem = v.ready_problem()
+            if problem != self._problems.get(v.name):
+                self._problems[v.name] = problem
+                log.warning("%s: %s", v.name, f"not ready: {problem}" if problem else "ready again")
+                self._event("not_ready" if problem else "ready", vehicle=v.name, reason=problem)
+            if problem is None:
+                ready.append(v)
+        return ready
+
+    def fly(self, assignments: Sequence[Gains], round_id: int) -> list[Flight]:
+        """Fly assignment i on the i-th ready vehicle, all at once; a vehicle that cannot fly gives a LOST flight."""
+        ready = self._ready()
+        if len(assignments) > len(ready):
+            raise MavtuneError(f"round {round_id}: {len(assignments)} assignments for {len(ready)} ready vehicles")
+        if not assignments:
+            return []
+        with ThreadPoolExecutor(max_workers=len(assignments)) as pool:
+            futures = [pool.submit(v.fly, dict(a), round_id) for v, a in zip(ready, assignments)]
+            flights = []
+            for v, a, fut in zip(ready, assignments, futures):
+                try:
+                    flights.append(fut.result())
+                except MavtuneError:
+                    raise
+                except BaseException as exc:
+                    if not isinstance(exc, Exception):  # Ctrl-C: stop every primitive now, then unwind
+                        for other in ready:
+                            other.request_abort("interrupted")
+                        raise
+                    # a bug or I/O error on one vehicle: record it, lose that flight only
+                    log.error("%s: flight in round %d crashed: %r", v.name, round_id, exc)
+                    flights.append(Flight(v.name, dict(a), float("nan"), Status.LOST, None,
+                                          {"round_id": round_id, "reason": "error", "detail": repr(exc)}))
+        for f in flights:
+            if f.status is not Status.OK:
+                self._event("aborted" if f.status is Status.FAILED else "lost", vehicle=f.vehicle, round=round_id,
+                            reason=f.info.get("reason"))
+        return flights
+
+    def finish(self, tuned: Gains | None = None) -> bool:
+        """Leave every vehicle with its originals (or `tuned`, normalised) and release it; True if all confirmed."""
+        with ThreadPoolExecutor(max_workers=len(self.vehicles)) as pool:
+            oks = list(pool.map(lambda v: _finish(v, tuned), self.vehicles))
+        self.restored = all(oks)
+        self._event("finished", restored=all(oks), kept_tuned=tuned is not None)
+        return all(oks)
+
+    def close(self) -> None:
+        """Restore the originals (or the tuned gains when config.keep_tuned and `tuned` is set), close the links."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self.restored is None:  # not finished by the caller yet
+                self.finish(self.tuned if self.config.keep_tuned else None)
+        finally:
+            for v in self.vehicles:
+                v.close()
+
+    def __enter__(self) -> "MavlinkFleet":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _finish(vehicle: MavlinkVehicle, tuned: Gains | None) -> bool:
+    try:
+        return vehicle.finish(tuned)
+    except Exception:
+        log.exception("%s: could not finish", vehicle.name)
+        return False
+
+
+def journaled_fleet(urls: Sequence[str], config: MavlinkConfig, out_dir: str | Path,
+                    journal_name: str = "journal.sqlite") -> MavlinkFleet:
+    """A MavlinkFleet whose originals live in out_dir's journal (key "original_params") and originals file;
+    on resume the journaled originals win over what the vehicles hold now (they may carry candidate gains)."""
+    from mavtune.journal import Journal
+
+    out = Path(out_dir)
+    journal = out / journal_name
+    if journal.exists() and not read_originals(out):
+        with Journal(journal) as j:
+            stored = j.get("original_params")
+        if stored:
+            write_originals(out, stored)
+    fleet = MavlinkFleet(urls, config, out_dir=out)
+    try:
+        with Journal(journal) as j:
+            if j.get("original_params") is None:
+                j.put("original_params", fleet.original_params)
+    except BaseException:
+        fleet.close()
+        raise
+    return fleet
+
+
+def fleet_from_config(config: Any, out_dir: str | Path) -> MavlinkFleet:
+    """The MavlinkFleet of a run config (mavtune.config.Config): [mavlink] settings, [flight] timing."""
+    section = dict(getattr(config, "mavlink", {}) or {})
+    flight = getattr(config, "flight", None)
+    if flight is not None:
+        section.setdefault("primitive_s", flight.primitive_s)
+        section.setdefault("settle_s", flight.settle_s)
+    cfg = load_mavlink_config(section)
+    return journaled_fleet(cfg.urls, cfg, out_dir)

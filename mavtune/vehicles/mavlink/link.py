@@ -1,0 +1,224 @@
+"""One MAVLink connection (pymavlink) with a reader thread that keeps the vehicle's latest state and notifies waiters."""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from mavtune.errors import MavtuneError
+
+log = logging.getLogger(__name__)
+
+_SCHEMES = ("udp:", "udpin:", "udpout:", "tcp:", "tcpin:", "serial:")
+
+
+def parse_url(url: str) -> tuple[str, int]:
+    """A pymavlink device string and baud rate from a mavtune URL (udp:/udpin:/udpout:/tcp:/tcpin:/serial:DEV[:BAUD])."""
+    if url.startswith("serial:"):
+        dev, baud = url[len("serial:") :], 57600
+        head, sep, tail = dev.rpartition(":")
+        if sep and tail.isdigit():
+            dev, baud = head, int(tail)
+        if not dev:
+            raise MavtuneError(f"MAVLink URL {url!r} names no serial device (serial:/dev/ttyACM0:921600)")
+        return dev, baud
+    if url.startswith("/dev/") or url.upper().startswith("COM"):
+        return url, 57600
+    if not url.startswith(_SCHEMES) or ":" not in url.split(":", 1)[1]:
+        raise MavtuneError(
+            f"MAVLink URL {url!r} is not understood; use udpin:HOST:PORT, udp:HOST:PORT, tcp:HOST:PORT or serial:DEV[:BAUD]"
+        )
+    return url, 57600
+
+
+@dataclass
+class PositionSample:
+    """One LOCAL_POSITION_NED (or DISTANCE_SENSOR) reading: vehicle time and position, NED metres."""
+
+    t_s: float  # vehicle time since boot
+    x_m: float
+    y_m: float
+    z_m: float  # NED down (altitude is −z)
+    vz_mps: float
+    wall_s: float
+
+
+@dataclass
+class VehicleState:
+    """The latest state the reader thread saw from the target vehicle."""
+
+    system: int | None = None
+    component: int | None = None
+    mav_autopilot: int | None = None
+    mav_type: int | None = None
+    mode: str = ""
+    armed: bool = False
+    landed_state: int | None = None  # MAV_LANDED_STATE_*, None when never reported
+    heartbeat_wall_s: float = 0.0
+    heartbeats: int = 0
+    position: PositionSample | None = None
+    distance_m: float | None = None
+    distance_t_s: float | None = None
+    params: dict[str, tuple[float, int, int]] = field(default_factory=dict)  # name → (value, type, arrival no.)
+    param_arrivals: int = 0
+    acks: dict[int, tuple[int, int]] = field(default_factory=dict)  # command → (result, arrival no.)
+    ack_arrivals: int = 0
+
+
+class MavlinkLink:
+    """A connection to one vehicle: open by URL, read in the background, send under a lock."""
+
+    def __init__(self, url: str, *, source_system: int = 255, target_system: int | None = None):
+        device, baud = parse_url(url)
+        self.url = url
+        self.target_system = target_system
+        try:
+            self._conn = mavutil.mavlink_connection(
+                device, baud=baud, source_system=source_system, source_component=mavlink.MAV_COMP_ID_MISSIONPLANNER
+            )
+        except Exception as exc:  # pymavlink raises OSError/ValueError/serial errors
+            raise MavtuneError(f"cannot open MAVLink connection {url!r}: {exc}") from None
+        self.state = VehicleState()
+        self._cond = threading.Condition()
+        self._send_lock = threading.Lock()
+        self._listeners: list[Callable[[PositionSample], None]] = []
+        self._closed = threading.Event()
+        self._thread = threading.Thread(target=self._read_loop, name=f"mavlink-read {url}", daemon=True)
+        self._thread.start()
+
+    # ---- reading -------------------------------------------------------------------------------------------
+    def _read_loop(self) -> None:
+        while not self._closed.is_set():
+            try:
+                msg = self._conn.recv_match(blocking=True, timeout=0.05)
+            except Exception as exc:  # a closed socket during shutdown, or a garbled frame
+                if self._closed.is_set():
+                    return
+                log.debug("mavlink read error on %s: %s", self.url, exc)
+                time.sleep(0.01)
+                continue
+            if msg is None:
+                continue
+            try:
+                self._handle(msg)
+            except Exception:  # never let one odd message kill the reader
+                log.exception("error handling %s from %s", msg.get_type(), self.url)
+
+    def _handle(self, msg) -> None:
+        mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            return
+        src = msg.get_srcSystem()
+        st = self.state
+        if mtype == "HEARTBEAT":
+            if msg.type == mavlink.MAV_TYPE_GCS or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
+                return  # another ground station or a peripheral, not the autopilot
+            if self.target_system is None:
+                self.target_system = src
+            if src != self.target_system:
+                return
+            with self._cond:
+                st.system, st.component = src, msg.get_srcComponent()
+                st.mav_autopilot, st.mav_type = msg.autopilot, msg.type
+                st.mode = mavutil.mode_string_v10(msg)
+                st.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+                st.heartbeat_wall_s = time.monotonic()
+                st.heartbeats += 1
+                self._cond.notify_all()
+            return
+        if self.target_system is None or src != self.target_system:
+            return
+        if mtype == "LOCAL_POSITION_NED":
+            sample = PositionSample(
+                msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z, msg.vz, time.monotonic()
+            )
+            with self._cond:
+                st.position = sample
+                listeners = list(self._listeners)
+                self._cond.notify_all()
+            for fn in listeners:
+                fn(sample)
+        elif mtype == "DISTANCE_SENSOR":
+            with self._cond:
+                st.distance_m = msg.current_distance / 100.0 if msg.current_distance > 0 else math.nan
+                st.distance_t_s = msg.time_boot_ms / 1000.0
+        elif mtype == "EXTENDED_SYS_STATE":
+            with self._cond:
+                st.landed_state = msg.landed_state
+        elif mtype == "PARAM_VALUE":
+            name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else msg.param_id.decode().rstrip("\x00")
+            with self._cond:
+                st.param_arrivals += 1
+                st.params[name] = (float(msg.param_value), int(msg.param_type), st.param_arrivals)
+                self._cond.notify_all()
+        elif mtype == "COMMAND_ACK":
+            with self._cond:
+                st.ack_arrivals += 1
+                st.acks[msg.command] = (msg.result, st.ack_arrivals)
+                self._cond.notify_all()
+
+    def wait_for(self, predicate: Callable[[VehicleState], bool], timeout_s: float) -> bool:
+        """Block until predicate(state) holds (checked under the state lock) or the timeout passes."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while not predicate(self.state):
+                left = deadline - time.monotonic()
+                if left <= 0 or self._closed.is_set():
+                    return False
+                self._cond.wait(min(left, 0.1))
+            return True
+
+    def snapshot(self) -> VehicleState:
+        """A consistent copy of the vehicle state (params dict copied)."""
+        with self._cond:
+            st = self.state
+            return VehicleState(**{**vars(st), "params": dict(st.params), "acks": dict(st.acks)})
+
+    def heartbeat_age_s(self) -> float:
+        """Wall seconds since the last HEARTBEAT of the target vehicle (inf before the first)."""
+        with self._cond:
+            if not self.state.heartbeats:
+                return math.inf
+            return time.monotonic() - self.state.heartbeat_wall_s
+
+    def add_position_listener(self, fn: Callable[[PositionSample], None]) -> None:
+        """Call fn(sample) from the reader thread for every LOCAL_POSITION_NED."""
+        with self._cond:
+            self._listeners.append(fn)
+
+    def remove_position_listener(self, fn: Callable[[PositionSample], None]) -> None:
+        """Stop calling fn."""
+        with self._cond:
+            if fn in self._listeners:
+                self._listeners.remove(fn)
+
+    # ---- sending -------------------------------------------------------------------------------------------
+    def send(self, fn: Callable[[object], None]) -> None:
+        """Send one message: fn receives pymavlink's MAVLink object (e.g. lambda m: m.param_set_send(...))."""
+        if self._closed.is_set():
+            return
+        with self._send_lock:
+            fn(self._conn.mav)
+
+    @property
+    def target_component(self) -> int:
+        """The autopilot's component id (1 until a HEARTBEAT says otherwise)."""
+        return self.state.component or 1
+
+    def close(self) -> None:
+        """Stop the reader and close the connection."""
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        self._thread.join(timeout=1.0)
+        try:
+            self._conn.close()
+        except Exception:
+            pass

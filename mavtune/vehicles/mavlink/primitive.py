@@ -1,0 +1,66 @@
+"""The reference primitive flown over MAVLink (the paper's circle) and the altitude cost of a flown one.
+
+The circle starts and ends at the hover point: one turn of diameter `circle_diameter_m` in `primitive_s`,
+climbing `elevation_m` and back, z_up(t) = elevation/2 · (1 − cos ωt).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """A position/velocity/acceleration target in the local NED frame (metres, m/s, m/s²)."""
+
+    pos_m: tuple[float, float, float]
+    vel_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    acc_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def finite(self) -> bool:
+        """True when every component is a finite number (never send NaN)."""
+        return all(math.isfinite(v) for v in (*self.pos_m, *self.vel_mps, *self.acc_mps2))
+
+
+@dataclass(frozen=True)
+class Circle:
+    """One turn of a climbing circle relative to a hover point (NED), as a function of time since its start."""
+
+    hover_ned_m: tuple[float, float, float]
+    duration_s: float = 8.0
+    diameter_m: float = 2.0
+    elevation_m: float = 1.0
+
+    def at(self, t_s: float) -> Setpoint:
+        """The setpoint at time t_s (held at the end point outside [0, duration])."""
+        t = min(max(t_s, 0.0), self.duration_s)
+        w = 2.0 * math.pi / self.duration_s
+        r, h = self.diameter_m / 2.0, self.elevation_m / 2.0
+        c, s = math.cos(w * t), math.sin(w * t)
+        moving = 0.0 < t_s < self.duration_s
+        x0, y0, z0 = self.hover_ned_m
+        pos = (x0 + r * (c - 1.0), y0 + r * s, z0 - h * (1.0 - c))
+        if not moving:
+            return Setpoint(pos)
+        vel = (-r * w * s, r * w * c, -h * w * s)
+        acc = (-r * w * w * c, -r * w * w * s, -h * w * w * c)
+        return Setpoint(pos, vel, acc)
+
+    def altitude_ref_m(self, t_s: float) -> float:
+        """The reference altitude (up, metres, same origin as −z of LOCAL_POSITION_NED) at time t_s."""
+        return -self.at(t_s).pos_m[2]
+
+
+def altitude_cost(t_s, z_ref_m, z_m, filter_hz: float = 5.0, dt_s: float = 0.01) -> float:
+    """The simulator's IAE of a flown primitive: samples (at the telemetry rate) interpolated onto its 100 Hz grid."""
+    from mavtune.vehicles.mavlink.simcost import iae_cost
+
+    t = np.asarray(t_s, dtype=float)
+    if t.size < 2:
+        return math.inf
+    grid = np.arange(t[0], t[-1] + 1e-9, dt_s)
+    return iae_cost(np.interp(grid, t, np.asarray(z_ref_m, float)), np.interp(grid, t, np.asarray(z_m, float)),
+                    filter_hz, dt_s)

@@ -1,0 +1,402 @@
+"""One PX4 or ArduPilot vehicle tuned over MAVLink: probe, keep the originals, set gains safely, fly the primitive."""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from typing import Any, Mapping
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Flight, Gains, Status, Trace
+from mavtune.vehicles.mavlink.config import MavlinkConfig
+from mavtune.vehicles.mavlink.link import MavlinkLink, PositionSample
+from mavtune.vehicles.mavlink.params import ParamClient, ParamNotConfirmed
+from mavtune.vehicles.mavlink.primitive import Circle, Setpoint, altitude_cost
+from mavtune.vehicles.mavlink.profiles import profile_from_heartbeat
+from mavtune.vehicles.mavlink.safety import (
+    GAIN_FAULTS,
+    ResolvedGain,
+    abort_reason,
+    allowed_modes,
+    preflight_problem,
+    resolve_gain,
+)
+from mavtune.vehicles.mavlink.setpoints import SetpointStreamer, require_mode_known, set_mode
+
+log = logging.getLogger(__name__)
+
+TRACE_HZ = 10.0  # decimation of the trace kept in each Flight
+CALM_HOLD_S = 0.5  # vehicle seconds the hover must stay calm before new gains / the primitive
+
+
+class MavlinkVehicle:
+    """A vehicle behind a MAVLink URL. Connecting reads the original gains; nothing is changed until `fly`.
+
+    `originals` (param → value), when given, replaces the values read at connect: a resumed run passes the
+    originals journaled by the first run, since the vehicle may still carry candidate gains.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        config: MavlinkConfig | None = None,
+        *,
+        name: str | None = None,
+        originals: Mapping[str, float] | None = None,
+    ):
+        self.config = config or MavlinkConfig()
+        self.url = url
+        self.name = name or url
+        self._lock = threading.Lock()
+        self._closed = False
+        self._in_control = False
+        self._released: str | None = None  # why this vehicle no longer flies (pilot took over, restore failed)
+        self._hover_ned: tuple[float, float, float] | None = None
+        self._mode_before: str | None = None
+        self._abort_request: str | None = None  # set from another thread (Ctrl-C) to stop the running primitive
+        self.link = MavlinkLink(url, source_system=self.config.source_system, target_system=self.config.target_system)
+        try:
+            self._connect(originals)
+        except BaseException:
+            self.link.close()
+            raise
+
+    # ---- connect ---------------------------------------------------------------------------------------------
+    def _connect(self, originals: Mapping[str, float] | None) -> None:
+        cfg = self.config
+        if not self.link.wait_for(lambda st: st.heartbeats > 0, cfg.heartbeat_wait_s):
+            raise MavtuneError(f"{self.url}: no HEARTBEAT from an autopilot within {cfg.heartbeat_wait_s:g} s")
+        st = self.link.snapshot()
+        self.profile = profile_from_heartbeat(st.mav_autopilot)
+        if cfg.autopilot != "auto" and cfg.autopilot != self.profile.autopilot.value:
+            raise MavtuneError(
+                f"{self.url}: config says autopilot {cfg.autopilot}, the vehicle reports {self.profile.autopilot.value}"
+            )
+        require_mode_known(self.profile, list(allowed_modes(self.profile, cfg.safety)))
+        self.params = ParamClient(self.link, cfg.param_timeout_s, cfg.param_retries)
+        gain_map = cfg.gain_map(self.profile.autopilot)
+        names = sorted({n for c in gain_map.values() for n, _ in self.profile.family(c.param)})
+        present = self.params.probe(names, retries=min(3, cfg.param_retries))
+        self.gains: dict[str, ResolvedGain] = {g: resolve_gain(g, c, self.profile, present) for g, c in gain_map.items()}
+        self.original_params: dict[str, float] = {rg.vehicle_param: present[rg.vehicle_param] for rg in self.gains.values()}
+        if originals:
+            for k, v in originals.items():
+                if k in self.original_params and math.isfinite(float(v)):
+                    if float(v) != self.original_params[k]:
+                        log.warning("%s: %s is %g now; restoring to the journaled original %g", self.name, k,
+                                    self.original_params[k], float(v))
+                    self.original_params[k] = float(v)
+        self.current_params = {rg.vehicle_param: present[rg.vehicle_param] for rg in self.gains.values()}
+        self.last_safe_params = dict(self.original_params)
+        self.streamer = SetpointStreamer(self.link, cfg.setpoint_hz)
+        log.info("%s: %s, gains %s, originals %s", self.name, self.profile.autopilot.value,
+                 {g: rg.vehicle_param for g, rg in self.gains.items()}, self.original_params)
+
+    # ---- state -----------------------------------------------------------------------------------------------
+    def ready_problem(self) -> str | None:
+        """Why the vehicle cannot fly the next primitive (one line), or None."""
+        if self._closed:
+            return "closed"
+        if self._released:
+            return self._released
+        return preflight_problem(
+            self.link.snapshot(), self.link.heartbeat_age_s(), self.profile, self.config.safety, self._in_control
+        )
+
+    @property
+    def released(self) -> str | None:
+        """Why this vehicle is out of the run for good (pilot took over, gains not restorable), or None."""
+        return self._released
+
+    @property
+    def ready(self) -> bool:
+        """True when the vehicle can fly the next primitive."""
+        return self.ready_problem() is None
+
+    def param_values(self, normalised: Gains) -> dict[str, float]:
+        """The on-vehicle parameter values of a normalised gain vector, inside the envelope (MavtuneError otherwise)."""
+        missing = sorted(set(self.gains) - set(normalised))
+        extra = sorted(set(normalised) - set(self.gains))
+        if missing or extra:
+            raise MavtuneError(
+                f"{self.name}: gains {sorted(normalised)} do not match the configured gains {sorted(self.gains)}"
+            )
+        return {rg.vehicle_param: rg.value(normalised[g]) for g, rg in self.gains.items()}
+
+    # ---- parameters ------------------------------------------------------------------------------------------
+    def _set_params(self, values: Mapping[str, float]) -> None:
+        for name, value in values.items():
+            self.current_params[name] = math.nan  # unknown until confirmed
+            self.current_params[name] = self.params.set(name, value)
+
+    def _restore(self, values: Mapping[str, float], what: str) -> bool:
+        """Set `values`, trying every parameter even when one fails; True when all confirmed."""
+        ok = True
+        for name, value in values.items():
+            try:
+                self.current_params[name] = self.params.set(name, value)
+            except MavtuneError as exc:
+                ok = False
+                log.error("%s: restoring %s failed: %s", self.name, what, exc)
+        return ok
+
+    def apply_gains(self, normalised: Gains) -> dict[str, float]:
+        """Set a normalised gain vector (envelope-checked, each PARAM_SET confirmed); on failure restore the last
+        safe gains and raise ParamNotConfirmed. Returns the values set."""
+        values = self.param_values(normalised)
+        try:
+            self._set_params(values)
+        except ParamNotConfirmed:
+            if not self._restore(self.last_safe_params, "the last safe gains"):
+                self._released = "gains could not be restored after an unconfirmed PARAM_SET"
+            raise
+        return values
+
+    # ---- control ---------------------------------------------------------------------------------------------
+    def _take_control(self) -> str | None:
+        """Hold the current position with streamed setpoints and switch to the flight mode; a problem or None."""
+        st = self.link.snapshot()
+        pos = st.position
+        self._hover_ned = (pos.x_m, pos.y_m, pos.z_m)
+        self._mode_before = st.mode
+        hover = Setpoint(self._hover_ned)
+        self.streamer.set_target(lambda t: hover)
+        self.streamer.start()
+        if self.profile.stream_before_switch:  # PX4 refuses OFFBOARD unless setpoints already arrive
+            deadline = time.monotonic() + 2.0
+            while self.streamer.sent < 10 and time.monotonic() < deadline:
+                time.sleep(0.01)
+        if st.mode != self.profile.flight_mode and not set_mode(
+            self.link, self.profile, self.profile.flight_mode, self.config.mode_timeout_s
+        ):
+            self.streamer.stop()
+            return f"mode switch to {self.profile.flight_mode} not confirmed"
+        self._in_control = True
+        return None
+
+    def _hold(self) -> None:
+        """Stream the hover point again (abort: stop the primitive where the vehicle is safe)."""
+        if self._hover_ned is not None and self.streamer.running:
+            hover = Setpoint(self._hover_ned)
+            self.streamer.set_target(lambda t: hover)
+
+    def _release(self, pilot: bool) -> None:
+        """Stop commanding the vehicle; unless the pilot took it, leave it in a position-holding mode first."""
+        if self._in_control and not pilot:
+            mode = self._mode_before if self._mode_before not in (None, self.profile.flight_mode) else self.profile.hold_mode
+            if mode != self.profile.flight_mode and not set_mode(self.link, self.profile, mode, self.config.mode_timeout_s):
+                log.error("%s: could not switch back to %s", self.name, mode)
+        self.streamer.stop()
+        self._in_control = False
+
+    # ---- flying ----------------------------------------------------------------------------------------------
+    def _altitude(self, sample: PositionSample) -> float:
+        if self.config.altitude_source == "distance_sensor":
+            d = self.link.state.distance_m
+            return math.nan if d is None else d
+        return -sample.z_m
+
+    def _phase(self, samples: "queue.Queue[PositionSample]", t0: float, duration_s: float, ref, record,
+               calm=None, check_error: bool = True) -> str | None:
+        """Follow the streamed target for duration_s of vehicle time from t0, checking every sample for an abort;
+        with `calm` (a sample → bool), go on after duration_s until calm(sample), up to config.calm_timeout_s."""
+        safety = self.config.safety
+        last_wall = time.monotonic()
+        calm_since: float | None = None
+        while True:
+            try:
+                s = samples.get(timeout=0.05)
+            except queue.Empty:
+                if self.link.heartbeat_age_s() > safety.heartbeat_timeout_s:
+                    return "heartbeat_lost"
+                if time.monotonic() - last_wall > safety.position_timeout_s:
+                    return "position_lost"
+                continue
+            last_wall = time.monotonic()
+            if self._abort_request:
+                return self._abort_request
+            if s.t_s < t0:
+                continue
+            t = s.t_s - t0
+            z, z_ref = self._altitude(s), ref(t)
+            reason = abort_reason(z, z_ref if check_error else z, self.link.state, self.link.heartbeat_age_s(),
+                                  self.profile, safety)
+            if record is not None and math.isfinite(z):
+                record.append((t, z_ref, z))
+            if reason:
+                return reason
+            if calm is not None:  # calm must last CALM_HOLD_S of vehicle time
+                calm_since = (calm_since if calm_since is not None else s.t_s) if calm(s) else None
+            if t >= duration_s and (calm is None or (calm_since is not None and s.t_s - calm_since >= CALM_HOLD_S)):
+                return None
+            if calm is not None and t >= duration_s + self.config.calm_timeout_s:
+                return "not_calm"
+
+    def request_abort(self, reason: str = "interrupted") -> None:
+        """Ask the running primitive (if any) to stop at its next sample; thread-safe."""
+        self._abort_request = reason
+
+    def _recover(self) -> str | None:
+        """Before new gains: hover with the current (safe) gains until calm, e.g. after an aborted primitive."""
+        samples: queue.Queue[PositionSample] = queue.Queue()
+        self.link.add_position_listener(samples.put)
+        try:
+            hover_alt = -self._hover_ned[2]
+            cfg = self.config
+            return self._phase(
+                samples, self.link.state.position.t_s, 0.0, lambda t: hover_alt, None,
+                lambda s: abs(-s.z_m - hover_alt) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps,
+                check_error=False,
+            )
+        finally:
+            self.link.remove_position_listener(samples.put)
+
+    def _fly_primitive(self) -> tuple[str | None, list[tuple[float, float, float]]]:
+        """Settle, then fly the circle; (abort reason or None, samples (t_s, z_ref_m, z_m))."""
+        cfg = self.config
+        samples: queue.Queue[PositionSample] = queue.Queue()
+        self.link.add_position_listener(samples.put)
+        recorded: list[tuple[float, float, float]] = []
+        try:
+            start = self.link.state.position
+            base = self._altitude(start)
+            hover_alt = -self._hover_ned[2]
+
+            def calm(s: PositionSample) -> bool:
+                return abs(-s.z_m - hover_alt) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps
+
+            reason = self._phase(samples, start.t_s, cfg.settle_s, lambda t: base, None, calm)
+            if reason:
+                return reason, recorded
+            circle = Circle(self._hover_ned, cfg.primitive_s, cfg.circle_diameter_m, cfg.elevation_m)
+            t0 = self.link.state.position.t_s
+            base = self._altitude(self.link.state.position) if cfg.altitude_source == "distance_sensor" else hover_alt
+            self.streamer.set_target(lambda t: circle.at(t - t0))
+            reason = self._phase(samples, t0, cfg.primitive_s, lambda t: base + circle.altitude_ref_m(t) - hover_alt, recorded)
+            return reason, recorded
+        finally:
+            self.link.remove_position_listener(samples.put)
+            self._hold()
+
+    def fly(self, gains: Gains, round_id: int) -> Flight:
+        """Set `gains` (normalised), settle, fly the primitive and measure it; aborts restore the last safe gains."""
+        with self._lock:
+            self._abort_request = None
+            return self._fly(dict(gains), round_id)
+
+    def _fly(self, gains: Gains, round_id: int) -> Flight:
+        info: dict[str, Any] = {"round_id": round_id, "url": self.url, "autopilot": self.profile.autopilot.value}
+        values = self.param_values(gains)  # refuse bad input before touching the vehicle
+        info["params"] = values
+
+        def lost(reason: str, detail: str = "") -> Flight:
+            info["reason"] = reason
+            if detail:
+                info["detail"] = detail
+            log.warning("%s: round %d lost: %s %s", self.name, round_id, reason, detail)
+            return Flight(self.name, gains, math.nan, Status.LOST, None, info)
+
+        problem = self.ready_problem()
+        if problem:
+            if self._in_control and not self._released and self.link.snapshot().mode != self.profile.flight_mode \
+                    and self.link.heartbeat_age_s() <= self.config.safety.heartbeat_timeout_s:
+                self._pilot_took_over()
+                return lost("mode_change", problem)
+            return lost("not_ready", problem)
+        if not self._in_control:
+            problem = self._take_control()
+            if problem:
+                return lost("mode_switch_failed", problem)
+        reason = self._recover()
+        if reason:
+            return lost(reason, "the vehicle did not come back to a calm hover before the gain change")
+        try:
+            self.apply_gains(gains)
+        except ParamNotConfirmed as exc:
+            return lost("param_not_confirmed", str(exc))
+        started = time.monotonic()
+        reason, recorded = self._fly_primitive()
+        info["samples"] = len(recorded)
+        info["wall_s"] = round(time.monotonic() - started, 3)
+        trace = _trace(recorded)
+        if reason is None:
+            cost = altitude_cost(*zip(*recorded), filter_hz=self.config.filter_hz) if len(recorded) >= 2 else math.inf
+            if math.isfinite(cost):
+                self.last_safe_params = dict(values)
+                return Flight(self.name, gains, cost, Status.OK, trace, info)
+            reason = "non_finite"
+        # abort: hover (already streamed), restore the last safe gains, classify
+        info["reason"] = reason
+        log.warning("%s: round %d aborted: %s", self.name, round_id, reason)
+        if reason == "mode_change":
+            self._pilot_took_over()
+        elif reason in ("heartbeat_lost", "position_lost"):
+            self._in_control = False  # the autopilot's own failsafe may have taken over; re-check before flying
+            self.streamer.stop()
+            if not self.config.safety.rejoin_after_link_loss:
+                self._released = f"link lost in round {round_id}"
+        restored = self._restore(self.last_safe_params, "the last safe gains")
+        info["restored_last_safe"] = restored
+        if not restored:
+            self._released = f"last safe gains could not be restored after {reason}"
+        if reason in GAIN_FAULTS and recorded:
+            info["partial_cost"] = altitude_cost(*zip(*recorded), filter_hz=self.config.filter_hz)
+            return Flight(self.name, gains, math.inf, Status.FAILED, trace, info)
+        return Flight(self.name, gains, math.nan, Status.LOST, trace, info)
+
+    def _pilot_took_over(self) -> None:
+        self._released = "the pilot changed the mode; this vehicle is left to the pilot"
+        self._release(pilot=True)
+
+    # ---- the end ---------------------------------------------------------------------------------------------
+    def finish(self, tuned: Gains | None = None) -> bool:
+        """Leave the vehicle with the originals (or `tuned`, normalised, when given) and release it; True if confirmed."""
+        with self._lock:
+            if self._closed:
+                return True
+            if tuned is not None:
+                target, what = self.param_values(tuned), "the tuned gains"
+            else:
+                target, what = self.original_params, "the original gains"
+            ok = self._restore(target, what)
+            if ok:
+                log.info("%s: %s set: %s", self.name, what, target)
+            self._release(pilot=self._released is not None and "pilot" in self._released)
+            return ok
+
+    def close(self) -> None:
+        """Restore the original gains (if not done), release the vehicle and close the link."""
+        if self._closed:
+            return
+        try:
+            if any(self.current_params.get(k) != v for k, v in self.original_params.items()) or self._in_control:
+                self.finish()
+        finally:
+            self._closed = True
+            self.link.close()
+
+    def __enter__(self) -> "MavlinkVehicle":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _trace(recorded: list[tuple[float, float, float]]) -> Trace | None:
+    """The recorded samples decimated to TRACE_HZ."""
+    if not recorded:
+        return None
+    out: list[tuple[float, float, float]] = []
+    for row in recorded:
+        if not out or row[0] - out[-1][0] >= 1.0 / TRACE_HZ - 1e-9:
+            out.append(row)
+    t, zr, z = zip(*out)
+    return Trace(list(t), list(zr), list(z))
+
+
+def make_mavlink_vehicle(url: str, config: MavlinkConfig | None = None, **kwargs: Any) -> MavlinkVehicle:
+    """Connect to one vehicle for the swarm agent: `.fly(gains, round_id) -> Flight`, `.close()` restores originals."""
+    return MavlinkVehicle(url, config, **kwargs)

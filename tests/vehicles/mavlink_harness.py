@@ -1,0 +1,60 @@
+"""Harness for MAVLink tests: `mavtune mavsim` as a real process on a free 127.0.0.1 UDP port, always killed."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+from contextlib import contextmanager
+
+from mavtune.vehicles.mavlink.config import MavlinkConfig, SafetyConfig
+from mavtune.vehicles.mavlink.link import MavlinkLink
+from mavtune.vehicles.mavlink.params import ParamClient
+
+SPEED = 20.0  # simulated seconds per wall second
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that nothing holds right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1):
+    """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT); kills it afterwards."""
+    port = free_udp_port()
+    cmd = [sys.executable, "-c", "from mavtune.cli import main; main()", "mavsim", "--port", str(port),
+           "--autopilot", autopilot, "--seed", str(seed), "--speed", str(speed), "--sysid", str(sysid),
+           "--noise-free", "--duration", "120", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        yield f"udpin:127.0.0.1:{port}"
+    finally:
+        proc.kill()
+        proc.wait(timeout=10)
+        if proc.stderr is not None:
+            proc.stderr.close()
+
+
+def fast_config(**changes) -> MavlinkConfig:
+    """A short primitive and short timeouts, for a simulator running SPEED times faster than real time."""
+    base = dict(
+        primitive_s=4.0, settle_s=0.5, param_timeout_s=0.3, param_retries=5, heartbeat_wait_s=20.0,
+        mode_timeout_s=2.0,
+        safety=SafetyConfig(heartbeat_timeout_s=0.5, position_timeout_s=1.0, max_altitude_error_m=1.0),
+    )
+    base.update(changes)
+    return MavlinkConfig(**base)
+
+
+def read_params(url: str, names: list[str]) -> dict[str, float]:
+    """Read parameters back over a fresh MAVLink connection (what the vehicle really holds now)."""
+    link = MavlinkLink(url)
+    try:
+        assert link.wait_for(lambda st: st.heartbeats > 0, 10.0), "no heartbeat"
+        client = ParamClient(link, 0.5, 5)
+        return {n: client.read(n) for n in names}
+    finally:
+        link.close()

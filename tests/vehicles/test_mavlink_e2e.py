@@ -1,0 +1,77 @@
+"""End-to-end: tune through `mavtune mavsim` processes over real MAVLink on UDP loopback (one and two vehicles)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Status
+from mavtune.journal import Journal
+from mavtune.vehicles.mavlink import MavlinkFleet, MavlinkVehicle, make_mavlink_vehicle, run_mavlink_tuning
+from mavtune.vehicles.mavlink.config import GainParam
+
+from mavlink_harness import fast_config, mavsim, read_params
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
+
+PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
+
+
+def test_tune_one_px4_vehicle_end_to_end(tmp_path):
+    with mavsim(autopilot="px4") as url:
+        summary = run_mavlink_tuning([url], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
+        assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
+    assert summary["restored"] is True
+    assert summary["original_params"] == {url: PX4_ORIGINALS}
+    assert set(summary["gains"]) == {"kp", "kd"} and all(0 <= v <= 1 for v in summary["gains"].values())
+    assert summary["flights_by_status"]["ok"] == summary["flights"] > 0
+    on_disk = json.loads((tmp_path / "result.json").read_text())
+    assert on_disk["gains"] == summary["gains"] and on_disk["restored"] is True
+    assert json.loads((tmp_path / "original_params.json").read_text()) == {url: PX4_ORIGINALS}
+    with Journal(tmp_path / "journal.sqlite") as j:
+        assert len(j.rounds()) == len(summary["rounds"])
+        assert j.get("original_params") == {url: PX4_ORIGINALS}
+
+
+def test_tune_two_vehicles_px4_and_ardupilot_47_concurrently(tmp_path):
+    with mavsim(autopilot="px4", seed=1) as a, mavsim(autopilot="ardupilot-4.7", seed=2, sysid=2) as b:
+        summary = run_mavlink_tuning([a, b], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
+        assert read_params(a, list(PX4_ORIGINALS)) == PX4_ORIGINALS
+        assert read_params(b, ["PSC_D_POS_P", "PSC_D_VEL_P"]) == {"PSC_D_POS_P": 1.0, "PSC_D_VEL_P": 5.0}
+    assert summary["restored"] is True
+    assert summary["original_params"][b] == {"PSC_D_POS_P": 1.0, "PSC_D_VEL_P": 5.0}
+    for rnd in summary["rounds"]:
+        assert [f["vehicle"] for f in rnd["flights"]] == [a, b]  # avg: both fly every round
+        assert all(f["status"] == "ok" for f in rnd["flights"])
+
+
+def test_vehicle_for_the_swarm_agent_sets_gains_flies_and_restores():
+    cfg = fast_config(gains={"kp": GainParam(param="PSC_ACCZ_P", min=0.2, max=1.0),
+                             "kd": GainParam(param="PSC_VELZ_P", min=1.0, max=8.0)})
+    with mavsim(autopilot="ardupilot-4.7") as url:
+        vehicle = make_mavlink_vehicle(url, cfg)
+        try:
+            assert isinstance(vehicle, MavlinkVehicle)
+            assert {g: r.vehicle_param for g, r in vehicle.gains.items()} == {"kp": "PSC_D_ACC_P", "kd": "PSC_D_VEL_P"}
+            flight = vehicle.fly({"kp": 0.5, "kd": 0.5}, 0)
+            assert flight.status is Status.OK and math.isfinite(flight.cost) and flight.trace is not None
+            assert flight.info["params"]["PSC_D_ACC_P"] == pytest.approx(0.06)  # 0.6 in ≤4.6 units × 0.1
+            assert read_params(url, ["PSC_D_ACC_P"])["PSC_D_ACC_P"] == pytest.approx(0.06)
+            with pytest.raises(MavtuneError):
+                vehicle.fly({"kp": math.nan, "kd": 0.5}, 1)  # never sent
+            with pytest.raises(MavtuneError):
+                vehicle.fly({"kp": 1.5, "kd": 0.5}, 1)
+        finally:
+            vehicle.close()
+        assert read_params(url, ["PSC_D_ACC_P", "PSC_D_VEL_P"]) == {"PSC_D_ACC_P": pytest.approx(0.05),
+                                                                  "PSC_D_VEL_P": 5.0}
+
+
+def test_refuses_to_start_a_vehicle_on_the_ground():
+    with mavsim("--on-ground", autopilot="px4") as url:
+        with pytest.raises(MavtuneError, match="refusing to start.*not armed"):
+            MavlinkFleet([url], fast_config())
+        assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS

@@ -1,0 +1,112 @@
+"""Unit tests of the MAVLink vehicle's pieces that need no vehicle: config, envelope, profiles, cost, faults."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mavtune.errors import MavtuneError
+from mavtune.vehicles.mavlink.config import GainParam, MavlinkConfig, load_mavlink_config
+from mavtune.vehicles.mavlink.link import parse_url
+from mavtune.vehicles.mavlink.mavsim.faults import parse_faults
+from mavtune.vehicles.mavlink.primitive import Circle, altitude_cost
+from mavtune.vehicles.mavlink.profiles import ARDUPILOT, PX4, Autopilot
+from mavtune.vehicles.mavlink.safety import resolve_gain
+from mavtune.vehicles.mavlink.simcost import iae_cost
+
+
+def test_gain_param_maps_normalised_to_physical_and_refuses_nan_and_outside():
+    g = GainParam(param="MPC_Z_P", min=0.1, max=1.5)
+    assert g.physical(0.0) == pytest.approx(0.1)
+    assert g.physical(1.0) == pytest.approx(1.5)
+    assert g.physical(0.5) == pytest.approx(0.8)
+    for bad in (math.nan, math.inf, -0.1, 1.1):
+        with pytest.raises(MavtuneError):
+            g.physical(bad)
+
+
+def test_gain_param_needs_min_below_max():
+    with pytest.raises(ValueError):
+        GainParam(param="MPC_Z_P", min=1.0, max=1.0)
+
+
+def test_default_gain_maps():
+    cfg = MavlinkConfig()
+    assert {k: v.param for k, v in cfg.gain_map(Autopilot.PX4).items()} == {"kp": "MPC_Z_P", "kd": "MPC_Z_VEL_P_ACC"}
+    assert {k: v.param for k, v in cfg.gain_map(Autopilot.ARDUPILOT).items()} == {"kp": "PSC_POSZ_P", "kd": "PSC_VELZ_P"}
+
+
+def test_ardupilot_47_names_are_found_and_acc_values_scaled():
+    cfg = GainParam(param="PSC_ACCZ_P", min=0.2, max=1.0)
+    rg = resolve_gain("ka", cfg, ARDUPILOT, {"PSC_D_ACC_P": 0.05})
+    assert rg.vehicle_param == "PSC_D_ACC_P"
+    assert (rg.lo, rg.hi) == pytest.approx((0.02, 0.1))
+    assert rg.value(0.5) == pytest.approx(0.06)
+    legacy = resolve_gain("ka", cfg, ARDUPILOT, {"PSC_ACCZ_P": 0.5})
+    assert legacy.vehicle_param == "PSC_ACCZ_P" and legacy.value(0.5) == pytest.approx(0.6)
+
+
+def test_missing_parameter_and_envelope_beyond_autopilot_limits_are_refused():
+    with pytest.raises(MavtuneError, match="no parameter"):
+        resolve_gain("kp", GainParam(param="MPC_Z_P", min=0.1, max=1.5), PX4, {})
+    with pytest.raises(MavtuneError, match="exceeds"):
+        resolve_gain("kp", GainParam(param="MPC_Z_P", min=0.1, max=5.0), PX4, {"MPC_Z_P": 1.0})
+
+
+def test_mode_numbers_come_from_pymavlink_tables():
+    assert PX4.custom_mode_word("OFFBOARD") == 6 << 16
+    assert PX4.custom_mode_word("LOITER") == (4 << 16) | (3 << 24)
+    assert ARDUPILOT.custom_mode_word("GUIDED") == 4
+    with pytest.raises(MavtuneError):
+        PX4.mode_number("NOPE")
+
+
+def test_load_config_from_toml(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('[mavlink]\nautopilot = "px4"\nprimitive_s = 6\n[mavlink.gains.kp]\nparam = "MPC_Z_P"\n'
+                    'min = 0.2\nmax = 1.2\n[mavlink.safety]\nmax_altitude_error_m = 0.8\n')
+    cfg = load_mavlink_config(path)
+    assert cfg.primitive_s == 6 and cfg.gains["kp"].max == 1.2 and cfg.safety.max_altitude_error_m == 0.8
+    path.write_text("[mavlink]\nsetpoint_hz = 1\n")
+    with pytest.raises(MavtuneError, match="setpoint_hz"):
+        load_mavlink_config(path)
+
+
+def test_parse_url():
+    assert parse_url("udpin:127.0.0.1:14540") == ("udpin:127.0.0.1:14540", 57600)
+    assert parse_url("serial:/dev/ttyACM0:921600") == ("/dev/ttyACM0", 921600)
+    assert parse_url("/dev/ttyUSB0") == ("/dev/ttyUSB0", 57600)
+    for bad in ("http://x", "udp:", "14540"):
+        with pytest.raises(MavtuneError):
+            parse_url(bad)
+
+
+def test_circle_starts_and_ends_at_hover_point_and_climbs_by_the_elevation():
+    c = Circle((1.0, 2.0, -5.0), duration_s=8.0, diameter_m=2.0, elevation_m=1.0)
+    assert c.at(0.0).pos_m == pytest.approx((1.0, 2.0, -5.0))
+    assert c.at(8.0).pos_m == pytest.approx((1.0, 2.0, -5.0))
+    assert c.altitude_ref_m(4.0) == pytest.approx(6.0)
+    assert c.at(4.0).pos_m[0] == pytest.approx(-1.0)  # the far side of a 2 m circle
+    assert c.at(2.0).vel_mps[1] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_cost_is_the_simulators_iae_and_independent_of_telemetry_rate():
+    t = np.arange(0, 4.0, 0.02)
+    ref = 5 + 0.5 * (1 - np.cos(2 * np.pi * t / 4))
+    z = ref - 0.1
+    assert altitude_cost(t, ref, ref) == pytest.approx(0.0, abs=1e-12)
+    fast = altitude_cost(t, ref, z)
+    t2 = t[::2]
+    slow = altitude_cost(t2, ref[::2], z[::2])
+    assert fast == pytest.approx(slow, rel=0.02)
+    assert fast > 0 and math.isinf(iae_cost([1.0, math.nan], [1.0, 1.0]))
+
+
+def test_fault_flags():
+    f = parse_faults(["mode-change:2", "heartbeat-gap:3:1.5", "param-drop:MPC_Z_P:3", "diverge:MPC_Z_P:1.2"])
+    assert f.mode_change == 2 and f.heartbeat_gap == (3, 1.5)
+    assert f.param_drop == {"MPC_Z_P": 3} and f.diverge == {"MPC_Z_P": 1.2}
+    with pytest.raises(MavtuneError, match="not understood"):
+        parse_faults(["explode:1"])
