@@ -83,6 +83,8 @@ def tune_command(
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder (default runs/tune-<time>); "
                                        "a folder holding a journal is resumed."),
     resume: bool = typer.Option(False, "--resume", help="Require --out to hold a journal and continue it."),
+    keep_tuned: Optional[bool] = typer.Option(None, "--keep-tuned", help="mavlink: leave the tuned gains on the "
+                                              "vehicles at the end (default: restore the originals)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No per-round lines or progress bar."),
 ) -> None:
     """Tune the gains: the paper's setting on 2 simulated vehicles unless told otherwise."""
@@ -90,7 +92,7 @@ def tune_command(
 
     cfg = _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
                   tuning__seed=seed, sim__payload_kg=payload, fleet__kind=fleet, swarm__listen=listen,
-                  mavlink__urls=mavlink or None)
+                  mavlink__urls=mavlink or None, mavlink__keep_tuned=keep_tuned)
     if out is None:
         if resume:
             raise MavtuneError("--resume needs --out naming the run folder to continue")
@@ -105,6 +107,16 @@ from mavtune.swarm.cli import agent_command, coordinator_command  # noqa: E402
 
 app.command("agent")(agent_command)
 app.command("coordinator")(coordinator_command)
+from mavtune.vehicles.mavlink.mavsim.cli import mavsim_command  # noqa: E402
+
+app.command("mavsim")(mavsim_command)
+from mavtune.sim.commands import bench as bench_command, surface as surface_command  # noqa: E402
+
+app.command("surface")(surface_command)
+app.command("bench")(bench_command)
+from mavtune.experiments.reproduce import reproduce_command  # noqa: E402
+
+app.command("reproduce")(reproduce_command)
 
 
 def main() -> None:

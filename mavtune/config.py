@@ -138,4 +138,6 @@ def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None
         node[leaf] = value
     config = _validated(Config, data)
     config.settings()  # cross-field checks (initial inside its range, groups dividing the vehicles, …)
+    if config.fleet.kind == "sim":
+        config.scenario()  # a bad [sim] value is named before anything is planned or written
     return config

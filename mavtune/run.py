@@ -112,11 +112,14 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     try:
         with RoundView(console, plan, quiet) as view:
             result = run_tuning(settings, fleet, journal, on_round=view)
+        if hasattr(fleet, "tuned"):
+            fleet.tuned = result.gains  # a real fleet keeps these on the vehicles only when told to
     finally:
-        fleet.close()
+        fleet.close()  # real vehicles get their original gains back here, whatever happened
     summary = {**result.to_dict(), "fleet": config.fleet.kind, "wall_s": time.time() - started,
                "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s},
-               "flight_time_s": len(result.rounds) * plan.round_s, "events": _events(fleet)}
+               "flight_time_s": len(result.rounds) * plan.round_s, "events": _events(fleet),
+               **{k: getattr(fleet, k) for k in ("original_params", "restored") if hasattr(fleet, k)}}
     (out_dir / "result.json").write_text(json.dumps(summary, indent=2))
     if report:
         from mavtune.report import write_run_report

@@ -1,4 +1,4 @@
-"""Figures and reports of tuning runs and of the paper's reproduction."""
+"""Figures and reports of tuning runs (`write_run_report`) and the claims of the paper's reproduction."""
 
 from mavtune.report.run_report import write_run_report
 

@@ -1,0 +1,326 @@
+"""`mavtune reproduce`: the paper's simulation campaign in our simulator, beside the paper's numbers.
+
+1. cost surfaces over (kp, kd) without and with the 0.9 kg payload (Figs. 2 and 4), by `mavtune.sim.surface`;
+2. repeated tuning runs for {avg, split} × {0, 0.9 kg} in the paper's setting (2 vehicles, EQL, ε 0.125,
+   2 bootstraps, initial kd 0.2, no reuse), each with its own seeds; `runs.csv`, the table of mean ± std next
+   to the paper's, and the final gains drawn on the surfaces (green avg, red split);
+3. `report.md`: the paper's claims tested on these data (`mavtune.report.claims`), plus the timelines of one
+   avg and one split run (Figs. 6–7).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from mavtune.config import Config, load_config
+from mavtune.errors import MavtuneError
+from mavtune.report import claims as C
+from mavtune.report import markdown as md
+
+RUNS_CSV = "runs.csv"
+RUNS_COLUMNS = ("strategy", "payload_kg", "run", "kp", "kd", "rounds", "flights", "true_cost")
+STRATEGIES = ("avg", "split")
+PAYLOADS_KG = (0.0, 0.9)
+RUN_SEED_OFFSET = 100  # run i flies vehicles with seeds seed + 100 + 2i and seed + 101 + 2i
+VEHICLES = 2
+QUICK_NOTE = " (quick: a smaller campaign than the paper's)"
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """How much to run: surface grid and repeats, tuning runs per configuration, base seed."""
+
+    grid: int = 25
+    repeats: int = 20
+    runs: int = 10
+    seed: int = 0
+    payloads_kg: tuple[float, ...] = PAYLOADS_KG
+
+    @classmethod
+    def full(cls, seed: int = 0) -> "Campaign":
+        """The paper's campaign: 25 × 25 × 20 surfaces, 10 runs per configuration."""
+        return cls(seed=seed)
+
+    @classmethod
+    def quick(cls, seed: int = 0) -> "Campaign":
+        """A CI-sized campaign: 9 × 9 × 5 surfaces, 4 runs per configuration."""
+        return cls(grid=9, repeats=5, runs=4, seed=seed)
+
+    def run_seed(self, run: int) -> int:
+        """The seed of vehicle 0 in tuning run `run` (vehicle j: + j); the same for every configuration."""
+        return self.seed + RUN_SEED_OFFSET + VEHICLES * run
+
+
+@dataclass
+class Reproduction:
+    """What `reproduce` produced: the runs (rows of runs.csv), the surfaces, the claims and the timings."""
+
+    out_dir: Path
+    campaign: Campaign
+    runs: list[dict[str, Any]]
+    surfaces: dict[float, Any]
+    claims: list[C.Claim]
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+def run_config(strategy: str, payload_kg: float, seed: int) -> Config:
+    """The paper's tuning setting (EQL, ε 0.125, 2 bootstraps, initial kd 0.2, 2 vehicles, no reuse) as a Config."""
+    return load_config(None, {"tuning.strategy": strategy, "tuning.reuse": False, "tuning.vehicles": VEHICLES,
+                              "tuning.method": "eql", "tuning.epsilon": 0.125, "tuning.bootstraps": 2,
+                              "tuning.initial": {"kd": 0.2}, "tuning.seed": seed, "sim.payload_kg": payload_kg})
+
+
+def _payload_tag(p: float) -> str:
+    return f"{p:g}kg"
+
+
+def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: Console | None = None,
+              campaign: Campaign | None = None) -> Reproduction:
+    """Run the campaign (quick or full, or an explicit `campaign`) and write everything into `out_dir`."""
+    from mavtune.report.run_report import write_run_report
+    from mavtune.sim import Scenario, SimFleet
+    from mavtune.sim import surface as surf
+    from mavtune.tuner import run_tuning
+
+    console = console or Console()
+    camp = campaign or (Campaign.quick(seed) if quick else Campaign.full(seed))
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise MavtuneError(f"output path {out} is a file, not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float] = {}
+    t_all = time.perf_counter()
+    n_configs = len(STRATEGIES) * len(camp.payloads_kg)
+    surfaces: dict[float, Any] = {}
+    runs: list[dict[str, Any]] = []
+    results: dict[tuple[str, float, int], Any] = {}
+
+    columns = (TextColumn("[bold]{task.description:<28}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, console=console) as bar:
+        flights_per_surface = camp.grid * camp.grid * camp.repeats
+        surface_tasks = {p: bar.add_task(f"surface {_payload_tag(p)} (flights)", total=flights_per_surface)
+                         for p in camp.payloads_kg}
+        runs_task = bar.add_task("tuning runs", total=n_configs * camp.runs)
+        t0 = time.perf_counter()
+        for p in camp.payloads_kg:
+            task = surface_tasks[p]
+            surfaces[p] = surf.compute_surface(camp.grid, camp.repeats, Scenario(payload_kg=p), seed=camp.seed,
+                                               progress=lambda done, total, task=task: bar.update(task, completed=done))
+            surf.write_csv(surfaces[p], out / f"surface_{_payload_tag(p)}.csv")
+        timings["surfaces"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        for p in camp.payloads_kg:
+            for strategy in STRATEGIES:
+                for i in range(camp.runs):
+                    cfg = run_config(strategy, p, camp.run_seed(i))
+                    keep_trace = i == 0  # the first run of each configuration gets a timeline report
+                    fleet = SimFleet(VEHICLES, cfg.scenario(), seed=camp.run_seed(i), trace_hz=10.0 if keep_trace
+                                     else 0.0)
+                    result = run_tuning(cfg.settings(), fleet)
+                    results[(strategy, p, i)] = result
+                    runs.append({"strategy": strategy, "payload_kg": p, "run": i,
+                                 "kp": float(result.gains["kp"]), "kd": float(result.gains["kd"]),
+                                 "rounds": len(result.rounds), "flights": result.flights, "true_cost": math.nan})
+                    bar.advance(runs_task)
+        timings["tuning runs"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    for p in camp.payloads_kg:  # the noise-free cost of every final gain pair, one batch per payload
+        rows = [r for r in runs if r["payload_kg"] == p]
+        flights = SimFleet(len(rows), Scenario.noise_free(payload_kg=p), seed=0, trace_hz=0.0).fly(
+            [{"kp": r["kp"], "kd": r["kd"]} for r in rows], 0)
+        for r, f in zip(rows, flights):
+            r["true_cost"] = float(f.cost)
+    timings["true costs"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    write_runs_csv(runs, out / RUNS_CSV)
+    round_s = run_config("avg", 0.0, 0).flight.primitive_s + run_config("avg", 0.0, 0).flight.settle_s
+    claims = C.all_claims(runs, surfaces, round_s)
+    figures = _surface_figures(out, surfaces, runs, camp)
+    timelines = []
+    for strategy in STRATEGIES:
+        p = camp.payloads_kg[0]
+        name = f"run-{strategy}-{_payload_tag(p)}-0"
+        cfg = run_config(strategy, p, camp.run_seed(0))
+        write_run_report(out / name, results[(strategy, p, 0)], cfg,
+                         title=f"reproduction: {strategy}, payload {p:g} kg, run 0")
+        timelines.append((strategy, p, name))
+    timings["report"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_all
+    rep = Reproduction(out, camp, runs, surfaces, claims, timings)
+    _write_summary(rep, round_s)
+    (out / "report.md").write_text(_report_text(rep, round_s, figures, timelines, quick))
+    return rep
+
+
+def write_runs_csv(runs: list[dict[str, Any]], path: Path) -> None:
+    """Write the runs with the columns of RUNS_COLUMNS (full float precision)."""
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(RUNS_COLUMNS)
+        for r in runs:
+            w.writerow([r["strategy"], f"{r['payload_kg']:g}", r["run"], repr(r["kp"]), repr(r["kd"]), r["rounds"],
+                        r["flights"], repr(r["true_cost"])])
+
+
+def read_runs_csv(path: str | Path) -> list[dict[str, Any]]:
+    """Read runs.csv back into the dicts `write_runs_csv` wrote."""
+    with Path(path).open(newline="") as fh:
+        return [{"strategy": r["strategy"], "payload_kg": float(r["payload_kg"]), "run": int(r["run"]),
+                 "kp": float(r["kp"]), "kd": float(r["kd"]), "rounds": int(r["rounds"]), "flights": int(r["flights"]),
+                 "true_cost": float(r["true_cost"])} for r in csv.DictReader(fh)]
+
+
+def config_table(runs: list[dict[str, Any]], round_s: float, payloads: tuple[float, ...]) -> list[dict[str, Any]]:
+    """Per configuration: n, mean ± std (sample) of kp, kd, rounds, flight time and true cost, and the paper's."""
+    table = []
+    for p in payloads:
+        for strategy in STRATEGIES:
+            g = C.group(runs, strategy, p)
+            paper = C.PAPER_GAINS.get((strategy, p), {})
+            table.append({
+                "strategy": strategy, "payload_kg": p, "n": len(g),
+                "kp": C.mean_std([r["kp"] for r in g]), "kd": C.mean_std([r["kd"] for r in g]),
+                "rounds": C.mean_std([r["rounds"] for r in g]),
+                "flight_time_s": C.mean_std([r["rounds"] * round_s for r in g]),
+                "true_cost": C.mean_std([r["true_cost"] for r in g]),
+                "paper_kp": paper.get("kp"), "paper_kd": paper.get("kd"),
+                "paper_rounds": C.PAPER_AVG_ROUNDS if strategy == "avg" and paper else None,
+                "paper_flight_time_s": C.PAPER_AVG_FLIGHT_S if strategy == "avg" and paper else None,
+            })
+    return table
+
+
+def _surface_figures(out: Path, surfaces: dict[float, Any], runs: list[dict[str, Any]], camp: Campaign) -> list:
+    """The surfaces with the final gains of the runs (green avg, red split), like the paper's Fig. 4."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mavtune.sim import surface as surf
+
+    figures = []
+    for p, s in surfaces.items():
+        fig, ax = plt.subplots(figsize=(6.2, 5.0))
+        avg = [(r["kp"], r["kd"]) for r in C.group(runs, "avg", p)]
+        split = [(r["kp"], r["kd"]) for r in C.group(runs, "split", p)]
+        im = surf.plot_surface(ax, s, points=avg, point_style={"color": "limegreen", "markeredgecolor": "black",
+                                                               "markersize": 6, "label": "avg", "alpha": 0.85},
+                               title=f"payload {p:g} kg: log10 mean cost ({camp.grid}×{camp.grid}×{camp.repeats}), "
+                                     "final gains")
+        if split:  # plot_surface draws x = kd, y = kp
+            ax.plot([kd for _, kd in split], [kp for kp, _ in split], "o", color="red", markeredgecolor="black",
+                    markersize=6, alpha=0.85, label="split", ls="none")
+        fig.colorbar(im, ax=ax, label="log10 mean cost")
+        ax.legend(loc="lower right", fontsize=7, framealpha=0.8)
+        fig.tight_layout()
+        name = f"surface_{_payload_tag(p)}.png"
+        fig.savefig(out / name, dpi=100)
+        plt.close(fig)
+        figures.append((p, name))
+    return figures
+
+
+def _write_summary(rep: Reproduction, round_s: float) -> None:
+    table = config_table(rep.runs, round_s, rep.campaign.payloads_kg)
+    data = {"campaign": asdict(rep.campaign), "round_s": round_s, "table": table,
+            "claims": [asdict(c) for c in rep.claims], "timings_s": rep.timings_s,
+            "surface_minimum": {_payload_tag(p): list(s.argmin()) for p, s in rep.surfaces.items()}}
+    (rep.out_dir / "summary.json").write_text(json.dumps(data, indent=2, default=_json_default))
+
+
+def _json_default(o: Any) -> Any:
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    if isinstance(o, float) and not math.isfinite(o):
+        return repr(o)
+    return str(o)
+
+
+def _report_text(rep: Reproduction, round_s: float, figures: list, timelines: list, quick: bool) -> str:
+    camp = rep.campaign
+    table = config_table(rep.runs, round_s, camp.payloads_kg)
+    lines = [
+        "# Reproduction of the paper's simulation campaign", "",
+        f"Run by `mavtune reproduce{' --quick' if quick else ''} --seed {camp.seed}`{QUICK_NOTE if quick else ''}. "
+        "Every number below is computed "
+        "from the files in this folder; the paper's numbers are from its Gazebo campaign.", "",
+        "## Setting", "",
+        md.table(["", "value"], [
+            ["tuning", "EQL, ε = 0.125, 2 bootstraps, kp then kd, initial kd = 0.2, "
+                       f"{VEHICLES} simulated vehicles"],
+            ["reuse", "off (reuse=False): the paper's authors fly both points of every iteration again — 14 "
+                      "evaluations per gain per bootstrap, 56 in all, the paper's 560 s; with reuse on the "
+                      "same search needs 36"],
+            ["strategies", "avg: both vehicles fly the same point, costs averaged; split: each vehicle flies "
+                           "a different point (paper: 'without AVG')"],
+            ["runs", f"{camp.runs} per configuration; run i uses vehicle seeds seed + {RUN_SEED_OFFSET} + "
+                     f"{VEHICLES}i + j (the same seeds for every configuration)"],
+            ["surfaces", f"{camp.grid} × {camp.grid} grid, {camp.repeats} flights per point, one vehicle "
+                         f"(seed {camp.seed}), `mavtune.sim.surface` (paper: 25 × 25 × 20)"],
+            ["scenario", "the default simulated scenario (wind, lidar noise, vehicle spread) with payload 0 or "
+                         "0.9 kg; true_cost = the cost of the final gains flown once on the noise-free scenario"],
+            ["round", f"{round_s:g} s (8 s circle + 1 s settle); flight time = rounds × {round_s:g} s"],
+        ]), "",
+        "## Final gains, rounds and flight time: ours vs the paper", "",
+        md.table(["strategy", "payload", "runs", "kp (ours)", "kp (paper)", "kd (ours)", "kd (paper)",
+                  "rounds (ours)", "rounds (paper)", "flight time s (ours)", "flight time s (paper)",
+                  "true cost (ours)"],
+                 [[t["strategy"], f"{t['payload_kg']:g} kg", t["n"], md.pm(*t["kp"]), md.pm(*(t["paper_kp"] or (None, None))),
+                   md.pm(*t["kd"]), md.pm(*(t["paper_kd"] or (None, None))), md.pm(*t["rounds"], 1),
+                   md.fixed(t["paper_rounds"], 0), md.pm(*t["flight_time_s"], 1), md.fixed(t["paper_flight_time_s"], 0),
+                   md.pm(*t["true_cost"], 3)] for t in table],
+                 ["l", "l", "r"] + ["r"] * 9), "",
+        "Mean ± sample standard deviation over the runs. The paper gives no round count or flight time for "
+        "'without AVG' (split).", "",
+        "## The paper's claims", "",
+        md.table(["claim", "test", "measured here", "paper", "holds here", "holds on the paper's table"],
+                 [[c.claim, c.test, c.measured, c.paper, "yes" if c.holds else "**no**",
+                   {True: "yes", False: "no", None: "— (no figures)"}[c.paper_holds]] for c in rep.claims]), "",
+        "The last column applies the same test to the paper's own numbers where its table gives them.", "",
+        "## Cost surfaces with the final gains (Figs. 2 and 4)", "",
+    ]
+    for p, name in figures:
+        s = rep.surfaces[p]
+        kp0, kd0 = s.argmin()
+        lines += [md.image(name, f"surface {p:g} kg"), "",
+                  f"Payload {p:g} kg: green = avg, red = split final gains; grid minimum at kp = {kp0:.3f}, "
+                  f"kd = {kd0:.3f} (mean cost {float(s.mean.min()):.4g}); data in `surface_{_payload_tag(p)}.csv`.",
+                  ""]
+    lines += ["## Tuning timelines (Figs. 6–7)", ""]
+    for strategy, p, name in timelines:
+        lines += [f"- {strategy}, payload {p:g} kg, run 0: [{name}/report.md]({name}/report.md)",
+                  f"  {md.image(f'{name}/timeline.png', f'timeline {strategy}')}"]
+    lines += ["", "## Wall time", "",
+              md.table(["stage", "s"], [[k, f"{v:.1f}"] for k, v in rep.timings_s.items()], ["l", "r"]), "",
+              "Files: `runs.csv` (one row per run), `summary.json` (the table and claims as data), "
+              "`surface_*.csv`, the figures, one run report per strategy.", ""]
+    return "\n".join(lines)
+
+
+def reproduce_command(
+    out: Path = typer.Option(..., "--out", "-o", help="Folder for the surfaces, runs.csv, figures and report.md."),
+    quick: bool = typer.Option(False, "--quick", help="A CI-sized campaign (9×9×5 surfaces, 4 runs each, < 60 s)."),
+    seed: int = typer.Option(0, "--seed", help="Base seed of the surfaces and the tuning runs."),
+) -> None:
+    """Regenerate the paper's experiments in the simulator, beside the paper's numbers and claims."""
+    console = Console()
+    rep = reproduce(out, quick=quick, seed=seed, console=console)
+    for c in rep.claims:
+        console.print(f"{'[green]holds[/]' if c.holds else '[red]does not hold[/]'}  {c.claim}: {c.measured}",
+                      highlight=False)
+    console.print(f"{len(rep.runs)} tuning runs and {len(rep.surfaces)} surfaces in {rep.timings_s['total']:.1f} s; "
+                  f"report: {out / 'report.md'}")

@@ -1,0 +1,63 @@
+"""`mavtune tune` with an invalid configuration: one line naming the field, exit status 2, no traceback."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from mavtune.cli import app
+from mavtune.errors import MavtuneError
+
+MAVTUNE = str(Path(sys.executable).with_name("mavtune"))
+
+
+def test_bad_config_file_exits_2_with_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[tuning]\nepsilon = 0.7\n")
+    proc = subprocess.run([MAVTUNE, "tune", "--config", str(bad), "--out", str(tmp_path / "run")],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("error: config tuning.epsilon:") and "0.5" in lines[0]
+    assert "Traceback" not in proc.stderr + proc.stdout
+    assert not (tmp_path / "run").exists()  # nothing was flown or written
+
+
+@pytest.mark.parametrize("toml, args, field", [
+    ("[tuning]\nfoo = 1\n", [], "tuning.foo"),
+    ("[tuning]\nbootstraps = 0\n", [], "tuning.bootstraps"),
+    ("[tuning]\nspace = { kp = [0.0, 1.0] }\ninitial = { kd = 0.2 }\n", [], "kd"),
+    ("[flight]\nprimitive = \"square\"\n", [], "flight.primitive"),
+    ("", ["--strategy", "sideways"], "tuning.strategy"),
+    ("", ["--epsilon", "0"], "tuning.epsilon"),
+    ("[tuning\n", [], "not valid TOML"),
+])
+def test_invalid_config_names_the_field(tmp_path, toml, args, field):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(toml)
+    result = CliRunner().invoke(app, ["tune", "--config", str(cfg), "--quiet", "--out", str(tmp_path / "run"), *args])
+    assert isinstance(result.exception, MavtuneError), result.output
+    message = str(result.exception)
+    assert field in message and "\n" not in message
+    assert not (tmp_path / "run").exists()
+
+
+def test_missing_config_file(tmp_path):
+    result = CliRunner().invoke(app, ["tune", "--config", str(tmp_path / "none.toml")])
+    assert isinstance(result.exception, MavtuneError) and "does not exist" in str(result.exception)
+
+
+def test_tune_writes_the_run_folder_with_the_report(tmp_path):
+    out = tmp_path / "run"
+    result = CliRunner().invoke(app, ["tune", "--quiet", "--strategy", "split", "--no-reuse", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    for name in ("journal.sqlite", "config.json", "result.json", "report.md", "timeline.png"):
+        assert (out / name).exists(), name
+    report = (out / "report.md").read_text()
+    assert "| rounds | 28 | 28 |" in report  # plan vs actual: the plan is known before take-off
+    assert report.count("\n| ") >= 28

@@ -1,0 +1,126 @@
+"""write_run_report: the run folder's report.md and figures, for callable fleets (no traces), SimFleet runs,
+lost/failed flights, fleet events and a cost surface in the folder."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import re
+import time
+
+import pytest
+from rich.console import Console
+
+import mavtune
+from mavtune.config import load_config
+from mavtune.fleet import Flight, Status
+from mavtune.report import write_run_report
+from mavtune.run import run
+
+
+def _table_rows(text: str, heading: str) -> list[list[str]]:
+    """The body rows of the first Markdown table after `heading`."""
+    lines = text.split(heading, 1)[1].splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith("|"))
+    table = []
+    for ln in lines[start:]:
+        if not ln.startswith("|"):
+            break
+        table.append([c.strip() for c in ln.strip().strip("|").split("|")])
+    return table[2:]
+
+
+def _quadratic(assignments):
+    return [sum((g[k] - 0.3) ** 2 for k in g) + 0.01 for g in assignments]
+
+
+def test_callable_fleet_without_traces_three_gains_three_vehicles(tmp_path):
+    result = mavtune.tune(_quadratic, space={"a": (0, 1), "b": (0, 1), "c": (0, 2)}, vehicles=3, strategy="split")
+    path = write_run_report(tmp_path, result)
+    text = path.read_text()
+    assert path == tmp_path / "report.md"
+    png = tmp_path / "timeline.png"
+    assert png.stat().st_size > 5000 and png.read_bytes()[:4] == b"\x89PNG"
+    assert "no altitude traces were recorded" in text
+    rows = _table_rows(text, "## Rounds")
+    assert len(rows) == len(result.rounds)
+    # per-vehicle points and costs are those of the flights
+    first = result.rounds[0]
+    assert rows[0][0] == "0" and rows[0][2] == first.gain
+    assert [float(c) for c in rows[0][4:7]] == pytest.approx([f.gains[first.gain] for f in first.flights], rel=1e-4)
+    assert [float(c) for c in rows[0][7:10]] == pytest.approx(first.costs, rel=1e-4)
+    for name, value in result.gains.items():
+        assert re.search(rf"\| {name} \| {value:.6g} \|", text)
+    plan = _table_rows(text, "## Plan vs actual")
+    assert plan[0][0] == "rounds" and int(plan[0][2]) == len(result.rounds)
+    assert "gains_on_surface.png" not in text
+
+
+def test_simfleet_run_report_has_timeline_plan_and_is_fast(tmp_path):
+    cfg = load_config(None, {"tuning.reuse": False})  # the paper's 56 rounds
+    result = run(cfg, tmp_path, console=Console(file=io.StringIO()), report=False)
+    assert len(result.rounds) == 56
+    t0 = time.perf_counter()
+    write_run_report(tmp_path, result, cfg)
+    elapsed = time.perf_counter() - t0
+    text = (tmp_path / "report.md").read_text()
+    assert "altitude reference (dashed) and measurement" in text
+    assert (tmp_path / "timeline.png").stat().st_size > 20000
+    plan = {r[0]: r[1:] for r in _table_rows(text, "## Plan vs actual")}
+    assert plan["rounds"] == ["56", "56"] and plan["flights"] == ["112", "112"]
+    assert len(_table_rows(text, "## Rounds")) == 56
+    assert elapsed < 4.0, f"report took {elapsed:.2f} s (budget 2 s on an idle machine)"
+
+
+def test_surface_in_run_folder_gets_final_gains(tmp_path):
+    from mavtune.sim import Scenario
+    from mavtune.sim.surface import compute_surface, write_csv
+
+    write_csv(compute_surface(4, 2, Scenario.noise_free()), tmp_path / "surface.csv")
+    result = mavtune.tune(_quadratic, vehicles=2)
+    text = write_run_report(tmp_path, result).read_text()
+    assert "## Final gains on the cost surface" in text
+    assert (tmp_path / "gains_on_surface.png").stat().st_size > 5000
+
+
+class _FlakyFleet:
+    """Two vehicles; vehicle 1 is lost in round 1 and fails (diverges) in round 3."""
+
+    size = 2
+
+    def fly(self, assignments, round_id):
+        out = []
+        for i, g in enumerate(assignments):
+            cost = _quadratic([g])[0]
+            status = Status.OK
+            if i == 1 and round_id == 1:
+                cost, status = math.nan, Status.LOST
+            elif i == 1 and round_id == 3:
+                cost, status = 50.0, Status.FAILED
+            out.append(Flight(vehicle=f"uav{i + 1}", gains=dict(g), cost=cost, status=status))
+        return out
+
+    def close(self):
+        pass
+
+
+def test_lost_and_failed_flights_and_fleet_events(tmp_path):
+    result = mavtune.tune(_FlakyFleet(), strategy="split")
+    events = [{"t_s": 1.5, "event": "lost", "round": 1, "vehicle": "uav2", "detail": "no result within 20 s"},
+              {"t_s": 9.0, "event": "joined", "round": None, "vehicle": "uav2", "detail": "rejoined"}]
+    (tmp_path / "result.json").write_text(json.dumps({"events": events, "fleet": "zenoh"}))
+    text = write_run_report(tmp_path, result).read_text()
+    rows = _table_rows(text, "## Rounds")
+    assert rows[1][-1] == "uav2 lost" and rows[1][7] == "—"
+    assert rows[3][-1] == "uav2 failed"
+    assert "1 failed and 1 lost flights" in text
+    ev = _table_rows(text, "## Fleet events")
+    assert [r[1] for r in ev] == ["lost", "joined"] and ev[0][3] == "uav2"
+    assert "| fleet | zenoh |" in text
+
+
+def test_missing_surface_file_is_one_line_error(tmp_path):
+    result = mavtune.tune(_quadratic, vehicles=2)
+    with pytest.raises(mavtune.errors.MavtuneError, match="does not exist"):
+        write_run_report(tmp_path, result, surface=tmp_path / "nope.csv")
