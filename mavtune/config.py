@@ -102,10 +102,10 @@ class Config(_Section):
 
         f = self.flight
         data = {**self.sim, "primitive": f.primitive, "primitive_s": f.primitive_s, "settle_s": f.settle_s}
-        return _validated(Scenario, data, "sim")
+        return validated(Scenario, data, "sim")
 
 
-def _validated(model: type[BaseModel], data: dict[str, Any], prefix: str = "") -> Any:
+def validated(model: type[BaseModel], data: dict[str, Any], prefix: str = "") -> Any:
     """Validate, turning the first pydantic error into one line: `config <field>: <reason>`."""
     try:
         return model.model_validate(data)
@@ -117,17 +117,22 @@ def _validated(model: type[BaseModel], data: dict[str, Any], prefix: str = "") -
         raise MavtuneError(f"config {where}: {reason}{got}") from None
 
 
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The tables of a TOML file; a missing or malformed file is one line naming it."""
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise MavtuneError(f"config file {path} does not exist") from None
+    except IsADirectoryError:
+        raise MavtuneError(f"config file {path} is a folder") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise MavtuneError(f"config file {path} is not valid TOML: {exc}") from None
+
+
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> Config:
     """Read a TOML file (or the defaults), then apply `{"section.field": value}` overrides from flags."""
-    data: dict[str, Any] = {}
-    if path is not None:
-        path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise MavtuneError(f"config file {path} does not exist") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise MavtuneError(f"config file {path} is not valid TOML: {exc}") from None
+    data = read_toml(path) if path is not None else {}
     for dotted, value in (overrides or {}).items():
         if value is None:
             continue
@@ -136,7 +141,7 @@ def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None
         for p in parents:
             node = node.setdefault(p, {})
         node[leaf] = value
-    config = _validated(Config, data)
+    config = validated(Config, data)
     config.settings()  # cross-field checks (initial inside its range, groups dividing the vehicles, …)
     if config.fleet.kind == "sim":
         config.scenario()  # a bad [sim] value is named before anything is planned or written

@@ -5,13 +5,12 @@ Read from a TOML file (the `[swarm]` table, or the top level) and/or overridden 
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from mavtune.errors import MavtuneError
+from mavtune.config import read_toml, validated
 from mavtune.swarm.messages import SESSION_PATTERN, VEHICLE_PATTERN
 
 
@@ -61,21 +60,10 @@ def load_swarm_config(path: str | Path | None = None, **overrides: Any) -> Swarm
     """Build a SwarmConfig from an optional TOML file plus non-None overrides; bad input raises MavtuneError."""
     data: dict[str, Any] = {}
     if path is not None:
-        p = Path(path)
-        try:
-            raw = tomllib.loads(p.read_text())
-        except FileNotFoundError:
-            raise MavtuneError(f"swarm config file {p} does not exist") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise MavtuneError(f"swarm config file {p} is not valid TOML: {exc}") from None
+        raw = read_toml(path)
         if "swarm" in raw:
             data = dict(raw["swarm"])
         else:  # the top level, minus other tools' tables ([mavlink], [tuning], ...)
             data = {k: v for k, v in raw.items() if k in SwarmConfig.model_fields or not isinstance(v, dict)}
     data.update({k: v for k, v in overrides.items() if v is not None})
-    try:
-        return SwarmConfig.model_validate(data)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(str(p) for p in err["loc"]) or "swarm config"
-        raise MavtuneError(f"swarm config: {where}: {err['msg']}") from None
+    return validated(SwarmConfig, data, "swarm")

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import math
 
 import pytest
 
@@ -95,7 +93,6 @@ def test_out_of_envelope_gains_are_refused_and_never_applied(swarm):
 
 
 def test_stray_and_malformed_messages_change_nothing(swarm):
-    import zenoh
 
     fleet, agents, endpoint = swarm
     a = agents(2, seed=1)

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from mavtune.config import read_toml, validated
 from mavtune.errors import MavtuneError
 from mavtune.vehicles.mavlink.profiles import Autopilot
 
@@ -102,20 +102,5 @@ def load_mavlink_config(source: str | Path | dict[str, Any] | None) -> MavlinkCo
     """A MavlinkConfig from a TOML file (its `[mavlink]` table, or the whole file), a dict, or None (defaults)."""
     if source is None:
         return MavlinkConfig()
-    if isinstance(source, dict):
-        data = source
-    else:
-        path = Path(source)
-        try:
-            data = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise MavtuneError(f"config file {path} does not exist") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise MavtuneError(f"config file {path} is not valid TOML: {exc}") from None
-    data = data.get("mavlink", data)
-    try:
-        return MavlinkConfig.model_validate(data)
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        where = ".".join(str(p) for p in first["loc"])
-        raise MavtuneError(f"mavlink config: {where}: {first['msg']}") from None
+    data = source if isinstance(source, dict) else read_toml(source)
+    return validated(MavlinkConfig, data.get("mavlink", data), "mavlink")
