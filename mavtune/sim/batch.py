@@ -1,0 +1,117 @@
+"""Python side of the batched kernel: pack a Scenario into kernel constants and fly a batch of flights at once."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from mavtune.sim import airframe as af
+from mavtune.sim import kernel as K
+from mavtune.sim.scenario import COST_NAMES, Scenario
+from mavtune.sim.tracker import DT_S, flight_reference
+
+FAILURE_NAMES = {K.FAIL_NONFINITE: "non-finite state", K.FAIL_GROUND: "hit the ground", K.FAIL_TILT: "tilt > 90 deg"}
+
+
+@lru_cache(maxsize=32)
+def constants(scenario: Scenario) -> np.ndarray:
+    """The kernel's shared constants vector for `scenario` (airframe, controller, disturbance figures)."""
+    cp = np.zeros(K.NCP)
+    cp[K.C_DT] = DT_S
+    cp[K.C_G] = af.GRAVITY_MPS2
+    cp[K.C_MNOM] = af.MASS_KG
+    cp[K.C_KF] = af.THRUST_COEFF_N_PER_RPM2
+    cp[K.C_TAU] = af.MOTOR_TAU_S
+    cp[K.C_RPM_MIN] = af.RPM_MIN
+    cp[K.C_RPM_MAX] = af.RPM_MAX
+    cp[K.C_JX], cp[K.C_JY], cp[K.C_JZ] = af.INERTIA_KGM2
+    cp[K.C_DRAG] = af.DRAG_N_PER_MPS2
+    cp[K.C_KX_XY] = af.KX_XY
+    cp[K.C_KV_XY] = af.KV_XY
+    cp[K.C_KIW] = af.KIW_XY
+    cp[K.C_KIB] = af.KIB_XY
+    cp[K.C_KR_XY] = af.KR_XY
+    cp[K.C_KR_Z] = af.KR_Z
+    cp[K.C_KW_XY] = af.KW_XY
+    cp[K.C_KW_Z] = af.KW_Z
+    cp[K.C_KM] = scenario.mass_estimator_km
+    cp[K.C_DM_MAX] = af.MASS_ESTIMATOR_LIMIT_KG
+    cp[K.C_TAN_TILT] = math.tan(af.TILT_MAX_RAD)
+    cp[K.C_SIG_LIDAR] = scenario.noise.altitude_m
+    cp[K.C_SIG_VZ] = scenario.noise.vertical_velocity_mps
+    cp[K.C_SIG_POS] = scenario.noise.position_m
+    cp[K.C_A_POS] = math.exp(-K.SLOW_EVERY * DT_S / scenario.noise.position_tau_s)
+    cp[K.C_WIND_MEAN] = scenario.wind.mean_mps
+    cp[K.C_WIND_SPREAD] = scenario.wind.mean_spread
+    cp[K.C_GUST_XY] = scenario.wind.gust_xy_mps
+    cp[K.C_GUST_Z] = scenario.wind.gust_z_mps
+    cp[K.C_A_GUST] = math.exp(-K.SLOW_EVERY * DT_S / scenario.wind.gust_tau_s)
+    cp[K.C_SPREAD_MASS] = scenario.spread.mass
+    cp[K.C_SPREAD_KF] = scenario.spread.motor_constant
+    cp[K.C_PAYLOAD] = scenario.payload_kg
+    cp[K.C_LP_ALPHA] = 1.0 - math.exp(-2.0 * math.pi * scenario.filter_hz * DT_S)
+    cp[K.C_Z_GROUND] = 0.0
+    cp[K.C_FAIL_ERR] = scenario.failure_error_m
+    cp[K.C_EFFORT_W] = scenario.effort_weight
+    cp[K.C_DELAY] = int(round(scenario.latency_s / DT_S))
+    cp[K.C_E_HALF] = math.exp(-0.5 * DT_S / af.MOTOR_TAU_S)
+    cp.setflags(write=False)
+    return cp
+
+
+@lru_cache(maxsize=1)
+def mixing() -> tuple[np.ndarray, np.ndarray]:
+    """(mixer (4, 6), allocator (6, 4)) of the hexarotor."""
+    return np.ascontiguousarray(af.mixer()), np.ascontiguousarray(af.allocator())
+
+
+def reference_for(scenario: Scenario) -> np.ndarray:
+    """The shared flight reference (n, 9) of `scenario` (settle hover + tracker output of the primitive)."""
+    return flight_reference(scenario.primitive, scenario.primitive_s, scenario.settle_s, scenario.altitude_m)
+
+
+def settle_steps(scenario: Scenario) -> int:
+    """Number of 100 Hz steps of the settle hover before the primitive."""
+    return int(round(scenario.settle_s / DT_S))
+
+
+@dataclass
+class BatchResult:
+    """Outcome of B flights: costs (B, 4) in COST_NAMES order, status codes, failure times, traces (B, n_trace)."""
+
+    costs: np.ndarray
+    status: np.ndarray
+    t_fail_s: np.ndarray
+    traces: np.ndarray
+    trace_t_s: np.ndarray
+
+    def cost(self, name: str) -> np.ndarray:
+        """The (B,) costs by name (iae, ise, itae, effort)."""
+        return self.costs[:, COST_NAMES.index(name)]
+
+
+def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0) -> BatchResult:
+    """Fly len(seeds) flights at once: flight i has physical gains (kx_z[i], kv_z[i]) and randomness (seeds[i],
+    round_ids[i]). trace_hz > 0 records the filtered altitude measurement at that rate (0: no trace)."""
+    seeds = np.ascontiguousarray(np.asarray(seeds, dtype=np.int64).astype(np.uint64))
+    b = seeds.shape[0]
+    round_ids = np.ascontiguousarray(np.broadcast_to(np.asarray(round_ids, dtype=np.int64), (b,)))
+    kx = np.ascontiguousarray(np.broadcast_to(np.asarray(kx_z, dtype=float), (b,)))
+    kv = np.ascontiguousarray(np.broadcast_to(np.asarray(kv_z, dtype=float), (b,)))
+    ref = reference_for(scenario)
+    n = ref.shape[0]
+    every = max(1, int(round(1.0 / (trace_hz * DT_S)))) if trace_hz > 0 else 0
+    n_trace = (n + every - 1) // every if every else 0
+    traces = np.full((b, max(n_trace, 1)), np.nan)
+    costs = np.empty((b, K.NCOST))
+    status = np.empty(b, dtype=np.int64)
+    t_fail = np.empty(b)
+    mix, alloc = mixing()
+    if b:
+        K.fly_batch(seeds, round_ids, kx, kv, ref, settle_steps(scenario), constants(scenario), mix, alloc, every,
+                    traces, costs, status, t_fail)
+    t_trace = np.arange(n_trace) * every * DT_S
+    return BatchResult(costs=costs, status=status, t_fail_s=t_fail, traces=traces[:, :n_trace], trace_t_s=t_trace)

@@ -1,0 +1,73 @@
+"""SimFleet: the in-process fleet of simulated vehicles; one round of N vehicles is one batched kernel call."""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Flight, Gains, Status, Trace
+from mavtune.sim import batch
+from mavtune.sim.gains import parse_assignment
+from mavtune.sim.scenario import Scenario
+
+
+class SimFleet:
+    """`vehicles` simulated F550s; vehicle j has seed `seed + j`, and its flight in round k depends only on
+    (seed + j, k), so SimFleet(1, sc, seed=s + j).fly([g], k)[0] equals vehicle j of SimFleet(N, sc, seed=s)."""
+
+    def __init__(self, vehicles: int, scenario: Scenario | None = None, seed: int = 0, trace_hz: float = 10.0):
+        if int(vehicles) < 1:
+            raise MavtuneError(f"a SimFleet needs at least 1 vehicle, got {vehicles}")
+        if trace_hz < 0 or not math.isfinite(trace_hz):
+            raise MavtuneError(f"trace_hz must be >= 0, got {trace_hz}")
+        self._vehicles = int(vehicles)
+        self.scenario = scenario if scenario is not None else Scenario.default()
+        self.seed = int(seed)
+        self.trace_hz = float(trace_hz)
+
+    @property
+    def size(self) -> int:
+        """How many vehicles fly the next round (constant for a SimFleet)."""
+        return self._vehicles
+
+    def fly(self, assignments: Sequence[Gains], round_id: int) -> list[Flight]:
+        """Fly assignment i on vehicle i, all in one batched call; costs by the scenario's cost name."""
+        if len(assignments) > self._vehicles:
+            raise MavtuneError(f"{len(assignments)} assignments for a fleet of {self._vehicles} vehicles")
+        physical = [parse_assignment(g) for g in assignments]
+        if not physical:
+            return []
+        kx = np.array([p[0] for p in physical])
+        kv = np.array([p[1] for p in physical])
+        seeds = self.seed + np.arange(len(physical))
+        res = batch.fly(self.scenario, kx, kv, seeds, int(round_id), trace_hz=self.trace_hz)
+        costs = res.cost(self.scenario.cost)
+        ref_z = batch.reference_for(self.scenario)[:, 2]
+        step = int(round(res.trace_t_s[1] / 0.01)) if res.trace_t_s.size > 1 else 1
+        flights = []
+        for i, gains in enumerate(assignments):
+            code = int(res.status[i])
+            info = {
+                "seed": int(seeds[i]), "round_id": int(round_id), "kx_z": float(kx[i]), "kv_z": float(kv[i]),
+                "costs": {name: float(res.cost(name)[i]) for name in ("iae", "ise", "itae", "effort")},
+                "cost_name": self.scenario.cost,
+            }
+            if code != 0:
+                info["failure"] = batch.FAILURE_NAMES.get(code, str(code))
+                info["t_fail_s"] = float(res.t_fail_s[i])
+            trace = None
+            if self.trace_hz > 0:
+                z = res.traces[i]
+                keep = np.isfinite(z)
+                trace = Trace(t_s=[float(t) for t in res.trace_t_s[keep]],
+                              z_ref_m=[float(v) for v in ref_z[::step][: z.size][keep]],
+                              z_m=[float(v) for v in z[keep]])
+            flights.append(Flight(vehicle=f"sim{i}", gains=dict(gains), cost=float(costs[i]),
+                                  status=Status.OK if code == 0 else Status.FAILED, trace=trace, info=info))
+        return flights
+
+    def close(self) -> None:
+        """Nothing to release."""

@@ -1,0 +1,117 @@
+"""Plant: the batched simulator stepped from outside (0.01 s per step), e.g. by the MAVLink simulator."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mavtune.errors import MavtuneError
+from mavtune.sim import batch
+from mavtune.sim import kernel as K
+from mavtune.sim.gains import MRS_DEFAULT_KV, MRS_DEFAULT_KX
+from mavtune.sim.scenario import Scenario
+from mavtune.sim.tracker import DT_S
+
+
+class Plant:
+    """B simulated F550s with their SO(3) controllers; the caller supplies the reference every step.
+
+    Same kernel as SimFleet (same dynamics, controller, disturbances); vehicle j uses seed `seed + j`.
+    """
+
+    dt_s = DT_S
+
+    def __init__(self, vehicles: int = 1, scenario: Scenario | None = None, seed: int = 0):
+        if int(vehicles) < 1:
+            raise MavtuneError(f"a Plant needs at least 1 vehicle, got {vehicles}")
+        self.vehicles = int(vehicles)
+        self.scenario = scenario if scenario is not None else Scenario.default()
+        self.seed = int(seed)
+        b = self.vehicles
+        self._cp = batch.constants(self.scenario)
+        self._mix, self._alloc = batch.mixing()
+        self._S = np.zeros((b, K.NS))
+        self._A = np.zeros((b, K.NA))
+        self._VP = np.zeros((b, K.NVP))
+        self._RS = np.zeros((b, 1), dtype=np.uint64)
+        self._status = np.zeros(b, dtype=np.int64)
+        self._kx = np.full(b, MRS_DEFAULT_KX)
+        self._kv = np.full(b, MRS_DEFAULT_KV)
+        self.t_s = 0.0
+        self.reset((0.0, 0.0, self.scenario.altitude_m))
+
+    def reset(self, position_m, round_id: int = 0) -> None:
+        """Hover at position_m ((3,) or (B, 3)), t = 0; wind and noise drawn from (seed + j, round_id)."""
+        pos = self._per_vehicle(position_m, 3, "position_m")
+        seeds = (self.seed + np.arange(self.vehicles)).astype(np.uint64)
+        rounds = np.full(self.vehicles, int(round_id), dtype=np.int64)
+        K.init_batch(seeds, rounds, self._kx, self._kv, pos, self._cp, self._S, self._A, self._VP, self._RS)
+        self._status[:] = K.OK
+        self._k = 0
+        self.t_s = 0.0
+
+    def set_gains(self, kx, kv) -> None:
+        """Physical altitude gains k_x(z) [1/s^2] and k_v(z) [1/s]; scalars or (B,) arrays; take effect now."""
+        kx = np.broadcast_to(np.asarray(kx, dtype=float), (self.vehicles,))
+        kv = np.broadcast_to(np.asarray(kv, dtype=float), (self.vehicles,))
+        if not (np.all(np.isfinite(kx)) and np.all(np.isfinite(kv)) and np.all(kx >= 0) and np.all(kv >= 0)):
+            raise MavtuneError("plant gains must be finite and >= 0")
+        self._kx[:] = kx
+        self._kv[:] = kv
+        self._VP[:, K.V_KXZ] = kx
+        self._VP[:, K.V_KVZ] = kv
+
+    def step(self, ref_pos_m, ref_vel_mps=None, ref_acc_mps2=None) -> None:
+        """Advance 0.01 s towards the reference ((3,) or (B, 3) each; velocity/acceleration default to 0)."""
+        refs = np.zeros((self.vehicles, 9))
+        refs[:, 0:3] = self._per_vehicle(ref_pos_m, 3, "ref_pos_m")
+        if ref_vel_mps is not None:
+            refs[:, 3:6] = self._per_vehicle(ref_vel_mps, 3, "ref_vel_mps")
+        if ref_acc_mps2 is not None:
+            refs[:, 6:9] = self._per_vehicle(ref_acc_mps2, 3, "ref_acc_mps2")
+        K.step_batch(self._S, self._A, self._VP, self._RS, self._cp, self._mix, self._alloc, refs, self._k,
+                     self._status)
+        self._k += 1
+        self.t_s = self._k * DT_S
+
+    def _per_vehicle(self, value, width: int, name: str) -> np.ndarray:
+        arr = np.asarray(value, dtype=float)
+        try:
+            return np.ascontiguousarray(np.broadcast_to(arr, (self.vehicles, width)))
+        except ValueError:
+            raise MavtuneError(f"{name} must have shape ({width},) or ({self.vehicles}, {width}), got {arr.shape}") \
+                from None
+
+    @property
+    def position_m(self) -> np.ndarray:
+        """True positions (B, 3), world frame, z up."""
+        return self._S[:, K.S_P:K.S_P + 3].copy()
+
+    @property
+    def velocity_mps(self) -> np.ndarray:
+        """True velocities (B, 3), world frame."""
+        return self._S[:, K.S_V:K.S_V + 3].copy()
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """Attitudes (B, 3, 3): body-to-world rotation matrices."""
+        w, x, y, z = (self._S[:, K.S_Q + i] for i in range(4))
+        return np.stack([
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ], axis=1)
+
+    @property
+    def altitude_measured_m(self) -> np.ndarray:
+        """The last lidar altitude measurement (B,), with its noise."""
+        return self._A[:, K.A_ZMEAS].copy()
+
+    @property
+    def failed(self) -> np.ndarray:
+        """(B,) bool: the vehicle diverged (non-finite, ground, tilt > 90 deg) and is frozen."""
+        return self._status != K.OK
+
+    @property
+    def rotor_rpm(self) -> np.ndarray:
+        """Rotor speeds (B, 6), rpm."""
+        return self._S[:, K.S_R:K.S_R + 6].copy()

@@ -1,0 +1,73 @@
+"""What a simulated flight meets: primitive, cost, payload, wind, sensor noise and vehicle spread (seeded defaults)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+PrimitiveName = Literal["circle", "step", "figure8"]
+CostName = Literal["iae", "ise", "itae", "effort"]
+COST_NAMES: tuple[str, ...] = ("iae", "ise", "itae", "effort")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Wind(_Model):
+    """Wind per flight: a mean of random direction plus Ornstein-Uhlenbeck gusts (drag acts on the air speed)."""
+
+    mean_mps: float = Field(2.0, ge=0, description="mean wind speed, m/s (direction uniform per flight)")
+    mean_spread: float = Field(0.5, ge=0, description="relative std of the mean speed between flights")
+    gust_xy_mps: float = Field(1.0, ge=0, description="std of horizontal gusts per axis, m/s")
+    gust_z_mps: float = Field(0.5, ge=0, description="std of vertical gusts, m/s")
+    gust_tau_s: float = Field(1.5, gt=0, description="gust correlation time, s")
+
+
+class Noise(_Model):
+    """Sensor and estimator noise seen by the controller and by the cost."""
+
+    altitude_m: float = Field(0.01, ge=0, description="lidar altitude noise std at 100 Hz (Garmin Lidar Lite v3), m")
+    vertical_velocity_mps: float = Field(0.02, ge=0, description="std of the z velocity estimate noise, m/s")
+    position_m: float = Field(0.05, ge=0, description="std of the horizontal position estimate error, m")
+    position_tau_s: float = Field(1.0, gt=0, description="correlation time of the horizontal position error, s")
+
+
+class Spread(_Model):
+    """Vehicle-to-vehicle spread (fixed per vehicle seed): relative std of mass and rotor thrust coefficient."""
+
+    mass: float = Field(0.03, ge=0, le=0.3)
+    motor_constant: float = Field(0.03, ge=0, le=0.3)
+
+
+class Scenario(_Model):
+    """Everything about a simulated flight except the gains and the seed."""
+
+    primitive: PrimitiveName = "circle"
+    cost: CostName = "iae"
+    primitive_s: float = Field(8.0, gt=0, le=120, description="duration of the reference primitive, s")
+    settle_s: float = Field(1.0, ge=0, le=60, description="hover after a gain change: flown, not in the cost, s")
+    altitude_m: float = Field(2.0, gt=0.2, description="height of the primitive's first point, m")
+    payload_kg: float = Field(0.0, ge=0, le=4.0, description="mass added to the vehicle (paper: 0.9 kg battery)")
+    wind: Wind = Wind()
+    noise: Noise = Noise()
+    spread: Spread = Spread()
+    filter_hz: float = Field(5.0, gt=0, description="cutoff of the first-order low-pass on the altitude error")
+    effort_weight: float = Field(0.1, ge=0, description="m per unit of |f - m g|/(m g) in the 'effort' cost")
+    failure_error_m: float = Field(10.0, gt=0, description="error assumed after a divergence, for the penalty")
+    latency_s: float = Field(0.03, ge=0, le=0.09, description="feedback latency of the position/velocity estimate"
+                             " (estimator + link to the flight controller), s; whole 0.01 s steps")
+    mass_estimator_km: float = Field(0.5, ge=0, description="MRS mass estimator gain, kg/(m s); 0 turns it off")
+
+    @classmethod
+    def default(cls) -> "Scenario":
+        """The paper's circle with the documented wind, noise and spread."""
+        return cls()
+
+    @classmethod
+    def noise_free(cls, **changes) -> "Scenario":
+        """No wind, no sensor noise, identical vehicles: a deterministic plant."""
+        return cls(wind=Wind(mean_mps=0, mean_spread=0, gust_xy_mps=0, gust_z_mps=0),
+                   noise=Noise(altitude_m=0, vertical_velocity_mps=0, position_m=0),
+                   spread=Spread(mass=0, motor_constant=0), **changes)

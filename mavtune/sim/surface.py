@@ -1,0 +1,136 @@
+"""Cost surfaces over the normalised (kp, kd) square (the paper's Fig. 2): compute, save as CSV, plot."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from mavtune.errors import MavtuneError
+from mavtune.sim import batch
+from mavtune.sim.gains import to_physical
+from mavtune.sim.scenario import Scenario
+
+
+@dataclass
+class Surface:
+    """Mean, std and count of the cost at each grid point; arrays (grid, grid) indexed [i_kp, j_kd]."""
+
+    kp: np.ndarray
+    kd: np.ndarray
+    mean: np.ndarray
+    std: np.ndarray
+    n: np.ndarray
+    failed: np.ndarray
+    scenario: Scenario
+
+    def argmin(self) -> tuple[float, float]:
+        """(kp, kd) of the grid point with the lowest mean cost."""
+        i, j = np.unravel_index(int(np.nanargmin(self.mean)), self.mean.shape)
+        return float(self.kp[i]), float(self.kd[j])
+
+    def rows(self) -> Iterable[tuple[float, float, float, float, int]]:
+        """(kp, kd, mean_cost, std_cost, n) per grid point, kp-major."""
+        for i, kp in enumerate(self.kp):
+            for j, kd in enumerate(self.kd):
+                yield float(kp), float(kd), float(self.mean[i, j]), float(self.std[i, j]), int(self.n[i, j])
+
+
+def compute_surface(grid: int = 25, repeats: int = 20, scenario: Scenario | None = None, seed: int = 0,
+                    chunk: int = 2500, progress: Callable[[int, int], None] | None = None) -> Surface:
+    """Fly every (kp, kd) of a grid x grid lattice on [0, 1]^2 `repeats` times on one vehicle (seed) and average.
+
+    Repeat r is round r at every grid point (common random numbers: the same wind and noise everywhere), so
+    neighbouring points differ by their gains, not by luck. `progress(done, total)` is called after each chunk.
+    """
+    if grid < 2 or repeats < 1:
+        raise MavtuneError(f"a surface needs grid >= 2 and repeats >= 1, got grid {grid}, repeats {repeats}")
+    sc = scenario if scenario is not None else Scenario.default()
+    axis = np.linspace(0.0, 1.0, grid)
+    kp, kd = np.meshgrid(axis, axis, indexing="ij")
+    kx, kv = to_physical(np.repeat(kp.ravel(), repeats), np.repeat(kd.ravel(), repeats))
+    rounds = np.tile(np.arange(repeats), grid * grid)
+    total = rounds.size
+    costs = np.empty(total)
+    failed = np.empty(total, dtype=bool)
+    for start in range(0, total, chunk):
+        stop = min(total, start + chunk)
+        res = batch.fly(sc, kx[start:stop], kv[start:stop], np.full(stop - start, seed), rounds[start:stop])
+        costs[start:stop] = res.cost(sc.cost)
+        failed[start:stop] = res.status != 0
+        if progress is not None:
+            progress(stop, total)
+    c = costs.reshape(grid, grid, repeats)
+    return Surface(kp=axis, kd=axis.copy(), mean=c.mean(-1), std=c.std(-1, ddof=1) if repeats > 1 else
+                   np.zeros((grid, grid)), n=np.full((grid, grid), repeats),
+                   failed=failed.reshape(grid, grid, repeats).sum(-1), scenario=sc)
+
+
+def write_csv(surface: Surface, path: str | Path) -> None:
+    """Write kp, kd, mean_cost, std_cost, n (one row per grid point)."""
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["kp", "kd", "mean_cost", "std_cost", "n"])
+        for kp, kd, m, s, n in surface.rows():
+            w.writerow([f"{kp:.6g}", f"{kd:.6g}", f"{m:.8g}", f"{s:.8g}", n])
+
+
+def read_csv(path: str | Path) -> Surface:
+    """Read a surface written by `write_csv` (scenario unknown: the default is attached)."""
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    kp = np.unique(data["kp"])
+    kd = np.unique(data["kd"])
+    shape = (kp.size, kd.size)
+    if data.size != kp.size * kd.size:
+        raise MavtuneError(f"{path} is not a full kp x kd grid")
+    order = np.lexsort((data["kd"], data["kp"]))
+    d = data[order]
+    return Surface(kp=kp, kd=kd, mean=d["mean_cost"].reshape(shape), std=d["std_cost"].reshape(shape),
+                   n=d["n"].reshape(shape).astype(int), failed=np.zeros(shape, int), scenario=Scenario.default())
+
+
+def plot_surface(ax, surface: Surface, points: Sequence[tuple[float, float]] = (), point_style: dict | None = None,
+                 title: str | None = None, mark_min: bool = True):
+    """Draw log10(mean cost) over the (kp, kd) square on `ax` (like the paper's Fig. 2); `points` (kp, kd) on top.
+
+    Colours span the minimum to the 90th percentile (higher values saturate). Returns the image for a colour bar.
+    """
+    z = np.log10(np.maximum(surface.mean, 1e-12))
+    lo, hi = float(np.nanmin(z)), float(np.nanquantile(z, 0.9))  # the diverging edge would flatten the rest
+    hi = max(hi, lo + 1e-3)
+    im = ax.pcolormesh(surface.kd, surface.kp, z, shading="nearest", cmap="viridis", vmin=lo, vmax=hi)
+    ax.contour(surface.kd, surface.kp, z, levels=np.linspace(lo, hi, 12), colors="white", linewidths=0.4,
+               alpha=0.6)
+    if mark_min:
+        kp0, kd0 = surface.argmin()
+        ax.plot([kd0], [kp0], marker="*", color="white", markersize=12, markeredgecolor="black", linestyle="none",
+                label=f"grid minimum ({kp0:.3f}, {kd0:.3f})")
+    if points:
+        style = {"marker": "o", "color": "red", "linestyle": "none", "markersize": 5} | (point_style or {})
+        pts = np.asarray(points, dtype=float)
+        ax.plot(pts[:, 1], pts[:, 0], **style)
+    ax.set_xlabel("k_D (normalised)")
+    ax.set_ylabel("k_P (normalised)")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.set_title(title or "log10 of the mean cost")
+    return im
+
+
+def save_png(surface: Surface, path: str | Path, title: str | None = None) -> None:
+    """Write the surface figure (log10 of the mean cost, colour bar, grid minimum) to `path`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 5.0))
+    im = plot_surface(ax, surface, title=title)
+    fig.colorbar(im, ax=ax, label=f"log10 mean {surface.scenario.cost}")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
