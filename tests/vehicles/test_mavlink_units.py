@@ -14,7 +14,7 @@ from mavtune.vehicles.mavlink.mavsim.faults import parse_faults
 from mavtune.vehicles.mavlink.primitive import Circle, altitude_cost
 from mavtune.vehicles.mavlink.profiles import ARDUPILOT, PX4, Autopilot
 from mavtune.vehicles.mavlink.safety import resolve_gain
-from mavtune.vehicles.mavlink.simcost import iae_cost
+from mavtune.sim.cost import iae
 
 
 def test_gain_param_maps_normalised_to_physical_and_refuses_nan_and_outside():
@@ -101,7 +101,7 @@ def test_cost_is_the_simulators_iae_and_independent_of_telemetry_rate():
     t2 = t[::2]
     slow = altitude_cost(t2, ref[::2], z[::2])
     assert fast == pytest.approx(slow, rel=0.02)
-    assert fast > 0 and math.isinf(iae_cost([1.0, math.nan], [1.0, 1.0]))
+    assert fast > 0 and math.isinf(iae([1.0, math.nan], [1.0, 1.0]))
 
 
 def test_fault_flags():

@@ -56,11 +56,11 @@ class Circle:
 
 def altitude_cost(t_s, z_ref_m, z_m, filter_hz: float = 5.0, dt_s: float = 0.01) -> float:
     """The simulator's IAE of a flown primitive: samples (at the telemetry rate) interpolated onto its 100 Hz grid."""
-    from mavtune.vehicles.mavlink.simcost import iae_cost
+    from mavtune.sim.cost import iae
 
     t = np.asarray(t_s, dtype=float)
     if t.size < 2:
         return math.inf
     grid = np.arange(t[0], t[-1] + 1e-9, dt_s)
-    return iae_cost(np.interp(grid, t, np.asarray(z_ref_m, float)), np.interp(grid, t, np.asarray(z_m, float)),
+    return iae(np.interp(grid, t, np.asarray(z_ref_m, float)), np.interp(grid, t, np.asarray(z_m, float)),
                     filter_hz, dt_s)

@@ -1,0 +1,28 @@
+"""The paper's altitude index for samples measured outside the simulator (MAVLink vehicles, logs).
+
+The same definition as the simulator's kernel: the altitude measurement and the reference go through the
+same first-order low-pass (cutoff filter_hz, both started at the first reference value, so the filter lag is
+not counted as error), and |z_f − z_ref,f| is summed at every dt_s step from sample `skip` on. Units: m per
+sample, as in the kernel; tests/sim/test_cost.py checks that both give the same number for one flight.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.signal import lfilter
+
+
+def iae(z_ref_m, z_m, filter_hz: float = 5.0, dt_s: float = 0.01, skip: int = 0) -> float:
+    """Σ_k≥skip |lowpass(z)_k − lowpass(z_ref)_k| over uniformly sampled altitude and reference; inf if non-finite."""
+    z_ref = np.asarray(z_ref_m, dtype=float)
+    z = np.asarray(z_m, dtype=float)
+    if z.size == 0 or z.shape != z_ref.shape or not (np.all(np.isfinite(z)) and np.all(np.isfinite(z_ref))):
+        return math.inf
+    alpha = 1.0 - math.exp(-2.0 * math.pi * filter_hz * dt_s)
+    b, a = [alpha], [1.0, alpha - 1.0]
+    start = [(1.0 - alpha) * z_ref[0]]
+    zf, _ = lfilter(b, a, z, zi=start)
+    rf, _ = lfilter(b, a, z_ref, zi=start)
+    return float(np.sum(np.abs(zf - rf)[skip:]))
