@@ -141,6 +141,12 @@ def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None
         for p in parents:
             node = node.setdefault(p, {})
         node[leaf] = value
+    urls = (data.get("mavlink") or {}).get("urls") or []
+    if (data.get("fleet") or {}).get("kind") == "mavlink" and urls:
+        given = (data.get("tuning") or {}).get("vehicles")
+        if given is not None and given != len(urls):
+            raise MavtuneError(f"config tuning.vehicles is {given} but {len(urls)} MAVLink URLs are given")
+        data.setdefault("tuning", {})["vehicles"] = len(urls)  # one vehicle per URL
     config = validated(Config, data)
     config.settings()  # cross-field checks (initial inside its range, groups dividing the vehicles, …)
     if config.fleet.kind == "sim":
