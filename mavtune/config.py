@@ -15,7 +15,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from mavtune.errors import MavtuneError
 from mavtune.search import METHODS
@@ -42,6 +42,13 @@ class Tuning(_Section):
     reuse: bool = True
     initial: dict[str, float] = Field(default_factory=lambda: {"kd": 0.2})
     seed: int = 0
+
+    @model_validator(mode="after")
+    def _default_initial_in_space(self) -> "Tuning":
+        """The paper's initial k_D = 0.2 applies only when kd is tuned and no initial values were given."""
+        if "initial" not in self.model_fields_set:
+            self.initial = {k: v for k, v in self.initial.items() if k in self.space}
+        return self
 
     @field_validator("method")
     @classmethod
@@ -151,4 +158,11 @@ def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None
     config.settings()  # cross-field checks (initial inside its range, groups dividing the vehicles, …)
     if config.fleet.kind == "sim":
         config.scenario()  # a bad [sim] value is named before anything is planned or written
+        from mavtune.sim.gains import GAIN_NAMES
+
+        for name, (lo, hi) in config.tuning.space.items():
+            if name not in GAIN_NAMES:
+                raise MavtuneError(f"config tuning.space: the simulator tunes {', '.join(GAIN_NAMES)}, not {name!r}")
+            if lo < 0.0 or hi > 1.0:
+                raise MavtuneError(f"config tuning.space.{name}: [{lo}, {hi}] leaves the normalised range [0, 1]")
     return config

@@ -36,6 +36,10 @@ def test_bad_config_file_exits_2_with_one_line(tmp_path):
     ("", ["--strategy", "sideways"], "tuning.strategy"),
     ("", ["--epsilon", "0"], "tuning.epsilon"),
     ("[tuning\n", [], "not valid TOML"),
+    ("[tuning]\nspace = { kp = [0.0, 1.0], ki = [0.0, 1.0] }\n", [], "not 'ki'"),
+    ("[tuning]\nspace = { kp = [0.0, 2.0] }\n", [], "tuning.space.kp"),
+    ("[sim]\npayload_kg = -1\n", [], "sim.payload_kg"),
+    ("[fleet]\nkind = \"mavlink\"\n[mavlink]\nurls = [\"udpin:127.0.0.1:9\"]\n", ["-n", "2"], "tuning.vehicles is 2"),
 ])
 def test_invalid_config_names_the_field(tmp_path, toml, args, field):
     cfg = tmp_path / "c.toml"
@@ -61,3 +65,12 @@ def test_tune_writes_the_run_folder_with_the_report(tmp_path):
     report = (out / "report.md").read_text()
     assert "| rounds | 28 | 28 |" in report  # plan vs actual: the plan is known before take-off
     assert report.count("\n| ") >= 28
+
+
+def test_default_initial_kd_applies_only_when_kd_is_tuned(tmp_path):
+    from mavtune.config import load_config
+
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[tuning]\nspace = { kp = [0.0, 1.0] }\n")
+    assert load_config(cfg).tuning.initial == {}
+    assert load_config(None).tuning.initial == {"kd": 0.2}
