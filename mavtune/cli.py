@@ -83,6 +83,8 @@ def tune_command(
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder (default runs/tune-<time>); "
                                        "a folder holding a journal is resumed."),
     resume: bool = typer.Option(False, "--resume", help="Require --out to hold a journal and continue it."),
+    surface: Optional[Path] = typer.Option(None, "--surface", help="A surface.csv (from `mavtune surface`) to draw "
+                                           "the final gains on in the report."),
     keep_tuned: Optional[bool] = typer.Option(None, "--keep-tuned", help="mavlink: leave the tuned gains on the "
                                               "vehicles at the end (default: restore the originals)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No per-round lines or progress bar."),
@@ -99,7 +101,9 @@ def tune_command(
         out = Path("runs") / time.strftime("tune-%Y%m%d-%H%M%S")
     if resume and not (out / JOURNAL).exists():
         raise MavtuneError(f"--resume: {out / JOURNAL} does not exist")
-    run(cfg, out, quiet=quiet)
+    if surface is not None and not surface.is_file():
+        raise MavtuneError(f"--surface: {surface} does not exist")
+    run(cfg, out, quiet=quiet, surface=surface)
 
 
 # Other commands are registered below, one line each: app.command("name")(function).

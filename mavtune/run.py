@@ -91,8 +91,9 @@ def _cost_text(cost: float, status: Status) -> str:
 
 
 def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bool = False,
-        report: bool = True) -> TuningResult:
-    """Plan, fly and record one tuning run into `out_dir`; an existing journal there is resumed."""
+        report: bool = True, surface: Path | None = None) -> TuningResult:
+    """Plan, fly and record one tuning run into `out_dir` (an existing journal there is resumed); the report
+    draws the final gains on `surface` (a surface.csv) when given, or on `out_dir/surface.csv` if present."""
     console = console or Console()
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
@@ -124,7 +125,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     if report:
         from mavtune.report import write_run_report
 
-        write_run_report(out_dir, result, config)
+        write_run_report(out_dir, result, config, surface=surface)
     console.print(f"tuned after {len(result.rounds)} rounds, {result.flights} flights "
                   f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
     console.print(_result_table(result))

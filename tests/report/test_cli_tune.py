@@ -74,3 +74,17 @@ def test_default_initial_kd_applies_only_when_kd_is_tuned(tmp_path):
     cfg.write_text("[tuning]\nspace = { kp = [0.0, 1.0] }\n")
     assert load_config(cfg).tuning.initial == {}
     assert load_config(None).tuning.initial == {"kd": 0.2}
+
+
+def test_tune_draws_the_final_gains_on_a_given_surface(tmp_path):
+    runner = CliRunner()
+    made = runner.invoke(app, ["surface", "--grid", "3", "--repeats", "1", "--out", str(tmp_path / "s")])
+    assert made.exit_code == 0, made.output
+    out = tmp_path / "run"
+    result = runner.invoke(app, ["tune", "--quiet", "--bootstraps", "1", "--out", str(out),
+                                 "--surface", str(tmp_path / "s" / "surface.csv")])
+    assert result.exit_code == 0, result.output
+    assert (out / "gains_on_surface.png").exists()
+    assert "Final gains on the cost surface" in (out / "report.md").read_text()
+    missing = runner.invoke(app, ["tune", "--quiet", "--surface", str(tmp_path / "none.csv")])
+    assert isinstance(missing.exception, MavtuneError) and "does not exist" in str(missing.exception)
