@@ -102,7 +102,6 @@ def test_coordinator_killed_then_resumed_flies_no_recorded_round_again(procs, tm
         assert max(flown_rounds(procs.log(v)).values()) == 1  # no round flown twice by any vehicle
 
 
-@pytest.mark.slow
 @pytest.mark.timeout(200)
 def test_four_agents_equal_in_process_run(procs, tmp_path):
     _, out, twin = start_swarm(procs, tmp_path, 4, seed=21, noise_free=False)
