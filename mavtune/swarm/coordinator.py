@@ -237,9 +237,8 @@ class ZenohFleet:
         entry = {"t_s": round(time.monotonic() - self._t0, 3), "event": event, "round": round_id,
                  "vehicle": vehicle, "detail": detail, **extra}
         self.events.append(entry)
-        log.warning("round %s: %s %s (%s)", round_id, vehicle or "", event, detail) if event in (
-            "lost", "left", "refused", "late_result", "unassigned") else log.info(
-            "round %s: %s %s (%s)", round_id, vehicle or "", event, detail)
+        level = logging.WARNING if event in ("lost", "left", "refused", "late_result", "unassigned") else logging.INFO
+        log.log(level, "round %s: %s %s (%s)", round_id, vehicle or "", event, detail)
 
     def _send(self, key: str, msg: Any) -> None:
         self.link.put(key, encode(msg))
