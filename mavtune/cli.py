@@ -45,10 +45,11 @@ ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twi
 BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
 
 
-def _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, **more):
+def _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base=None,
+            **more):
     from mavtune.config import load_config
 
-    return load_config(config, _overrides(
+    return load_config(config, base=base, overrides=_overrides(
         tuning__vehicles=vehicles, tuning__strategy=strategy, tuning__replicates=replicates, tuning__method=method,
         tuning__epsilon=epsilon, tuning__bootstraps=_bootstraps(bootstraps), tuning__reuse=reuse,
         flight__battery_s=battery_s, **more))
@@ -90,9 +91,10 @@ def tune_command(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No per-round lines or progress bar."),
 ) -> None:
     """Tune the gains: the paper's setting on 2 simulated vehicles unless told otherwise."""
-    from mavtune.run import JOURNAL, run
+    from mavtune.run import JOURNAL, run, saved_config
 
-    cfg = _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
+    base = saved_config(out) if out is not None and config is None else None  # resume a folder as it was run
+    cfg = _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base,
                   tuning__seed=seed, sim__payload_kg=payload, fleet__kind=fleet, swarm__listen=listen,
                   mavlink__urls=mavlink or None, mavlink__keep_tuned=keep_tuned)
     if out is None:
@@ -125,8 +127,16 @@ app.command("reproduce")(reproduce_command)
 
 def main() -> None:
     """Entry point: run the app, turning MavtuneError into a one-line message and exit status 2."""
+    from mavtune.run import Interrupted
+
     try:
         app()
+    except Interrupted as exc:
+        typer.secho(str(exc), fg="yellow", err=True)
+        sys.exit(130)
     except MavtuneError as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         sys.exit(2)
+    except KeyboardInterrupt:
+        typer.secho("interrupted", fg="yellow", err=True)
+        sys.exit(130)

@@ -137,9 +137,11 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise MavtuneError(f"config file {path} is not valid TOML: {exc}") from None
 
 
-def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> Config:
-    """Read a TOML file (or the defaults), then apply `{"section.field": value}` overrides from flags."""
-    data = read_toml(path) if path is not None else {}
+def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None,
+                base: dict[str, Any] | None = None) -> Config:
+    """Read a TOML file (or start from `base`, e.g. a run folder's config.json, or the defaults), then apply
+    `{"section.field": value}` overrides from flags."""
+    data = read_toml(path) if path is not None else dict(base or {})
     for dotted, value in (overrides or {}).items():
         if value is None:
             continue

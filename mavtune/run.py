@@ -26,6 +26,21 @@ from mavtune.tuner import Round, TuningResult, run_tuning
 JOURNAL = "journal.sqlite"
 
 
+class Interrupted(MavtuneError):
+    """Ctrl-C during a run: every finished round is in the journal; the message says how to resume."""
+
+
+def saved_config(out_dir: Path) -> dict[str, Any] | None:
+    """The configuration a run folder was started with (its config.json), or None for a new folder."""
+    path = Path(out_dir) / "config.json"
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise MavtuneError(f"{path} is not valid JSON ({exc}); pass --config to say how the run was set up") from None
+
+
 def plan_of(config: Config) -> Plan:
     """The plan of a configuration, with its flight timing."""
     f = config.flight
@@ -115,6 +130,11 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
             result = run_tuning(settings, fleet, journal, on_round=view)
         if hasattr(fleet, "tuned"):
             fleet.tuned = result.gains  # a real fleet keeps these on the vehicles only when told to
+    except KeyboardInterrupt:
+        with Journal(journal) as j:
+            recorded = len(j.rounds())
+        raise Interrupted(f"interrupted: the journal keeps {recorded} rounds; "
+                          f"`mavtune tune --out {out_dir}` resumes") from None
     finally:
         fleet.close()  # real vehicles get their original gains back here, whatever happened
     summary = {**result.to_dict(), "fleet": config.fleet.kind, "wall_s": time.time() - started,
