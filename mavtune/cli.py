@@ -84,6 +84,10 @@ def tune_command(
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder (default runs/tune-<time>); "
                                        "a folder holding a journal is resumed."),
     resume: bool = typer.Option(False, "--resume", help="Require --out to hold a journal and continue it."),
+    stage: bool = typer.Option(False, "--stage", help="Fly one battery pack's worth of rounds (battery_s), then stop; "
+                               "run again with --out to fly the next stage."),
+    stage_rounds: Optional[int] = typer.Option(None, "--stage-rounds", help="Fly at most this many new rounds, "
+                                               "then stop (resume with --out)."),
     surface: Optional[Path] = typer.Option(None, "--surface", help="A surface.csv (from `mavtune surface`) to draw "
                                            "the final gains on in the report."),
     keep_tuned: Optional[bool] = typer.Option(None, "--keep-tuned", help="mavlink: leave the tuned gains on the "
@@ -105,7 +109,11 @@ def tune_command(
         raise MavtuneError(f"--resume: {out / JOURNAL} does not exist")
     if surface is not None and not surface.is_file():
         raise MavtuneError(f"--surface: {surface} does not exist")
-    run(cfg, out, quiet=quiet, surface=surface)
+    if stage and stage_rounds is None:
+        from mavtune.run import plan_of
+
+        stage_rounds = plan_of(cfg).rounds_per_battery
+    run(cfg, out, quiet=quiet, surface=surface, stage_rounds=stage_rounds)
 
 
 # Other commands are registered below, one line each: app.command("name")(function).

@@ -47,10 +47,14 @@ class Plan:
         return self.rounds_max * self.round_s
 
     @property
+    def rounds_per_battery(self) -> int:
+        """Whole rounds one battery pack flies (a round never straddles two packs)."""
+        return max(1, int(self.battery_s // self.round_s))
+
+    @property
     def batteries(self) -> int:
-        """Battery packs per vehicle for the guaranteed flight time (a round never straddles two packs)."""
-        per_pack = max(1, int(self.battery_s // self.round_s))
-        return math.ceil(self.rounds_max / per_pack)
+        """Battery packs per vehicle for the guaranteed flight time."""
+        return math.ceil(self.rounds_max / self.rounds_per_battery)
 
     def describe(self) -> str:
         lines = [
@@ -62,7 +66,8 @@ class Plan:
             f"{self.evaluations} points searched)",
             f"flight time   {clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
             f"primitive + {self.settle_s:g} s settle)",
-            f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each",
+            f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each "
+            f"({self.rounds_per_battery} rounds a pack)",
         ]
         return "\n".join(lines)
 

@@ -21,7 +21,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal
 from mavtune.plan import Plan, clock as _clock_s, make_plan
-from mavtune.tuner import Round, TuningResult, run_tuning
+from mavtune.tuner import Round, StageDone, TuningResult, run_tuning
 
 JOURNAL = "journal.sqlite"
 
@@ -106,9 +106,10 @@ def _cost_text(cost: float, status: Status) -> str:
 
 
 def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bool = False,
-        report: bool = True, surface: Path | None = None) -> TuningResult:
+        report: bool = True, surface: Path | None = None, stage_rounds: int | None = None) -> TuningResult | None:
     """Plan, fly and record one tuning run into `out_dir` (an existing journal there is resumed); the report
-    draws the final gains on `surface` (a surface.csv) when given, or on `out_dir/surface.csv` if present."""
+    draws the final gains on `surface` (a surface.csv) when given, or on `out_dir/surface.csv` if present.
+    With `stage_rounds`, stop after that many newly flown rounds (one battery pack) and return None."""
     console = console or Console()
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
@@ -127,9 +128,13 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     started = time.time()
     try:
         with RoundView(console, plan, quiet) as view:
-            result = run_tuning(settings, fleet, journal, on_round=view)
+            result = run_tuning(settings, fleet, journal, on_round=view, stage_rounds=stage_rounds)
         if hasattr(fleet, "tuned"):
             fleet.tuned = result.gains  # a real fleet keeps these on the vehicles only when told to
+    except StageDone as stage:
+        console.print(f"stage done: {stage.flown} rounds flown now, {stage.recorded} of at most {plan.rounds_max} "
+                      f"recorded; swap batteries (or fix what needs fixing), then `mavtune tune --out {out_dir}`")
+        return None
     except KeyboardInterrupt:
         with Journal(journal) as j:
             recorded = len(j.rounds())

@@ -169,15 +169,31 @@ class Settings:
         }
 
 
+class StageDone(Exception):
+    """A stage of a run (e.g. one battery pack) has flown its rounds; the journal holds them, resume continues."""
+
+    def __init__(self, flown: int, recorded: int):
+        super().__init__(f"stage done: {flown} rounds flown, {recorded} recorded in all")
+        self.flown, self.recorded = flown, recorded
+
+
 class Tuner:
-    """Runs the bootstrap over a fleet, journaling each round; a journal with rounds is replayed first."""
+    """Runs the bootstrap over a fleet, journaling each round; a journal with rounds is replayed first.
+
+    `stage_rounds` ends the process after that many newly flown rounds (StageDone): tuning in stages, as the
+    paper's summary wishes — swap batteries or fix a vehicle, then resume from the journal.
+    """
 
     def __init__(self, settings: Settings, fleet: Fleet, journal: Journal | None = None,
-                 on_round: Callable[[Round], None] | None = None):
+                 on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None):
+        if stage_rounds is not None and (journal is None or stage_rounds < 1):
+            raise MavtuneError("tuning in stages needs a journal and at least 1 round per stage")
         self.settings, self.fleet, self.journal, self.on_round = settings, fleet, journal, on_round
+        self.stage_rounds = stage_rounds
         self.recorded = journal.rounds() if journal is not None else {}
         self.rounds: list[Round] = []
         self._dry_rounds = 0
+        self._flown = 0
 
     def run(self) -> TuningResult:
         s = self.settings
@@ -219,6 +235,9 @@ class Tuner:
             self._check_replay(record, assignments)
             flights, started, finished, replayed = record.flights, record.started_s, record.finished_s, True
         else:
+            if self.stage_rounds is not None and self._flown == self.stage_rounds:
+                raise StageDone(self._flown, index)
+            self._flown += 1
             started = time.time()
             flights = list(self.fleet.fly(assignments, index))
             finished = time.time()
@@ -293,13 +312,14 @@ def tune(
 
 
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,
-               on_round: Callable[[Round], None] | None = None) -> TuningResult:
-    """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds)."""
+               on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None) -> TuningResult:
+    """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds); with
+    `stage_rounds`, StageDone ends the call after that many newly flown rounds."""
     book = Journal(journal) if journal is not None else None
     try:
         if book is not None:
             book.bind(settings.fingerprint())
-        return Tuner(settings, fleet, book, on_round).run()
+        return Tuner(settings, fleet, book, on_round, stage_rounds).run()
     finally:
         if book is not None:
             book.close()

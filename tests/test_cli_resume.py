@@ -46,3 +46,27 @@ def test_ctrl_c_then_resume_by_folder_gives_the_uninterrupted_result(tmp_path):
     result = json.loads((cut / "result.json").read_text())
     assert result["gains"] == reference["gains"] and result["rounds"] == reference["rounds"]
     assert rounds_in(journal) == reference["rounds"]
+
+
+def test_stages_of_one_battery_each_end_at_the_uninterrupted_result(tmp_path):
+    from typer.testing import CliRunner
+
+    from mavtune.cli import app
+
+    runner = CliRunner()
+    args = ["tune", "--battery-s", "100", "--seed", "2", "-q"]  # 11 rounds a pack; 36 rounds in all
+    whole = tmp_path / "whole"
+    assert runner.invoke(app, [*args, "--out", str(whole)]).exit_code == 0
+    staged = tmp_path / "staged"
+    stages = 0
+    while not (staged / "result.json").exists():
+        proc = runner.invoke(app, [*args, "--stage", "--out", str(staged)])
+        assert proc.exit_code == 0, proc.output
+        stages += 1
+        assert stages <= 4
+        if not (staged / "result.json").exists():
+            assert rounds_in(staged / "journal.sqlite") == 11 * stages
+            assert "stage done" in proc.output
+    assert stages == 4
+    assert json.loads((staged / "result.json").read_text())["gains"] == json.loads(
+        (whole / "result.json").read_text())["gains"]

@@ -147,3 +147,32 @@ def test_a_fleet_that_never_returns_stops_with_a_clear_error(tmp_path):
         mavtune.tune(Gone(2), journal=path, **SETTINGS)
     with Journal(path) as j:
         assert len(j.rounds()) == 5
+
+
+def test_tuning_in_stages_flies_every_round_once_to_the_same_result(tmp_path):
+    from mavtune.tuner import Settings, StageDone, run_tuning
+
+    path = tmp_path / "j.sqlite"
+    settings = Settings(strategy="split", vehicles=2, **SETTINGS)
+    reference = run_tuning(settings, CountingFleet(2))
+    flown, stages = [], 0
+    while True:
+        fleet = CountingFleet(2)
+        try:
+            result = run_tuning(settings, fleet, path, stage_rounds=6)
+            flown += fleet.flown
+            break
+        except StageDone as stage:
+            assert stage.flown == 6 and len(fleet.flown) == 6
+            flown += fleet.flown
+            stages += 1
+    assert stages == (len(reference.rounds) - 1) // 6
+    assert flown == list(range(len(reference.rounds)))  # each round flown exactly once, in order
+    assert result.gains == reference.gains
+
+
+def test_stages_need_a_journal():
+    from mavtune.tuner import Settings, run_tuning
+
+    with pytest.raises(MavtuneError, match="needs a journal"):
+        run_tuning(Settings(**SETTINGS), CountingFleet(2), None, stage_rounds=3)
