@@ -15,7 +15,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from mavtune.errors import MavtuneError
 from mavtune.search import METHODS
@@ -50,18 +50,12 @@ class Tuning(_Section):
             self.initial = {k: v for k, v in self.initial.items() if k in self.space}
         return self
 
-    @field_validator("method")
+    @field_validator("method", "strategy")
     @classmethod
-    def _known_method(cls, v: str) -> str:
-        if v not in METHODS:
-            raise ValueError(f"unknown method {v!r}; choose one of {', '.join(METHODS)}")
-        return v
-
-    @field_validator("strategy")
-    @classmethod
-    def _known_strategy(cls, v: str) -> str:
-        if v not in STRATEGIES:
-            raise ValueError(f"unknown strategy {v!r}; choose one of {', '.join(STRATEGIES)}")
+    def _known(cls, v: str, info: ValidationInfo) -> str:
+        choices = METHODS if info.field_name == "method" else STRATEGIES
+        if v not in choices:
+            raise ValueError(f"unknown {info.field_name} {v!r}; choose one of {', '.join(choices)}")
         return v
 
     @field_validator("bootstraps")

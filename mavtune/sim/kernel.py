@@ -317,7 +317,6 @@ def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
 @njit(cache=True, fastmath=FAST)
 def _step(s, a, vp, rs, cp, mix, alloc, ref, k):
     """Step k (0.01 s): sense (noise, gusts, latency), control, integrate RK4; returns OK or a FAIL_* code."""
-    dt = cp[C_DT]
     # disturbances: white lidar and vz noise every step; OU gusts and horizontal position error at 20 Hz
     n6, n7 = _normal2(rs)
     if k % SLOW_EVERY == 0:
