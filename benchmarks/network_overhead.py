@@ -33,19 +33,9 @@ def _in_process_fleet(backend: str, n: int, seed: int):
         from mavtune.sim import Scenario, SimFleet
 
         return SimFleet(n, Scenario.default(), seed=seed)
-    from mavtune.fleet import Flight
-    from mavtune.swarm.vehicles import toy_cost
+    from mavtune.swarm.vehicles import ToyFleet
 
-    class Toy:
-        size = n
-
-        def fly(self, assignments, round_id):
-            return [Flight(f"v{j}", dict(g), toy_cost(g, seed + j, round_id)) for j, g in enumerate(assignments)]
-
-        def close(self):
-            pass
-
-    return Toy()
+    return ToyFleet(n, seed)
 
 
 def _ms(samples: list[float]) -> str:

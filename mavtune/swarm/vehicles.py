@@ -82,25 +82,27 @@ def toy_cost(gains: Gains, seed: int, round_id: int, noise: float = 0.0) -> floa
     return float(1.0 + (kp - 0.7) ** 2 + 2.0 * (kd - 0.4) ** 2 + noise * abs(rng.standard_normal()))
 
 
-class ToyVehicle:
-    """A stand-in vehicle with a known cost bowl (`toy_cost`), for testing the swarm without a simulator."""
+class ToyFleet:
+    """A stand-in fleet with a known cost bowl (`toy_cost`): vehicle j has seed `seed + j`, like SimFleet.
 
-    backend = "toy"
+    One of them behind an agent is `--vehicle toy --seed S + j`; N of them in-process are the twin that the
+    swarm's tests and benchmark compare the network path with.
+    """
 
-    def __init__(self, seed: int = 0, noise: float = 0.0):
-        self.seed = seed
-        self.noise = noise
-        self._gains: Gains | None = None
+    def __init__(self, vehicles: int = 1, seed: int = 0, noise: float = 0.0):
+        self.vehicles, self.seed, self.noise = vehicles, seed, noise
 
-    def apply(self, gains: Gains) -> None:
-        self._gains = dict(gains)
+    @property
+    def size(self) -> int:
+        return self.vehicles
 
-    def fly(self, round_id: int) -> Flight:
-        if self._gains is None:
-            raise MavtuneError("fly() before any gains were applied")
-        cost = toy_cost(self._gains, self.seed, round_id, self.noise)
-        trace = Trace(t_s=[0.0, 1.0], z_ref_m=[1.0, 1.0], z_m=[1.0, 1.0 + cost * 1e-3])
-        return Flight(vehicle="toy", gains=dict(self._gains), cost=cost, status=Status.OK, trace=trace)
+    def fly(self, assignments, round_id: int) -> list[Flight]:
+        flights = []
+        for j, gains in enumerate(assignments):
+            cost = toy_cost(gains, self.seed + j, round_id, self.noise)
+            trace = Trace(t_s=[0.0, 1.0], z_ref_m=[1.0, 1.0], z_m=[1.0, 1.0 + cost * 1e-3])
+            flights.append(Flight(vehicle=f"v{j}", gains=dict(gains), cost=cost, status=Status.OK, trace=trace))
+        return flights
 
     def close(self) -> None:
         pass
@@ -161,7 +163,7 @@ def make_vehicle(kind: str, *, seed: int = 0, scenario: str | None = None, mavli
     if kind == "sim":
         vehicle = sim_vehicle(load_scenario(scenario), seed=seed)
     elif kind == "toy":
-        vehicle = ToyVehicle(seed=seed, noise=noise)
+        vehicle = FleetVehicle(ToyFleet(1, seed=seed, noise=noise), "toy")
     elif kind == "mavlink":
         if not mavlink:
             raise MavtuneError("--vehicle mavlink needs --mavlink URL (e.g. udpin:127.0.0.1:14540)")

@@ -13,10 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from mavtune.fleet import Flight, Status
 from mavtune.swarm.agent import Agent
 from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.vehicles import ToyVehicle, toy_cost
+from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
 
 PYTHON = sys.executable
 REPO = Path(__file__).resolve().parents[2]
@@ -29,24 +28,6 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-class ToyFleet:
-    """In-process twin of N toy agents: vehicle j has seed seed+j (what `--vehicle toy --seed S+j` flies)."""
-
-    def __init__(self, vehicles: int, seed: int = 0, noise: float = 0.0):
-        self.vehicles, self.seed, self.noise = vehicles, seed, noise
-
-    @property
-    def size(self) -> int:
-        return self.vehicles
-
-    def fly(self, assignments, round_id):
-        return [Flight(vehicle=f"v{j}", gains=dict(g), cost=toy_cost(g, self.seed + j, round_id, self.noise),
-                       status=Status.OK) for j, g in enumerate(assignments)]
-
-    def close(self):
-        pass
-
-
 class ThreadAgents:
     """Agents on toy vehicles running in threads of this process (real Zenoh clients)."""
 
@@ -54,7 +35,7 @@ class ThreadAgents:
         self.agents = []
         self.threads = []
         for j in range(n):
-            agent = Agent.connect(f"v{j}", ToyVehicle(seed=seed + j, noise=noise), config, endpoint)
+            agent = Agent.connect(f"v{j}", FleetVehicle(ToyFleet(1, seed + j, noise), "toy"), config, endpoint)
             t = threading.Thread(target=agent.run, daemon=True)
             t.start()
             self.agents.append(agent)

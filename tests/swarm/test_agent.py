@@ -10,7 +10,7 @@ from mavtune.swarm.agent import Agent, check_envelope, decimate
 from mavtune.swarm.config import SwarmConfig
 from mavtune.swarm.messages import Ack, Assignment, Result, Start, decode, encode
 from mavtune.swarm.transport import Keys
-from mavtune.swarm.vehicles import ToyVehicle
+from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
 from mavtune.fleet import Trace
 
 
@@ -35,7 +35,7 @@ class Recorder:
 
 def make(envelope=None, policy="refuse"):
     cfg = SwarmConfig(session="s", token="t", envelope=envelope or {}, envelope_policy=policy)
-    vehicle = ToyVehicle(seed=1)
+    vehicle = FleetVehicle(ToyFleet(1, seed=1), "toy")
     agent = Agent("v0", vehicle, cfg, Recorder())
     return agent, vehicle, Keys("s")
 

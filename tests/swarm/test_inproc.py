@@ -10,7 +10,9 @@ from mavtune.fleet import Status
 from mavtune.swarm import SwarmConfig, ZenohFleet
 from mavtune.swarm.messages import Assignment, Start, encode
 
-from .conftest import ThreadAgents, ToyFleet, free_port
+from mavtune.swarm.vehicles import ToyFleet
+
+from .conftest import ThreadAgents, free_port
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -71,11 +73,11 @@ def test_repeated_round_is_not_flown_twice(swarm):
 def test_out_of_envelope_gains_are_refused_and_never_applied(swarm):
     fleet, _, endpoint = swarm
     from mavtune.swarm.agent import Agent
-    from mavtune.swarm.vehicles import ToyVehicle
+    from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
     import threading
 
     config = SwarmConfig(**CFG, envelope={"kp": (0.0, 0.5)})
-    vehicle = ToyVehicle()
+    vehicle = FleetVehicle(ToyFleet(1), "toy")
     agent = Agent.connect("v0", vehicle, config, endpoint)
     t = threading.Thread(target=agent.run, daemon=True)
     t.start()
