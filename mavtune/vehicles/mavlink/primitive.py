@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mavtune.sim.primitives import CIRCLE_DIAMETER_M, ELEVATION_CHANGE_M
+
 
 @dataclass(frozen=True)
 class Setpoint:
@@ -31,8 +33,8 @@ class Circle:
 
     hover_ned_m: tuple[float, float, float]
     duration_s: float = 8.0
-    diameter_m: float = 2.0
-    elevation_m: float = 1.0
+    diameter_m: float = CIRCLE_DIAMETER_M
+    elevation_m: float = ELEVATION_CHANGE_M
 
     def at(self, t_s: float) -> Setpoint:
         """The setpoint at time t_s (held at the end point outside [0, duration])."""
