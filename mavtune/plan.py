@@ -1,19 +1,23 @@
 """The plan of a run, known before take-off: rounds, flights, flight time and batteries.
 
-Two round counts: `rounds` is what the run takes on any unimodal cost (worst case over where the minimiser
-lies, speculation included), `rounds_max` is the guarantee whatever the costs (as if no speculative point
-were ever used). Without speculation — avg, or reuse off — the two are equal.
+Two round counts: `rounds` is the most the run took in rehearsals of every line search — on unimodal costs
+with the minimiser at 64 places and on 32 costs of pure noise — speculation included; `rounds_max` is the
+guarantee whatever the costs (as if no speculative point were ever used). Without speculation (avg, or reuse
+off) the two are equal.
 """
 
 from __future__ import annotations
 
 import math
+import random
 from dataclasses import dataclass
+from typing import Callable
 
 from mavtune.search import make_search
 from mavtune.tuner import Settings
 
-MINIMISER_PROBES = 64  # minimiser positions tried per line search for the unimodal worst case
+MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal costs)
+NOISE_PROBES = 32  # costs of pure noise rehearsed per line search (seeded: the plan is reproducible)
 
 
 @dataclass(frozen=True)
@@ -53,21 +57,27 @@ class Plan:
 
     @property
     def batteries(self) -> int:
-        """Battery packs per vehicle for the guaranteed flight time."""
+        """Battery packs per vehicle for the planned rounds."""
+        return math.ceil(self.rounds / self.rounds_per_battery)
+
+    @property
+    def batteries_max(self) -> int:
+        """Battery packs per vehicle for the guaranteed rounds."""
         return math.ceil(self.rounds_max / self.rounds_per_battery)
 
     def describe(self) -> str:
         lines = [
             f"bootstraps    {self.bootstraps}" + (" at most (the paper's stop rule may end the run sooner)"
                                                    if self.stop_rule else ""),
-            f"rounds        {self.rounds}" + (f" (at most {self.rounds_max} whatever the costs)"
-                                              if self.rounds_max != self.rounds else ""),
+            f"rounds        {self.rounds}" + (f" (guaranteed at most {self.rounds_max}, if no speculative point "
+                                              "is ever used)" if self.rounds_max != self.rounds else ""),
             f"flights       {self.flights} ({self.vehicles} vehicles × {self.rounds} rounds; "
             f"{self.evaluations} points searched)",
             f"flight time   {clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
             f"primitive + {self.settle_s:g} s settle)",
             f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each "
-            f"({self.rounds_per_battery} rounds a pack)",
+            f"({self.rounds_per_battery} rounds a pack)" + (f"; {self.batteries_max} for {self.rounds_max} rounds"
+                                                            if self.batteries_max != self.batteries else ""),
         ]
         return "\n".join(lines)
 
@@ -78,19 +88,27 @@ def clock(seconds: float) -> str:
     return f"{m} min {s:02d} s" if m else f"{s} s"
 
 
-def _rounds_of_search(settings: Settings, lo: float, hi: float, minimiser: float | None) -> int:
-    """Rounds one line search takes on |x − minimiser| (or, with None, without any speculative point)."""
+def _rounds_without_speculation(settings: Settings, lo: float, hi: float) -> int:
+    """Rounds one line search takes if no speculative point is ever used: the guarantee."""
     search = make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse, points=settings.points)
-    if minimiser is None:
-        slots = settings.strategy_rule.slots(settings.vehicles)
-        return sum(math.ceil(n / slots) for n in search.needs() if n)
+    slots = settings.strategy_rule.slots(settings.vehicles)
+    return sum(math.ceil(n / slots) for n in search.needs() if n)
+
+
+def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float]) -> int:
+    """Rounds one line search takes, speculation included, on the cost `cost`."""
+    search = make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse, points=settings.points)
     rounds = 0
     while not search.done:
-        points = settings.strategy_rule.assign(search, settings.vehicles)
-        unique = sorted(set(points))
-        search.tell(unique, [abs(p - minimiser) for p in unique])
+        unique = sorted(set(settings.strategy_rule.assign(search, settings.vehicles)))
+        search.tell(unique, [cost(p) for p in unique])
         rounds += 1
     return rounds
+
+
+def _noise(seed: int) -> Callable[[float], float]:
+    draw = random.Random(seed)
+    return lambda _: draw.random()
 
 
 def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.0, battery_s: float = 600.0) -> Plan:
@@ -98,9 +116,10 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
     rounds = rounds_max = evaluations = 0
     for lo, hi in settings.space.values():
-        probes = [lo + (hi - lo) * (i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]
-        rounds += max(_rounds_of_search(settings, lo, hi, m) for m in probes)
-        rounds_max += _rounds_of_search(settings, lo, hi, None)
+        minimisers = [lo + (hi - lo) * (i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]
+        costs = [lambda x, m=m: abs(x - m) for m in minimisers] + [_noise(seed) for seed in range(NOISE_PROBES)]
+        rounds += max(_rehearse(settings, lo, hi, cost) for cost in costs)
+        rounds_max += _rounds_without_speculation(settings, lo, hi)
         evaluations += make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse,
                                    points=settings.points).budget()
     return Plan(rounds * bootstraps, max(rounds, rounds_max) * bootstraps, settings.vehicles,

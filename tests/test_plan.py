@@ -1,0 +1,63 @@
+"""The plan, before take-off, bounds what the run then takes."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings, strategies as st
+from typer.testing import CliRunner
+
+import mavtune
+from mavtune.cli import app
+from mavtune.plan import make_plan
+from mavtune.tuner import Settings
+
+SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
+
+
+@pytest.mark.parametrize("strategy, vehicles, reuse, rounds, rounds_max", [
+    ("avg", 2, False, 56, 56),   # the authors' run
+    ("avg", 2, True, 36, 36),
+    ("split", 2, False, 28, 28),
+    ("split", 2, True, 20, 28),  # speculation: the goal is at most 20
+    ("split", 8, True, 8, 28),   # the goal is at most 8
+    ("groups", 4, True, 20, 28),
+])
+def test_paper_setting_counts(strategy, vehicles, reuse, rounds, rounds_max):
+    plan = make_plan(Settings(space=SPACE, strategy=strategy, vehicles=vehicles, reuse=reuse, initial={"kd": 0.2}))
+    assert (plan.rounds, plan.rounds_max) == (rounds, rounds_max)
+    assert plan.flights == rounds * vehicles
+    assert plan.flight_time_s == rounds * 9.0
+
+
+def test_batteries_count_whole_rounds_per_pack():
+    plan = make_plan(Settings(space=SPACE, strategy="split", vehicles=8), battery_s=60.0)
+    assert plan.rounds_per_battery == 6  # 6 rounds of 9 s fit in 60 s
+    assert (plan.batteries, plan.batteries_max) == (2, 5)
+
+
+@given(st.sampled_from(["eql", "fibonacci", "golden", "dichotomy", "nsection"]),
+       st.sampled_from(["avg", "split", "groups"]), st.integers(1, 4), st.booleans(),
+       st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.05, 0.45), st.integers(0, 3))
+@settings(max_examples=40, deadline=None)
+def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsilon, noise_seed):
+    vehicles = 2 * half
+    import random
+
+    draw = random.Random(noise_seed)
+
+    def evaluate(assignments):  # a bowl with 20 % multiplicative noise
+        return [((g["kp"] - kp0) ** 2 + (g["kd"] - kd0) ** 2 + 0.01) * (1 + 0.2 * draw.random()) for g in assignments]
+
+    kwargs = dict(space=SPACE, method=method, epsilon=epsilon, strategy=strategy, vehicles=vehicles, reuse=reuse)
+    plan = make_plan(Settings(**kwargs, bootstraps=2))
+    result = mavtune.tune(evaluate, bootstraps=2, **kwargs)
+    assert len(result.rounds) <= plan.rounds_max
+    assert result.flights <= plan.rounds_max * vehicles
+
+
+def test_plan_command_prints_the_numbers():
+    out = CliRunner().invoke(app, ["plan", "--strategy", "split", "--vehicles", "8", "--battery-s", "60"])
+    assert out.exit_code == 0, out.output
+    text = " ".join(out.output.split())
+    assert "rounds 8 (guaranteed at most 28" in text
+    assert "flights 64" in text and "1 min 12 s" in text and "batteries 2 per vehicle" in text
