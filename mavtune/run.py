@@ -132,8 +132,14 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
         if hasattr(fleet, "tuned"):
             fleet.tuned = result.gains  # a real fleet keeps these on the vehicles only when told to
     except StageDone as stage:
+        if report and stage.partial is not None:
+            from mavtune.report import write_run_report
+
+            write_run_report(out_dir, stage.partial, config, surface=surface,
+                             title=f"mavtune tuning run — in progress after {stage.recorded} rounds")
         console.print(f"stage done: {stage.flown} rounds flown now, {stage.recorded} of at most {plan.rounds_max} "
-                      f"recorded; swap batteries (or fix what needs fixing), then `mavtune tune --out {out_dir}`")
+                      f"recorded (report so far: {out_dir / 'report.md'}); swap batteries (or fix what needs "
+                      f"fixing), then `mavtune tune --out {out_dir}`")
         return None
     except KeyboardInterrupt:
         with Journal(journal) as j:

@@ -175,6 +175,7 @@ class StageDone(Exception):
     def __init__(self, flown: int, recorded: int):
         super().__init__(f"stage done: {flown} rounds flown, {recorded} recorded in all")
         self.flown, self.recorded = flown, recorded
+        self.partial: TuningResult | None = None  # the run so far (gains still being searched at their start)
 
 
 class Tuner:
@@ -208,7 +209,15 @@ class Tuner:
                 search = make_search(s.method, lo, hi, s.epsilon, reuse=s.reuse, points=s.points)
                 held = {n: v for n, v in gains.items() if n != name}
                 while not search.done:
-                    self._round(search, bootstrap, name, gains)
+                    try:
+                        self._round(search, bootstrap, name, gains)
+                    except StageDone as stage:
+                        stage.partial = TuningResult(
+                            gains=dict(gains), rounds=self.rounds, searches=searches, bootstraps=bootstrap,
+                            stop_reason=f"stage ended in bootstrap {bootstrap} while tuning {name} in "
+                                        f"[{search.bracket[0]:.4g}, {search.bracket[1]:.4g}]",
+                            settings=s.fingerprint())
+                        raise
                 gains[name] = search.result
                 searches.append(LineSearchRecord(bootstrap, name, held, list(search.history), search.result,
                                                  search.evaluations))

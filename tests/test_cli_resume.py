@@ -67,6 +67,7 @@ def test_stages_of_one_battery_each_end_at_the_uninterrupted_result(tmp_path):
         if not (staged / "result.json").exists():
             assert rounds_in(staged / "journal.sqlite") == 11 * stages
             assert "stage done" in proc.output
+            assert f"in progress after {11 * stages} rounds" in (staged / "report.md").read_text()
     assert stages == 4
     assert json.loads((staged / "result.json").read_text())["gains"] == json.loads(
         (whole / "result.json").read_text())["gains"]
