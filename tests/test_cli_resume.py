@@ -17,8 +17,12 @@ LONG = ["--epsilon", "0.01", "--bootstraps", "2", "--no-reuse", "--seed", "4", "
 
 
 def rounds_in(journal: Path) -> int:
+    """Rounds recorded so far (0 while the journal is still being created by the run)."""
     with sqlite3.connect(journal) as db:
-        return db.execute("SELECT COUNT(*) FROM rounds").fetchone()[0]
+        try:
+            return db.execute("SELECT COUNT(*) FROM rounds").fetchone()[0]
+        except sqlite3.OperationalError:
+            return 0
 
 
 @pytest.mark.timeout(120)
