@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -21,9 +22,10 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal
 from mavtune.plan import Plan, clock as _clock_s, make_plan
-from mavtune.tuner import Round, StageDone, TuningResult, run_tuning
+from mavtune.tuner import Round, StageDone, Tuner, TuningResult
 
 JOURNAL = "journal.sqlite"
+FLEET_REPORTS = ("original_params", "restored", "kept_tuned", "dropped")  # fleet attributes kept in result.json
 
 
 class Interrupted(MavtuneError):
@@ -107,9 +109,13 @@ def _cost_text(cost: float, status: Status) -> str:
 
 def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bool = False,
         report: bool = True, surface: Path | None = None, stage_rounds: int | None = None) -> TuningResult | None:
-    """Plan, fly and record one tuning run into `out_dir` (an existing journal there is resumed); the report
-    draws the final gains on `surface` (a surface.csv) when given, or on `out_dir/surface.csv` if present.
-    With `stage_rounds`, stop after that many newly flown rounds (one battery pack) and return None."""
+    """Plan, fly and record one tuning run into `out_dir` (an existing journal there is resumed).
+
+    However the run ends — finished, a stage done (`stage_rounds` newly flown rounds, one battery pack), Ctrl-C
+    or an error — the fleet is closed first (real vehicles get their original gains back), then `result.json`
+    says how it ended (`status`) and the report shows what was done; only a finished run returns its result.
+    The report draws the final gains on `surface` (a surface.csv) or on `out_dir/surface.csv` if present.
+    """
     console = console or Console()
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
@@ -118,45 +124,51 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     journal = out_dir / JOURNAL
     settings = config.settings()
     plan = plan_of(config)
-    if journal.exists():
-        with Journal(journal) as j:
-            recorded = len(j.rounds())
-        console.print(f"resuming {journal}: {recorded} rounds recorded will not be flown again")
-    console.print(_plan_panel(config, plan))
-    (out_dir / "config.json").write_text(json.dumps(config.model_dump(mode="json"), indent=2))
-    fleet = build_fleet(config, out_dir)
-    started = time.time()
-    try:
-        with RoundView(console, plan, quiet) as view:
-            result = run_tuning(settings, fleet, journal, on_round=view, stage_rounds=stage_rounds)
-        if hasattr(fleet, "tuned"):
-            fleet.tuned = result.gains  # a real fleet keeps these on the vehicles only when told to
-    except StageDone as stage:
-        if report and stage.partial is not None:
-            from mavtune.report import write_run_report
+    with Journal(journal) as book:
+        book.bind(settings.fingerprint())
+        if recorded := len(book.rounds()):
+            console.print(f"resuming {journal}: {recorded} rounds recorded will not be flown again")
+        console.print(_plan_panel(config, plan))
+        (out_dir / "config.json").write_text(json.dumps(config.model_dump(mode="json"), indent=2))
+        fleet = build_fleet(config, out_dir)
+        tuner = Tuner(settings, fleet, book, stage_rounds=stage_rounds)
+        started, status, error = time.time(), "error", None
+        try:
+            with RoundView(console, plan, quiet) as view:
+                tuner.on_round = view
+                tuner.run()
+            status = "finished"
+            if hasattr(fleet, "tuned"):
+                fleet.tuned = tuner.gains  # a real fleet keeps these on the vehicles only when told to
+        except StageDone:
+            status = "stage"
+        except KeyboardInterrupt:
+            status = "interrupted"
+        except MavtuneError as exc:
+            error = str(exc)
+            raise
+        finally:
+            try:
+                fleet.close()  # real vehicles get their original gains back here, whatever happened
+            finally:
+                result = tuner.snapshot()
+                _write_summary(out_dir, config, plan, result, fleet, status, error, time.time() - started)
+                if report:
+                    from mavtune.report import write_run_report
 
-            write_run_report(out_dir, stage.partial, config, surface=surface,
-                             title=f"mavtune tuning run — in progress after {stage.recorded} rounds")
-        console.print(f"stage done: {stage.flown} rounds flown now, {stage.recorded} of at most {plan.rounds_max} "
-                      f"recorded (report so far: {out_dir / 'report.md'}); swap batteries (or fix what needs "
-                      f"fixing), then `mavtune tune --out {out_dir}`")
+                    ending = {"finished": "", "stage": "in progress", "interrupted": "interrupted", "error": "stopped"}
+                    title = "mavtune tuning run" + (f" — {ending[status]} after {len(result.rounds)} rounds"
+                                                    if status != "finished" else "")
+                    write_run_report(out_dir, result, config, surface=surface, title=title)
+    if status == "interrupted":
+        with Journal(journal) as book:  # the journal is the truth: a round can be recorded as Ctrl-C arrives
+            recorded = len(book.rounds())
+        raise Interrupted(f"interrupted: the journal keeps {recorded} rounds; `mavtune tune --out {out_dir}` resumes")
+    if status == "stage":
+        console.print(f"stage done: {tuner.flown} rounds flown now, {len(result.rounds)} of at most "
+                      f"{plan.rounds_max} recorded (report so far: {out_dir / 'report.md'}); swap batteries (or fix "
+                      f"what needs fixing), then `mavtune tune --out {out_dir}`")
         return None
-    except KeyboardInterrupt:
-        with Journal(journal) as j:
-            recorded = len(j.rounds())
-        raise Interrupted(f"interrupted: the journal keeps {recorded} rounds; "
-                          f"`mavtune tune --out {out_dir}` resumes") from None
-    finally:
-        fleet.close()  # real vehicles get their original gains back here, whatever happened
-    summary = {**result.to_dict(), "fleet": config.fleet.kind, "wall_s": time.time() - started,
-               "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s},
-               "flight_time_s": len(result.rounds) * plan.round_s, "events": _events(fleet),
-               **{k: getattr(fleet, k) for k in ("original_params", "restored") if hasattr(fleet, k)}}
-    (out_dir / "result.json").write_text(json.dumps(summary, indent=2))
-    if report:
-        from mavtune.report import write_run_report
-
-        write_run_report(out_dir, result, config, surface=surface)
     console.print(f"tuned after {len(result.rounds)} rounds, {result.flights} flights "
                   f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
     console.print(_result_table(result))
@@ -164,9 +176,21 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     return result
 
 
-def _events(fleet: Fleet) -> list[Any]:
-    """What the fleet saw happen (drop-outs, rejoins, aborts), when it keeps such a log."""
-    return list(getattr(fleet, "events", []) or [])
+def _write_summary(out_dir: Path, config: Config, plan: Plan, result: TuningResult, fleet: Fleet, status: str,
+                   error: str | None, wall_s: float) -> None:
+    """result.json: how the run ended, the gains, every round, and what the fleet reports of itself."""
+    by_status = Counter(f.status.value for r in result.rounds for f in r.flights)
+    summary = {
+        "status": status, "error": error, **result.to_dict(),
+        "rounds_log": [r.to_dict() | {"replayed": r.replayed} for r in result.rounds],
+        "flights_by_status": {s.value: by_status.get(s.value, 0) for s in Status},
+        "fleet": config.fleet.kind, "wall_s": wall_s,
+        "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s},
+        "flight_time_s": len(result.rounds) * plan.round_s,
+        "events": list(getattr(fleet, "events", []) or []),
+        **{k: getattr(fleet, k) for k in FLEET_REPORTS if hasattr(fleet, k)},
+    }
+    (out_dir / "result.json").write_text(json.dumps(summary, indent=2, default=str))
 
 
 def _plan_panel(config: Config, plan: Plan) -> str:

@@ -175,14 +175,14 @@ class StageDone(Exception):
     def __init__(self, flown: int, recorded: int):
         super().__init__(f"stage done: {flown} rounds flown, {recorded} recorded in all")
         self.flown, self.recorded = flown, recorded
-        self.partial: TuningResult | None = None  # the run so far (gains still being searched at their start)
 
 
 class Tuner:
     """Runs the bootstrap over a fleet, journaling each round; a journal with rounds is replayed first.
 
     `stage_rounds` ends the process after that many newly flown rounds (StageDone): tuning in stages, as the
-    paper's summary wishes — swap batteries or fix a vehicle, then resume from the journal.
+    paper's summary wishes — swap batteries or fix a vehicle, then resume from the journal. Whatever ends a
+    run, `snapshot()` is what it has done so far.
     """
 
     def __init__(self, settings: Settings, fleet: Fleet, journal: Journal | None = None,
@@ -193,42 +193,44 @@ class Tuner:
         self.stage_rounds = stage_rounds
         self.recorded = journal.rounds() if journal is not None else {}
         self.rounds: list[Round] = []
+        self.searches: list[LineSearchRecord] = []
+        self.gains = settings.start_gains()  # the latest value of every gain
+        self.bootstrap = 0
+        self.stop_reason = "not started"
         self._dry_rounds = 0
-        self._flown = 0
+        self.flown = 0  # rounds flown (not replayed) by this process
+
+    def snapshot(self) -> TuningResult:
+        """The run so far: final once `run()` has returned."""
+        return TuningResult(gains=dict(self.gains), rounds=list(self.rounds), searches=list(self.searches),
+                            bootstraps=self.bootstrap, stop_reason=self.stop_reason,
+                            settings=self.settings.fingerprint())
 
     def run(self) -> TuningResult:
         s = self.settings
-        gains = s.start_gains()
-        searches: list[LineSearchRecord] = []
         found: list[Gains] = []
         limit = s.bootstraps if s.bootstraps is not None else s.max_bootstraps
-        stop_reason = f"ran {limit} bootstraps"
-        bootstrap = 0
-        for bootstrap in range(1, limit + 1):
+        for self.bootstrap in range(1, limit + 1):
             for name, (lo, hi) in s.space.items():
                 search = make_search(s.method, lo, hi, s.epsilon, reuse=s.reuse, points=s.points)
-                held = {n: v for n, v in gains.items() if n != name}
+                held = {n: v for n, v in self.gains.items() if n != name}
                 while not search.done:
-                    try:
-                        self._round(search, bootstrap, name, gains)
-                    except StageDone as stage:
-                        stage.partial = TuningResult(
-                            gains=dict(gains), rounds=self.rounds, searches=searches, bootstraps=bootstrap,
-                            stop_reason=f"stage ended in bootstrap {bootstrap} while tuning {name} in "
-                                        f"[{search.bracket[0]:.4g}, {search.bracket[1]:.4g}]",
-                            settings=s.fingerprint())
-                        raise
-                gains[name] = search.result
-                searches.append(LineSearchRecord(bootstrap, name, held, list(search.history), search.result,
-                                                 search.evaluations))
+                    lo_now, hi_now = search.bracket
+                    self.stop_reason = (f"stopped in bootstrap {self.bootstrap} while tuning {name} in "
+                                        f"[{lo_now:.4g}, {hi_now:.4g}]")
+                    self._round(search, self.bootstrap, name, self.gains)
+                self.gains[name] = search.result
+                self.searches.append(LineSearchRecord(self.bootstrap, name, held, list(search.history),
+                                                      search.result, search.evaluations))
+            self.stop_reason = f"ran {limit} bootstraps"
             if s.bootstraps is None:
-                if any(all(math.isclose(gains[n], g[n], abs_tol=1e-12) for n in gains) for g in found):
-                    stop_reason = f"bootstrap {bootstrap} found a point already found before (paper's stop rule)"
+                if any(all(math.isclose(self.gains[n], g[n], abs_tol=1e-12) for n in self.gains) for g in found):
+                    self.stop_reason = (f"bootstrap {self.bootstrap} found a point already found before "
+                                        "(paper's stop rule)")
                     break
-                found.append(dict(gains))
-                stop_reason = f"reached the cap of {limit} bootstraps without a repeated point"
-        return TuningResult(gains=gains, rounds=self.rounds, searches=searches, bootstraps=bootstrap,
-                            stop_reason=stop_reason, settings=s.fingerprint())
+                found.append(dict(self.gains))
+                self.stop_reason = f"reached the cap of {limit} bootstraps without a repeated point"
+        return self.snapshot()
 
     def _round(self, search, bootstrap: int, name: str, gains: Gains) -> None:
         """Plan, fly (or replay) and account one round of the current line search."""
@@ -244,9 +246,9 @@ class Tuner:
             self._check_replay(record, assignments)
             flights, started, finished, replayed = record.flights, record.started_s, record.finished_s, True
         else:
-            if self.stage_rounds is not None and self._flown == self.stage_rounds:
-                raise StageDone(self._flown, index)
-            self._flown += 1
+            if self.stage_rounds is not None and self.flown == self.stage_rounds:
+                raise StageDone(self.flown, index)
+            self.flown += 1
             started = time.time()
             flights = list(self.fleet.fly(assignments, index))
             finished = time.time()

@@ -16,6 +16,11 @@ MAVTUNE = str(Path(sys.executable).with_name("mavtune"))
 LONG = ["--epsilon", "0.01", "--bootstraps", "2", "--no-reuse", "--seed", "4", "-q"]  # 792 rounds
 
 
+def status(run_folder: Path) -> str:
+    """How the run in a folder ended, from its result.json."""
+    return json.loads((run_folder / "result.json").read_text())["status"]
+
+
 def rounds_in(journal: Path) -> int:
     """Rounds recorded so far (0 while the journal is still being created by the run)."""
     with sqlite3.connect(journal) as db:
@@ -44,6 +49,8 @@ def test_ctrl_c_then_resume_by_folder_gives_the_uninterrupted_result(tmp_path):
     kept = rounds_in(journal)
     assert 50 <= kept < reference["rounds"]
     assert f"keeps {kept} rounds" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    interrupted = json.loads((cut / "result.json").read_text())
+    assert interrupted["status"] == "interrupted" and kept - 1 <= interrupted["rounds"] <= kept
 
     resumed = subprocess.run([MAVTUNE, "tune", "-q", "--out", str(cut)], capture_output=True, text=True, timeout=100)
     assert resumed.returncode == 0, resumed.stderr
@@ -63,15 +70,15 @@ def test_stages_of_one_battery_each_end_at_the_uninterrupted_result(tmp_path):
     assert runner.invoke(app, [*args, "--out", str(whole)]).exit_code == 0
     staged = tmp_path / "staged"
     stages = 0
-    while not (staged / "result.json").exists():
+    while not (staged / "result.json").exists() or status(staged) != "finished":
         proc = runner.invoke(app, [*args, "--stage", "--out", str(staged)])
         assert proc.exit_code == 0, proc.output
         stages += 1
         assert stages <= 4
-        if not (staged / "result.json").exists():
+        if status(staged) == "stage":
             assert rounds_in(staged / "journal.sqlite") == 11 * stages
             assert "stage done" in proc.output
             assert f"in progress after {11 * stages} rounds" in (staged / "report.md").read_text()
-    assert stages == 4
+    assert stages == 4 and status(staged) == "finished"
     assert json.loads((staged / "result.json").read_text())["gains"] == json.loads(
         (whole / "result.json").read_text())["gains"]
