@@ -116,6 +116,95 @@ def tune_command(
     run(cfg, out, quiet=quiet, surface=surface, stage_rounds=stage_rounds)
 
 
+bank_app = typer.Typer(help="A bank of tuned gains by vehicle mass, looked up by the mass estimator's reading.",
+                       no_args_is_help=True)
+app.add_typer(bank_app, name="bank")
+
+
+@bank_app.command("build")
+def bank_build(
+    payloads: str = typer.Option("0,0.45,0.9", "--payloads", help="Payload masses to tune at, kg, comma-separated."),
+    out: Path = typer.Option(..., "--out", "-o", help="Folder for bank.json and one run folder per payload."),
+    config: Optional[Path] = ConfigOpt, vehicles: Optional[int] = VehiclesOpt, strategy: Optional[str] = StrategyOpt,
+    seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the simulated vehicles."),
+) -> None:
+    """Tune the simulated vehicle at each payload and collect the gains by mass (resumes like `tune`)."""
+    from rich.console import Console
+
+    from mavtune.bank import GainBank
+    from mavtune.run import run
+    from mavtune.sim.airframe import MASS_KG
+
+    try:
+        masses = [float(p) for p in payloads.split(",")]
+    except ValueError:
+        raise MavtuneError(f"--payloads must be numbers separated by commas, got {payloads!r}") from None
+    console, bank = Console(), GainBank.load(out / "bank.json", missing_ok=True)
+    for payload in masses:
+        cfg = _config(config, vehicles, strategy, None, None, None, None, None, None, tuning__seed=seed,
+                      sim__payload_kg=payload)
+        folder = out / f"payload-{payload:g}kg"
+        console.rule(f"payload {payload:g} kg")
+        result = run(cfg, folder, console=console, quiet=True)
+        bank.add(MASS_KG + payload, result.gains, str(folder))
+        bank.save(out / "bank.json")
+    _print_bank(console, bank)
+
+
+@bank_app.command("add")
+def bank_add(
+    bank_file: Path = typer.Argument(..., help="The bank (JSON); created if missing."),
+    run_dir: Path = typer.Argument(..., help="A finished run folder (its result.json gives the gains)."),
+    mass_kg: float = typer.Option(..., "--mass-kg", help="The vehicle's mass during that run, kg."),
+) -> None:
+    """Add the gains of a finished run (a real vehicle at a known mass) to a bank."""
+    import json
+
+    from rich.console import Console
+
+    from mavtune.bank import GainBank
+
+    path = run_dir / "result.json"
+    try:
+        summary = json.loads(path.read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        raise MavtuneError(f"{path} is missing or unreadable: is {run_dir} a mavtune run folder?") from None
+    if summary.get("status", "finished") != "finished":
+        raise MavtuneError(f"the run in {run_dir} did not finish ({summary.get('status')}): resume it first")
+    bank = GainBank.load(bank_file, missing_ok=True)
+    bank.add(mass_kg, summary["gains"], str(run_dir))
+    bank.save(bank_file)
+    _print_bank(Console(), bank)
+
+
+@bank_app.command("lookup")
+def bank_lookup(
+    bank_file: Path = typer.Argument(..., help="The bank (JSON)."),
+    mass_kg: float = typer.Option(..., "--mass-kg", help="The mass estimator's reading, kg."),
+) -> None:
+    """Print the gains for a mass: interpolated between tuned masses, held at the ends outside them."""
+    from mavtune.bank import GainBank
+
+    found = GainBank.load(bank_file).lookup(mass_kg)
+    lo, hi = found.between
+    where = (f"between {lo:g} and {hi:g} kg" if lo != hi else f"at {lo:g} kg") + (
+        "" if found.inside else f" (outside the tuned masses: held, not extrapolated)")
+    typer.echo(" ".join(f"{k}={v:.5g}" for k, v in found.gains.items()) + f"  # {where}")
+
+
+def _print_bank(console, bank) -> None:
+    from rich.table import Table
+
+    table = Table(title="gain bank")
+    table.add_column("mass, kg", justify="right")
+    for name in bank.entries[0].gains if bank.entries else []:
+        table.add_column(name, justify="right")
+    table.add_column("from")
+    for e in bank.entries:
+        table.add_row(f"{e.mass_kg:g}", *(f"{v:.5g}" for v in e.gains.values()), e.source)
+    console.print(table)
+
+
 # Other commands are registered below, one line each: app.command("name")(function).
 from mavtune.swarm.cli import agent_command, coordinator_command  # noqa: E402
 

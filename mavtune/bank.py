@@ -1,0 +1,91 @@
+"""A bank of tuned gains by vehicle mass, looked up by the mass estimator's reading (the paper's closing wish).
+
+Tune once per payload (`mavtune bank build` in the simulator, or `mavtune bank add` with a finished run on a
+real vehicle); in flight, `lookup(mass_kg)` interpolates linearly between the two nearest tuned masses and
+holds the end values outside the tuned range (saying so), never extrapolating gains nobody flew.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Gains
+
+
+@dataclass(frozen=True)
+class BankEntry:
+    """Gains tuned at one vehicle mass."""
+
+    mass_kg: float
+    gains: Gains
+    source: str = ""  # the run folder (or note) the gains come from
+
+
+@dataclass(frozen=True)
+class Lookup:
+    """The gains for a mass, and whether the mass was inside the tuned range."""
+
+    gains: Gains
+    inside: bool
+    between: tuple[float, float]  # the tuned masses interpolated between (equal at the ends)
+
+
+@dataclass
+class GainBank:
+    """Tuned gains sorted by mass; every entry has the same gain names."""
+
+    entries: list[BankEntry] = field(default_factory=list)
+
+    def add(self, mass_kg: float, gains: Gains, source: str = "") -> None:
+        """Add (or replace) the gains tuned at `mass_kg`."""
+        mass_kg = float(mass_kg)
+        if not math.isfinite(mass_kg) or mass_kg <= 0:
+            raise MavtuneError(f"bank mass must be a positive number of kg, got {mass_kg}")
+        if not gains or not all(math.isfinite(float(v)) for v in gains.values()):
+            raise MavtuneError(f"bank gains at {mass_kg:g} kg must be finite numbers, got {gains}")
+        if self.entries and set(gains) != set(self.entries[0].gains):
+            raise MavtuneError(f"bank holds gains {sorted(self.entries[0].gains)}, not {sorted(gains)}")
+        kept = [e for e in self.entries if not math.isclose(e.mass_kg, mass_kg)]
+        self.entries = sorted(kept + [BankEntry(mass_kg, {k: float(v) for k, v in gains.items()}, source)],
+                              key=lambda e: e.mass_kg)
+
+    def lookup(self, mass_kg: float) -> Lookup:
+        """Gains for `mass_kg`: linear between the nearest tuned masses, the end values outside them."""
+        if not self.entries:
+            raise MavtuneError("the gain bank is empty: add tuned gains first")
+        if not math.isfinite(mass_kg):
+            raise MavtuneError(f"mass {mass_kg} is not a number")
+        first, last = self.entries[0], self.entries[-1]
+        if mass_kg <= first.mass_kg or mass_kg >= last.mass_kg:
+            end = first if mass_kg <= first.mass_kg else last
+            inside = math.isclose(mass_kg, end.mass_kg)
+            return Lookup(dict(end.gains), inside, (end.mass_kg, end.mass_kg))
+        upper = next(i for i, e in enumerate(self.entries) if e.mass_kg >= mass_kg)
+        a, b = self.entries[upper - 1], self.entries[upper]
+        w = (mass_kg - a.mass_kg) / (b.mass_kg - a.mass_kg)
+        return Lookup({k: (1 - w) * a.gains[k] + w * b.gains[k] for k in a.gains}, True, (a.mass_kg, b.mass_kg))
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps({"entries": [asdict(e) for e in self.entries]}, indent=2))
+
+    @classmethod
+    def load(cls, path: str | Path, missing_ok: bool = False) -> "GainBank":
+        """Read a bank file; a missing file is an empty bank when `missing_ok`."""
+        path = Path(path)
+        if not path.exists():
+            if missing_ok:
+                return cls()
+            raise MavtuneError(f"gain bank {path} does not exist")
+        try:
+            data: dict[str, Any] = json.loads(path.read_text())
+            bank = cls()
+            for e in data["entries"]:
+                bank.add(e["mass_kg"], e["gains"], e.get("source", ""))
+        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+            raise MavtuneError(f"gain bank {path} is not a mavtune bank file ({exc})") from None
+        return bank

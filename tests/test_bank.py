@@ -1,0 +1,80 @@
+"""The gain bank: interpolation by mass, held ends, validation, and the `mavtune bank` commands."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from mavtune.bank import GainBank
+from mavtune.cli import app
+from mavtune.errors import MavtuneError
+
+
+def bank() -> GainBank:
+    b = GainBank()
+    b.add(3.2, {"kp": 0.8, "kd": 0.2}, "heavy")
+    b.add(2.3, {"kp": 0.6, "kd": 0.4}, "light")
+    return b
+
+
+def test_lookup_interpolates_between_the_nearest_masses():
+    found = bank().lookup(2.75)
+    assert found.inside and found.between == (2.3, 3.2)
+    assert found.gains == pytest.approx({"kp": 0.7, "kd": 0.3})
+
+
+@pytest.mark.parametrize("mass, gains, inside", [(1.0, {"kp": 0.6, "kd": 0.4}, False), (2.3, {"kp": 0.6, "kd": 0.4}, True),
+                                                 (9.0, {"kp": 0.8, "kd": 0.2}, False)])
+def test_ends_are_held_not_extrapolated(mass, gains, inside):
+    found = bank().lookup(mass)
+    assert found.gains == gains and found.inside is inside
+
+
+def test_adding_a_mass_again_replaces_it_and_names_must_match():
+    b = bank()
+    b.add(2.3, {"kp": 0.5, "kd": 0.5})
+    assert [e.mass_kg for e in b.entries] == [2.3, 3.2] and b.entries[0].gains["kp"] == 0.5
+    with pytest.raises(MavtuneError, match="not \\['ki', 'kp'\\]"):
+        b.add(2.8, {"kp": 0.5, "ki": 0.1})
+    with pytest.raises(MavtuneError, match="positive number of kg"):
+        b.add(-1.0, {"kp": 0.5, "kd": 0.5})
+    with pytest.raises(MavtuneError, match="finite"):
+        b.add(2.5, {"kp": float("nan"), "kd": 0.5})
+    with pytest.raises(MavtuneError, match="empty"):
+        GainBank().lookup(2.0)
+
+
+def test_save_and_load_round_trip(tmp_path):
+    path = tmp_path / "bank.json"
+    bank().save(path)
+    assert GainBank.load(path).entries == bank().entries
+    path.write_text("{not json")
+    with pytest.raises(MavtuneError, match="not a mavtune bank file"):
+        GainBank.load(path)
+
+
+def test_bank_commands_add_a_finished_run_and_look_up(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "result.json").write_text(json.dumps({"status": "finished", "gains": {"kp": 0.6, "kd": 0.4}}))
+    runner = CliRunner()
+    path = tmp_path / "bank.json"
+    assert runner.invoke(app, ["bank", "add", str(path), str(run), "--mass-kg", "2.3"]).exit_code == 0
+    (run / "result.json").write_text(json.dumps({"status": "finished", "gains": {"kp": 0.8, "kd": 0.2}}))
+    assert runner.invoke(app, ["bank", "add", str(path), str(run), "--mass-kg", "3.2"]).exit_code == 0
+    out = runner.invoke(app, ["bank", "lookup", str(path), "--mass-kg", "2.75"])
+    assert out.exit_code == 0 and out.output.startswith("kp=0.7 kd=0.3  # between 2.3 and 3.2 kg")
+    (run / "result.json").write_text(json.dumps({"status": "stage", "gains": {"kp": 0.1, "kd": 0.1}}))
+    refused = runner.invoke(app, ["bank", "add", str(path), str(run), "--mass-kg", "2.8"])
+    assert isinstance(refused.exception, MavtuneError) and "did not finish" in str(refused.exception)
+
+
+def test_bank_build_tunes_each_payload_in_the_simulator(tmp_path):
+    out = CliRunner().invoke(app, ["bank", "build", "--payloads", "0,0.9", "--out", str(tmp_path), "--seed", "3"])
+    assert out.exit_code == 0, out.output
+    built = GainBank.load(tmp_path / "bank.json")
+    assert [e.mass_kg for e in built.entries] == pytest.approx([2.3, 3.2])
+    for e in built.entries:
+        assert json.loads((tmp_path / e.source.split("/")[-1] / "result.json").read_text())["gains"] == e.gains
