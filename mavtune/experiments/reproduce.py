@@ -23,9 +23,9 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from mavtune.config import Config, load_config
-from mavtune.errors import MavtuneError
 from mavtune.report import claims as C
 from mavtune.report import markdown as md
+from mavtune.report.folders import out_folder
 
 RUNS_CSV = "runs.csv"
 RUNS_COLUMNS = ("strategy", "payload_kg", "run", "kp", "kd", "rounds", "flights", "true_cost")
@@ -81,23 +81,21 @@ def run_config(strategy: str, payload_kg: float, seed: int) -> Config:
 
 
 def _payload_tag(p: float) -> str:
+    """The payload in file names: 0kg, 0.9kg."""
     return f"{p:g}kg"
 
 
 def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: Console | None = None,
               campaign: Campaign | None = None) -> Reproduction:
     """Run the campaign (quick or full, or an explicit `campaign`) and write everything into `out_dir`."""
-    from mavtune.report.run_report import write_run_report
+    from mavtune.report.run_report import round_seconds, write_run_report
     from mavtune.sim import Scenario, SimFleet
     from mavtune.sim import surface as surf
     from mavtune.tuner import run_tuning
 
     console = console or Console()
     camp = campaign or (Campaign.quick(seed) if quick else Campaign.full(seed))
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise MavtuneError(f"output path {out} is a file, not a folder")
-    out.mkdir(parents=True, exist_ok=True)
+    out = out_folder(Path(out_dir))
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
     n_configs = len(STRATEGIES) * len(camp.payloads_kg)
@@ -146,7 +144,8 @@ def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: 
 
     t0 = time.perf_counter()
     write_runs_csv(runs, out / RUNS_CSV)
-    round_s = run_config("avg", 0.0, 0).flight.primitive_s + run_config("avg", 0.0, 0).flight.settle_s
+    paper_cfg = run_config("avg", 0.0, 0)  # the primitive and settle are the same for every configuration
+    round_s = round_seconds(paper_cfg)
     claims = C.all_claims(runs, surfaces, round_s)
     figures = _surface_figures(out, surfaces, runs, camp)
     timelines = []
@@ -161,7 +160,7 @@ def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: 
     timings["total"] = time.perf_counter() - t_all
     rep = Reproduction(out, camp, runs, surfaces, claims, timings)
     _write_summary(rep, round_s)
-    (out / "report.md").write_text(_report_text(rep, round_s, figures, timelines, quick))
+    (out / "report.md").write_text(_report_text(rep, paper_cfg.flight, round_s, figures, timelines, quick))
     return rep
 
 
@@ -235,6 +234,7 @@ def _surface_figures(out: Path, surfaces: dict[float, Any], runs: list[dict[str,
 
 
 def _write_summary(rep: Reproduction, round_s: float) -> None:
+    """summary.json: the campaign, the table and the claims as data, the timings and the surface minima."""
     table = config_table(rep.runs, round_s, rep.campaign.payloads_kg)
     data = {"campaign": asdict(rep.campaign), "round_s": round_s, "table": table,
             "claims": [asdict(c) for c in rep.claims], "timings_s": rep.timings_s,
@@ -243,6 +243,7 @@ def _write_summary(rep: Reproduction, round_s: float) -> None:
 
 
 def _json_default(o: Any) -> Any:
+    """JSON for numpy values (as lists) and non-finite floats (as strings); anything else as its str."""
     if hasattr(o, "tolist"):
         return o.tolist()
     if isinstance(o, float) and not math.isfinite(o):
@@ -250,7 +251,8 @@ def _json_default(o: Any) -> Any:
     return str(o)
 
 
-def _report_text(rep: Reproduction, round_s: float, figures: list, timelines: list, quick: bool) -> str:
+def _report_text(rep: Reproduction, flight, round_s: float, figures: list, timelines: list, quick: bool) -> str:
+    """report.md of the reproduction: setting, table beside the paper's, claims, figures, wall times."""
     camp = rep.campaign
     table = config_table(rep.runs, round_s, camp.payloads_kg)
     lines = [
@@ -273,13 +275,15 @@ def _report_text(rep: Reproduction, round_s: float, figures: list, timelines: li
                          f"(seed {camp.seed}), `mavtune.sim.surface` (paper: 25 × 25 × 20)"],
             ["scenario", "the default simulated scenario (wind, lidar noise, vehicle spread) with payload 0 or "
                          "0.9 kg; true_cost = the cost of the final gains flown once on the noise-free scenario"],
-            ["round", f"{round_s:g} s (8 s circle + 1 s settle); flight time = rounds × {round_s:g} s"],
+            ["round", f"{round_s:g} s ({flight.primitive_s:g} s {flight.primitive} + {flight.settle_s:g} s settle); "
+                      f"flight time = rounds × {round_s:g} s"],
         ]), "",
         "## Final gains, rounds and flight time: ours vs the paper", "",
         md.table(["strategy", "payload", "runs", "kp (ours)", "kp (paper)", "kd (ours)", "kd (paper)",
                   "rounds (ours)", "rounds (paper)", "flight time s (ours)", "flight time s (paper)",
                   "true cost (ours)"],
-                 [[t["strategy"], f"{t['payload_kg']:g} kg", t["n"], md.pm(*t["kp"]), md.pm(*(t["paper_kp"] or (None, None))),
+                 [[t["strategy"], f"{t['payload_kg']:g} kg", t["n"], md.pm(*t["kp"]),
+                   md.pm(*(t["paper_kp"] or (None, None))),
                    md.pm(*t["kd"]), md.pm(*(t["paper_kd"] or (None, None))), md.pm(*t["rounds"], 1),
                    md.fixed(t["paper_rounds"], 0), md.pm(*t["flight_time_s"], 1), md.fixed(t["paper_flight_time_s"], 0),
                    md.pm(*t["true_cost"], 3)] for t in table],

@@ -53,7 +53,8 @@ def mean_std(values: Sequence[float]) -> tuple[float, float]:
     a = np.asarray(values, dtype=float)
     if a.size == 0:
         return math.nan, math.nan
-    return float(a.mean()), float(a.std(ddof=1)) if a.size > 1 else 0.0
+    std = float(a.std(ddof=1)) if a.size > 1 else 0.0
+    return float(a.mean()), std
 
 
 def spread(kp_std: float, kd_std: float) -> float:
@@ -91,7 +92,7 @@ def claim_avg_spreads_less(runs: list[dict[str, Any]]) -> Claim:
                  "spread = sqrt(std(kp)² + std(kd)²) of the final gains over the runs (sample std); holds when "
                  "spread(avg) < spread(split) for every payload. Strength, not part of the verdict: distance of each "
                  "run's (kp, kd) from its configuration's mean, avg vs split pooled over payloads, one-sided Welch "
-                 "t-test (a Brown–Forsythe-type test of spread)",
+                 "t-test on those distances (a Levene-type test of spread)",
                  "; ".join(parts), "; ".join(paper_parts) or "—", bool(holds and parts), figures,
                  bool(paper_holds) if paper_parts else None)
 
@@ -190,7 +191,8 @@ def _paper_payload_shift(p0: float, p1: float, n: int = 10) -> tuple[str, bool |
         pval = float(stats.ttest_ind_from_stats(a[0], a[1], 2 * n, b[0], b[1], 2 * n, equal_var=False).pvalue)
         pvals.append(pval)
         parts.append(f"Δ{g} = {b[0] - a[0]:+.4f} (Welch p = {pval:.3g})")
-    text = "; ".join(parts) + " from the Gazebo table; real flights 'proving the gains should be adapted' (data omitted)"
+    text = "; ".join(parts) + (" from the Gazebo table; real flights 'proving the gains should be adapted' "
+                               "(data omitted)")
     return text, any(pv < PAYLOAD_ALPHA / 2 for pv in pvals)
 
 

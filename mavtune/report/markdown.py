@@ -17,6 +17,7 @@ def table(header: Sequence[str], rows: Iterable[Sequence[object]], align: Sequen
 
 
 def _cell(value: object) -> str:
+    """A table cell: pipes escaped, on one line."""
     return str(value).replace("|", "\\|").replace("\n", " ")
 
 

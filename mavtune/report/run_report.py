@@ -23,7 +23,6 @@ REPORT = "report.md"
 TIMELINE_PNG = "timeline.png"
 SURFACE_PNG = "gains_on_surface.png"
 SURFACE_CSV = "surface.csv"
-DEFAULT_ROUND_S = 9.0  # the paper's 8 s primitive + 1 s settle, when no config says otherwise
 
 
 def write_run_report(out_dir: str | Path, result, config=None, surface: Any = None,
@@ -32,9 +31,17 @@ def write_run_report(out_dir: str | Path, result, config=None, surface: Any = No
     flight timing and the plan; `surface` (a `mavtune.sim.surface.Surface` or a surface.csv path; default
     `out_dir/surface.csv` if present) gets the final gains drawn on it. Returns the report's path."""
     out = Path(out_dir)
+    try:
+        return _write(out, result, config, surface, title)
+    except OSError as exc:
+        raise MavtuneError(f"cannot write the run report in {out}: {exc.strerror or exc}") from None
+
+
+def _write(out: Path, result, config, surface: Any, title: str) -> Path:
+    """`write_run_report` without the translation of file-system errors."""
     out.mkdir(parents=True, exist_ok=True)
     summary = _read_json(out / "result.json")
-    round_s = _round_s(config)
+    round_s = round_seconds(config)
     gains = list(result.gains)
     rounds = list(result.rounds)
 
@@ -73,16 +80,21 @@ def write_run_report(out_dir: str | Path, result, config=None, surface: Any = No
 
 
 def _read_json(path: Path) -> dict[str, Any]:
+    """The run folder's result.json as a dict ({} when absent or unreadable: the report is written anyway)."""
     try:
-        return json.loads(path.read_text())
-    except (FileNotFoundError, json.JSONDecodeError):
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):  # missing, unreadable, not JSON
         return {}
+    return data if isinstance(data, dict) else {}
 
 
-def _round_s(config) -> float:
+def round_seconds(config=None) -> float:
+    """Flight time of one round, s: primitive + settle of `config.flight`, else of the default flight plan."""
     flight = getattr(config, "flight", None)
     if flight is None:
-        return DEFAULT_ROUND_S
+        from mavtune.config import FlightPlan
+
+        flight = FlightPlan()
     return float(flight.primitive_s) + float(flight.settle_s)
 
 
@@ -121,6 +133,7 @@ def _plot_gains_on_surface(grid, gains: tuple[float, float], path: Path, source:
 
 
 def _settings_section(result, config, summary: dict[str, Any]) -> list[str]:
+    """How the run was set up: method, strategy, space, start gains, vehicles, fleet, payload, wall time."""
     s = result.settings or {}
     rows = []
     if s:
@@ -142,6 +155,7 @@ def _settings_section(result, config, summary: dict[str, Any]) -> list[str]:
 
 
 def _plan_section(result, config, summary: dict[str, Any], round_s: float) -> list[str]:
+    """Planned vs actual rounds, flights and flight time, with notes on failed, lost and replayed rounds."""
     vehicles = max((len(r.flights) for r in result.rounds), default=0)
     planned = summary.get("plan") or _plan(result, config, vehicles, round_s)
     rounds = len(result.rounds)
@@ -187,6 +201,7 @@ def _plan(result, config, vehicles: int, round_s: float) -> dict[str, Any] | Non
 
 
 def _rounds_table(rounds: list) -> str:
+    """One row per round: bracket, each vehicle's point and cost, and what went wrong."""
     vehicles = vehicle_order(rounds)
     header = ["round", "bootstrap", "gain", "bracket"] + [f"{v} point" for v in vehicles] + \
              [f"{v} cost" for v in vehicles] + ["status"]
@@ -204,6 +219,7 @@ def _rounds_table(rounds: list) -> str:
 
 
 def _events_table(events: list) -> str:
+    """The fleet events recorded in result.json (drop-outs, rejoins, aborts)."""
     rows = []
     for e in events:
         if isinstance(e, dict):

@@ -1,8 +1,8 @@
 """The tuning timeline of one run, like the paper's Figs. 6–7: altitude reference and measurement of every
 vehicle over the whole run, the gains each vehicle flew, and the cost of every flight (log scale).
 
-The x axis is flight time: round k occupies [k·round_s, (k+1)·round_s). As in the paper, vehicle j's
-altitudes are drawn lowered by j·offset_m so the vehicles do not hide each other.
+The x axis is flight time: the k-th round given (0-based) occupies [k·round_s, (k+1)·round_s). As in the paper,
+vehicle j's altitudes are drawn lowered by j·offset_m so the vehicles do not hide each other.
 """
 
 from __future__ import annotations
@@ -85,13 +85,14 @@ def _shade_searches(axes: list, rounds: Sequence, round_s: float) -> None:
 
 
 def _altitude(ax, rounds: Sequence, vehicles: list[str], round_s: float, offset_m: float, colours) -> None:
+    """Each vehicle's altitude reference (dashed) and filtered measurement over the run, lowered by j·offset_m."""
     for j, name in enumerate(vehicles):
         ts, refs, zs = [], [], []
-        for rnd in rounds:
+        for k, rnd in enumerate(rounds):
             for f in rnd.flights:
                 if f.vehicle != name or f.trace is None or not len(f.trace.t_s):
                     continue
-                t = rnd.index * round_s + np.asarray(f.trace.t_s, dtype=float)
+                t = k * round_s + np.asarray(f.trace.t_s, dtype=float)
                 ts += [t, [np.nan]]
                 refs += [np.asarray(f.trace.z_ref_m, dtype=float) - j * offset_m, [np.nan]]
                 zs += [np.asarray(f.trace.z_m, dtype=float) - j * offset_m, [np.nan]]
@@ -107,11 +108,12 @@ def _altitude(ax, rounds: Sequence, vehicles: list[str], round_s: float, offset_
 
 
 def _gain(ax, rounds: Sequence, vehicles: list[str], gain: str, round_s: float, colours) -> None:
+    """The value of `gain` each vehicle flew in each round, as steps."""
     for j, name in enumerate(vehicles):
         xs, ys = [], []
-        for rnd in rounds:
+        for k, rnd in enumerate(rounds):
             value = next((f.gains.get(gain, math.nan) for f in rnd.flights if f.vehicle == name), math.nan)
-            xs.append(rnd.index * round_s)
+            xs.append(k * round_s)
             ys.append(value)
         if not xs:
             continue
@@ -122,14 +124,15 @@ def _gain(ax, rounds: Sequence, vehicles: list[str], gain: str, round_s: float, 
 
 
 def _cost(ax, rounds: Sequence, vehicles: list[str], round_s: float, colours) -> None:
+    """The cost of every measured flight at the middle of its round (log scale; red x = failed)."""
     low, high = math.inf, 0.0
     for j, name in enumerate(vehicles):
         ok_x, ok_y, bad_x, bad_y = [], [], [], []
-        for rnd in rounds:
+        for k, rnd in enumerate(rounds):
             for f in rnd.flights:
                 if f.vehicle != name or f.status is Status.LOST or not math.isfinite(f.cost) or f.cost <= 0:
                     continue
-                x = (rnd.index + 0.5) * round_s
+                x = (k + 0.5) * round_s
                 (bad_x if f.status is Status.FAILED else ok_x).append(x)
                 (bad_y if f.status is Status.FAILED else ok_y).append(f.cost)
         if ok_y or bad_y:

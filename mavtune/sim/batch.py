@@ -10,6 +10,7 @@ import numpy as np
 
 from mavtune.sim import airframe as af
 from mavtune.sim import kernel as K
+from mavtune.sim.cost import lowpass_alpha
 from mavtune.sim.scenario import COST_NAMES, Scenario
 from mavtune.sim.tracker import DT_S, flight_reference
 
@@ -24,7 +25,6 @@ def constants(scenario: Scenario) -> np.ndarray:
     cp[K.C_G] = af.GRAVITY_MPS2
     cp[K.C_MNOM] = af.MASS_KG
     cp[K.C_KF] = af.THRUST_COEFF_N_PER_RPM2
-    cp[K.C_TAU] = af.MOTOR_TAU_S
     cp[K.C_RPM_MIN] = af.RPM_MIN
     cp[K.C_RPM_MAX] = af.RPM_MAX
     cp[K.C_JX], cp[K.C_JY], cp[K.C_JZ] = af.INERTIA_KGM2
@@ -52,7 +52,7 @@ def constants(scenario: Scenario) -> np.ndarray:
     cp[K.C_SPREAD_MASS] = scenario.spread.mass
     cp[K.C_SPREAD_KF] = scenario.spread.motor_constant
     cp[K.C_PAYLOAD] = scenario.payload_kg
-    cp[K.C_LP_ALPHA] = 1.0 - math.exp(-2.0 * math.pi * scenario.filter_hz * DT_S)
+    cp[K.C_LP_ALPHA] = lowpass_alpha(scenario.filter_hz, DT_S)
     cp[K.C_Z_GROUND] = 0.0
     cp[K.C_FAIL_ERR] = scenario.failure_error_m
     cp[K.C_EFFORT_W] = scenario.effort_weight
@@ -78,15 +78,24 @@ def settle_steps(scenario: Scenario) -> int:
     return int(round(scenario.settle_s / DT_S))
 
 
+def seed_array(seeds) -> np.ndarray:
+    """Vehicle seeds (any Python ints, negative or beyond 64 bits) as the kernel's uint64, taken modulo 2**64."""
+    if isinstance(seeds, np.ndarray) and seeds.dtype.kind in "iu":  # int64 wraps modulo 2**64 as well
+        return np.ascontiguousarray(seeds.astype(np.uint64).ravel())
+    return np.array([int(s) % 2**64 for s in seeds], dtype=np.uint64)
+
+
 @dataclass
 class BatchResult:
-    """Outcome of B flights: costs (B, 4) in COST_NAMES order, status codes, failure times, traces (B, n_trace)."""
+    """Outcome of B flights: costs (B, 4) in COST_NAMES order, status codes (K.OK or K.FAIL_*), failure times,
+    traces (B, n_trace) of the filtered altitude, their times and the reference altitude at those times."""
 
     costs: np.ndarray
     status: np.ndarray
     t_fail_s: np.ndarray
     traces: np.ndarray
     trace_t_s: np.ndarray
+    trace_z_ref_m: np.ndarray
 
     def cost(self, name: str) -> np.ndarray:
         """The (B,) costs by name (iae, ise, itae, effort)."""
@@ -96,7 +105,7 @@ class BatchResult:
 def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0) -> BatchResult:
     """Fly len(seeds) flights at once: flight i has physical gains (kx_z[i], kv_z[i]) and randomness (seeds[i],
     round_ids[i]). trace_hz > 0 records the filtered altitude measurement at that rate (0: no trace)."""
-    seeds = np.ascontiguousarray(np.asarray(seeds, dtype=np.int64).astype(np.uint64))
+    seeds = seed_array(seeds)
     b = seeds.shape[0]
     round_ids = np.ascontiguousarray(np.broadcast_to(np.asarray(round_ids, dtype=np.int64), (b,)))
     kx = np.ascontiguousarray(np.broadcast_to(np.asarray(kx_z, dtype=float), (b,)))
@@ -114,4 +123,6 @@ def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0)
         K.fly_batch(seeds, round_ids, kx, kv, ref, settle_steps(scenario), constants(scenario), mix, alloc, every,
                     traces, costs, status, t_fail)
     t_trace = np.arange(n_trace) * every * DT_S
-    return BatchResult(costs=costs, status=status, t_fail_s=t_fail, traces=traces[:, :n_trace], trace_t_s=t_trace)
+    z_ref = ref[::every, 2].copy() if every else np.empty(0)
+    return BatchResult(costs=costs, status=status, t_fail_s=t_fail, traces=traces[:, :n_trace], trace_t_s=t_trace,
+                       trace_z_ref_m=z_ref)

@@ -7,6 +7,23 @@ from typing import Optional
 
 import typer
 
+from mavtune.errors import MavtuneError
+from mavtune.report.folders import out_folder
+
+
+def _scenario(flags: dict[str, tuple[str, object]]):
+    """A Scenario from {flag: (field, value)}; an invalid value is one line naming the flag."""
+    from pydantic import ValidationError
+
+    from mavtune.sim.scenario import Scenario
+
+    try:
+        return Scenario(**{name: value for name, value in flags.values()})
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        flag = next((f for f, (name, _) in flags.items() if name == err["loc"][0]), str(err["loc"][0]))
+        raise MavtuneError(f"{flag}: {err['msg']} (got {err.get('input')!r})") from None
+
 
 def surface(
     grid: int = typer.Option(25, help="grid points per gain axis over [0, 1]"),
@@ -20,18 +37,14 @@ def surface(
     """Map the cost over the normalised (kp, kd) square with the simulator (the paper's Fig. 2)."""
     import time
 
-    from pydantic import ValidationError
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from mavtune.errors import MavtuneError
     from mavtune.sim import surface as surf
-    from mavtune.sim.scenario import Scenario
 
-    try:
-        sc = Scenario(payload_kg=payload, primitive=primitive, cost=cost)
-    except ValidationError as exc:
-        raise MavtuneError(f"bad scenario: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}") from None
-    out.mkdir(parents=True, exist_ok=True)
+    surf.check_size(grid, repeats)
+    sc = _scenario({"--payload": ("payload_kg", payload), "--primitive": ("primitive", primitive),
+                    "--cost": ("cost", cost)})
+    out_folder(out)
     t0 = time.perf_counter()
     with Progress(TextColumn("surface"), BarColumn(), MofNCompleteColumn(), TextColumn("flights"),
                   TimeElapsedColumn()) as bar:
@@ -53,7 +66,6 @@ def bench(
     primitive_s: float = typer.Option(8.0, help="primitive length, s (plus 1 s settle)"),
 ) -> None:
     """Print the simulator's throughput (vehicle-steps per second) for a few batch sizes, cold and warm."""
-    from mavtune.errors import MavtuneError
     from mavtune.sim import bench as b
 
     try:
@@ -62,5 +74,6 @@ def bench(
         raise MavtuneError(f"--sizes must be integers separated by commas, got {sizes!r}") from None
     if not batch_sizes or min(batch_sizes) < 1:
         raise MavtuneError("--sizes needs at least one batch size >= 1")
+    _scenario({"--primitive-s": ("primitive_s", primitive_s)})
     for line in b.run(batch_sizes, primitive_s=primitive_s):
         typer.echo(line)

@@ -11,16 +11,22 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
+
+
+def lowpass_alpha(filter_hz: float, dt_s: float) -> float:
+    """Gain of the first-order low-pass y += alpha (x - y), sampled every dt_s, cutoff filter_hz (kernel and `iae`)."""
+    return 1.0 - math.exp(-2.0 * math.pi * filter_hz * dt_s)
 
 
 def iae(z_ref_m, z_m, filter_hz: float = 5.0, dt_s: float = 0.01, skip: int = 0) -> float:
-    """Σ_k≥skip |lowpass(z)_k − lowpass(z_ref)_k| over uniformly sampled altitude and reference; inf if non-finite."""
+    """Σ_k≥skip |lowpass(z)_k − lowpass(z_ref)_k| of uniformly sampled altitude and reference; inf if non-finite."""
     z_ref = np.asarray(z_ref_m, dtype=float)
     z = np.asarray(z_m, dtype=float)
     if z.size == 0 or z.shape != z_ref.shape or not (np.all(np.isfinite(z)) and np.all(np.isfinite(z_ref))):
         return math.inf
-    alpha = 1.0 - math.exp(-2.0 * math.pi * filter_hz * dt_s)
+    from scipy.signal import lfilter  # slow to import; only this function needs it
+
+    alpha = lowpass_alpha(filter_hz, dt_s)
     b, a = [alpha], [1.0, alpha - 1.0]
     start = [(1.0 - alpha) * z_ref[0]]
     zf, _ = lfilter(b, a, z, zi=start)

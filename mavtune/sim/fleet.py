@@ -10,8 +10,9 @@ import numpy as np
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.sim import batch
+from mavtune.sim import kernel as K
 from mavtune.sim.gains import parse_assignment
-from mavtune.sim.scenario import Scenario
+from mavtune.sim.scenario import COST_NAMES, Scenario
 
 
 class SimFleet:
@@ -42,31 +43,24 @@ class SimFleet:
             return []
         kx = np.array([p[0] for p in physical])
         kv = np.array([p[1] for p in physical])
-        seeds = self.seed + np.arange(len(physical))
+        seeds = [self.seed + j for j in range(len(physical))]
         res = batch.fly(self.scenario, kx, kv, seeds, int(round_id), trace_hz=self.trace_hz)
-        costs = res.cost(self.scenario.cost)
-        ref_z = batch.reference_for(self.scenario)[:, 2]
-        step = int(round(res.trace_t_s[1] / 0.01)) if res.trace_t_s.size > 1 else 1
         flights = []
         for i, gains in enumerate(assignments):
             code = int(res.status[i])
-            info = {
-                "seed": int(seeds[i]), "round_id": int(round_id), "kx_z": float(kx[i]), "kv_z": float(kv[i]),
-                "costs": {name: float(res.cost(name)[i]) for name in ("iae", "ise", "itae", "effort")},
-                "cost_name": self.scenario.cost,
-            }
-            if code != 0:
+            costs = {name: float(res.cost(name)[i]) for name in COST_NAMES}
+            info = {"seed": seeds[i], "round_id": int(round_id), "kx_z": float(kx[i]), "kv_z": float(kv[i]),
+                    "costs": costs, "cost_name": self.scenario.cost}
+            if code != K.OK:
                 info["failure"] = batch.FAILURE_NAMES.get(code, str(code))
                 info["t_fail_s"] = float(res.t_fail_s[i])
             trace = None
             if self.trace_hz > 0:
-                z = res.traces[i]
-                keep = np.isfinite(z)
-                trace = Trace(t_s=[float(t) for t in res.trace_t_s[keep]],
-                              z_ref_m=[float(v) for v in ref_z[::step][: z.size][keep]],
-                              z_m=[float(v) for v in z[keep]])
-            flights.append(Flight(vehicle=f"sim{i}", gains=dict(gains), cost=float(costs[i]),
-                                  status=Status.OK if code == 0 else Status.FAILED, trace=trace, info=info))
+                keep = np.isfinite(res.traces[i])  # a failed flight's trace ends at its failure
+                trace = Trace(t_s=res.trace_t_s[keep].tolist(), z_ref_m=res.trace_z_ref_m[keep].tolist(),
+                              z_m=res.traces[i][keep].tolist())
+            flights.append(Flight(vehicle=f"sim{i}", gains=dict(gains), cost=costs[self.scenario.cost],
+                                  status=Status.OK if code == K.OK else Status.FAILED, trace=trace, info=info))
         return flights
 
     def close(self) -> None:

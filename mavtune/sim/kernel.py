@@ -24,10 +24,12 @@ from numba import njit, prange
 FAST = {"contract", "arcp", "nsz", "afn"}
 
 # ---- shared constants vector `cp` -----------------------------------------------------------------------------
-(C_DT, C_G, C_MNOM, C_KF, C_TAU, C_RPM_MIN, C_RPM_MAX, C_JX, C_JY, C_JZ, C_DRAG,
+(C_DT, C_G, C_MNOM, C_KF, C_RPM_MIN, C_RPM_MAX, C_JX, C_JY, C_JZ, C_DRAG,
  C_KX_XY, C_KV_XY, C_KIW, C_KIB, C_KR_XY, C_KR_Z, C_KW_XY, C_KW_Z, C_KM, C_DM_MAX, C_TAN_TILT,
  C_SIG_LIDAR, C_SIG_VZ, C_SIG_POS, C_A_POS, C_WIND_MEAN, C_WIND_SPREAD, C_GUST_XY, C_GUST_Z, C_A_GUST,
- C_SPREAD_MASS, C_SPREAD_KF, C_PAYLOAD, C_LP_ALPHA, C_Z_GROUND, C_FAIL_ERR, C_EFFORT_W, C_DELAY, C_E_HALF, NCP) = range(41)
+ C_SPREAD_MASS, C_SPREAD_KF, C_PAYLOAD, C_LP_ALPHA, C_Z_GROUND, C_FAIL_ERR, C_EFFORT_W, C_DELAY,
+ C_E_HALF,  # exp(-dt / (2 tau_motor)): the rotor lag over half a step
+ NCP) = range(40)
 
 # ---- per-vehicle parameters `vp` --------------------------------------------------------------------------------
 V_MASS, V_KF, V_KXZ, V_KVZ, V_WX, V_WY, NVP = range(7)
@@ -87,8 +89,10 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
     g = cp[C_G]
     rs[0] = _mix64(seed ^ _SALT_SPREAD)
     n1, n2 = _normal2(rs)
-    mass = cp[C_MNOM] * (1.0 + cp[C_SPREAD_MASS] * n1) + cp[C_PAYLOAD]
-    kf = cp[C_KF] * (1.0 + cp[C_SPREAD_KF] * n2)
+    # relative spread factors floored at one half: a far tail draw of a large spread never makes a mass or a
+    # thrust coefficient vanish (inactive for the default 3 % spread)
+    mass = cp[C_MNOM] * max(0.5, 1.0 + cp[C_SPREAD_MASS] * n1) + cp[C_PAYLOAD]
+    kf = cp[C_KF] * max(0.5, 1.0 + cp[C_SPREAD_KF] * n2)
     rs[0] = _mix64(_mix64(seed) ^ (np.uint64(round_id) * _GOLD + _SALT_FLIGHT))
     n1, n2 = _normal2(rs)
     speed = max(0.0, cp[C_WIND_MEAN] * (1.0 + cp[C_WIND_SPREAD] * n1))
@@ -235,7 +239,12 @@ def _integrate(s, a, vp, cp, mix):
 
 @njit(cache=True, fastmath=FAST)
 def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
-    """SO(3) controller (paper eq. 2, MRS form) from estimates (p, v); writes rotor rpm commands into `a`."""
+    """SO(3) controller (paper eq. 2, MRS form) from estimates (p, v); writes rotor rpm commands into `a`.
+
+    Errors are reference minus state (MRS sign; eq. 2 writes state minus reference with the signs flipped).
+    The desired heading is fixed (b1d = e1) and the commanded attitude is not differentiated, so eq. 2's
+    feed-forward terms in Omega_c and its derivative are zero: M = -k_R e_R - k_Omega Omega + Omega x J Omega.
+    """
     dt = cp[C_DT]
     g = cp[C_G]
     qw, qx, qy, qz = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
@@ -257,7 +266,7 @@ def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
     a[A_IBX] += (r00 * ex + r10 * ey + r20 * ez) * dt
     a[A_IBY] += (r01 * ex + r11 * ey + r21 * ez) * dt
     dm = a[A_DM] + cp[C_KM] * ez * dt
-    dm = min(max(dm, -0.5 * cp[C_MNOM]), cp[C_DM_MAX])
+    dm = min(max(dm, -0.5 * cp[C_MNOM]), cp[C_DM_MAX])  # the estimate never drops below half the nominal mass
     a[A_DM] = dm
     kib = cp[C_KIB]
     ibx = kib * a[A_IBX]
@@ -268,7 +277,7 @@ def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
     m = cp[C_MNOM] + dm
     fx = m * ax
     fy = m * ay
-    fz = max(m * az, 0.05 * m * g)
+    fz = max(m * az, 0.05 * m * g)  # keep 5 % of hover thrust: the attitude stays defined, no free fall command
     # tilt limit: keep the horizontal part within tan(tilt_max) of the vertical part
     fh = math.sqrt(fx * fx + fy * fy)
     fh_max = fz * cp[C_TAN_TILT]
@@ -375,7 +384,8 @@ def _fly_one(seed, round_id, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_ever
     ise = 0.0
     itae = 0.0
     eff = 0.0
-    mg = cp[C_MNOM] * cp[C_G]
+    # the vehicle's hover thrust in command units (rotor speeds from the nominal k_f): payload and spread included
+    mg = vp[V_MASS] * cp[C_KF] / vp[V_KF] * cp[C_G]
     status = OK
     k_fail = n
     for k in range(n):

@@ -42,7 +42,7 @@ class Plant:
     def reset(self, position_m, round_id: int = 0) -> None:
         """Hover at position_m ((3,) or (B, 3)), t = 0; wind and noise drawn from (seed + j, round_id)."""
         pos = self._per_vehicle(position_m, 3, "position_m")
-        seeds = (self.seed + np.arange(self.vehicles)).astype(np.uint64)
+        seeds = batch.seed_array([self.seed + j for j in range(self.vehicles)])
         rounds = np.full(self.vehicles, int(round_id), dtype=np.int64)
         K.init_batch(seeds, rounds, self._kx, self._kv, pos, self._cp, self._S, self._A, self._VP, self._RS)
         self._status[:] = K.OK
@@ -74,6 +74,7 @@ class Plant:
         self.t_s = self._k * DT_S
 
     def _per_vehicle(self, value, width: int, name: str) -> np.ndarray:
+        """`value` broadcast to (B, width) floats; a one-line error naming `name` when it does not fit."""
         arr = np.asarray(value, dtype=float)
         try:
             return np.ascontiguousarray(np.broadcast_to(arr, (self.vehicles, width)))

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field
 
 PrimitiveName = Literal["circle", "step", "figure8"]
 CostName = Literal["iae", "ise", "itae", "effort"]
-COST_NAMES: tuple[str, ...] = ("iae", "ise", "itae", "effort")
+COST_NAMES: tuple[str, ...] = get_args(CostName)  # the kernel computes all four, in this order
 
 
 class _Model(BaseModel):
+    """Frozen (hashable: constants are cached per scenario) and strict about unknown fields."""
+
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
@@ -37,8 +39,8 @@ class Noise(_Model):
 class Spread(_Model):
     """Vehicle-to-vehicle spread (fixed per vehicle seed): relative std of mass and rotor thrust coefficient."""
 
-    mass: float = Field(0.03, ge=0, le=0.3)
-    motor_constant: float = Field(0.03, ge=0, le=0.3)
+    mass: float = Field(0.03, ge=0, le=0.3, description="relative std of the take-off mass (before payload)")
+    motor_constant: float = Field(0.03, ge=0, le=0.3, description="relative std of the rotor thrust coefficient")
 
 
 class Scenario(_Model):
@@ -54,7 +56,8 @@ class Scenario(_Model):
     noise: Noise = Noise()
     spread: Spread = Spread()
     filter_hz: float = Field(5.0, gt=0, description="cutoff of the first-order low-pass on the altitude error")
-    effort_weight: float = Field(0.1, ge=0, description="m per unit of |f - m g|/(m g) in the 'effort' cost")
+    effort_weight: float = Field(0.1, ge=0, description="m per unit of |f - f_hover|/f_hover (this vehicle's "
+                                 "hover thrust, payload included) in the 'effort' cost")
     failure_error_m: float = Field(10.0, gt=0, description="error assumed after a divergence, for the penalty")
     latency_s: float = Field(0.03, ge=0, le=0.09, description="feedback latency of the position/velocity estimate"
                              " (estimator + link to the flight controller), s; whole 0.01 s steps")

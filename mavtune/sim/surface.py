@@ -10,9 +10,10 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from mavtune.errors import MavtuneError
-from mavtune.sim import batch
 from mavtune.sim.gains import to_physical
 from mavtune.sim.scenario import Scenario
+
+CSV_COLUMNS = ("kp", "kd", "mean_cost", "std_cost", "n")  # one row per grid point, kp-major
 
 
 @dataclass
@@ -28,7 +29,9 @@ class Surface:
     scenario: Scenario
 
     def argmin(self) -> tuple[float, float]:
-        """(kp, kd) of the grid point with the lowest mean cost."""
+        """(kp, kd) of the grid point with the lowest mean cost (NaN means are skipped)."""
+        if not np.isfinite(self.mean).any():
+            raise MavtuneError("the cost surface has no finite mean cost")
         i, j = np.unravel_index(int(np.nanargmin(self.mean)), self.mean.shape)
         return float(self.kp[i]), float(self.kd[j])
 
@@ -39,6 +42,12 @@ class Surface:
                 yield float(kp), float(kd), float(self.mean[i, j]), float(self.std[i, j]), int(self.n[i, j])
 
 
+def check_size(grid: int, repeats: int) -> None:
+    """A one-line MavtuneError unless grid >= 2 points per axis and repeats >= 1 flights per point."""
+    if grid < 2 or repeats < 1:
+        raise MavtuneError(f"a surface needs grid >= 2 and repeats >= 1, got grid {grid}, repeats {repeats}")
+
+
 def compute_surface(grid: int = 25, repeats: int = 20, scenario: Scenario | None = None, seed: int = 0,
                     chunk: int = 2500, progress: Callable[[int, int], None] | None = None) -> Surface:
     """Fly every (kp, kd) of a grid x grid lattice on [0, 1]^2 `repeats` times on one vehicle (seed) and average.
@@ -46,8 +55,10 @@ def compute_surface(grid: int = 25, repeats: int = 20, scenario: Scenario | None
     Repeat r is round r at every grid point (common random numbers: the same wind and noise everywhere), so
     neighbouring points differ by their gains, not by luck. `progress(done, total)` is called after each chunk.
     """
-    if grid < 2 or repeats < 1:
-        raise MavtuneError(f"a surface needs grid >= 2 and repeats >= 1, got grid {grid}, repeats {repeats}")
+    check_size(grid, repeats)
+    from mavtune.sim import batch  # loads numba: not needed to read or draw a surface
+    from mavtune.sim import kernel as K
+
     sc = scenario if scenario is not None else Scenario.default()
     axis = np.linspace(0.0, 1.0, grid)
     kp, kd = np.meshgrid(axis, axis, indexing="ij")
@@ -58,9 +69,9 @@ def compute_surface(grid: int = 25, repeats: int = 20, scenario: Scenario | None
     failed = np.empty(total, dtype=bool)
     for start in range(0, total, chunk):
         stop = min(total, start + chunk)
-        res = batch.fly(sc, kx[start:stop], kv[start:stop], np.full(stop - start, seed), rounds[start:stop])
+        res = batch.fly(sc, kx[start:stop], kv[start:stop], [seed] * (stop - start), rounds[start:stop])
         costs[start:stop] = res.cost(sc.cost)
-        failed[start:stop] = res.status != 0
+        failed[start:stop] = res.status != K.OK
         if progress is not None:
             progress(stop, total)
     c = costs.reshape(grid, grid, repeats)
@@ -73,23 +84,45 @@ def write_csv(surface: Surface, path: str | Path) -> None:
     """Write kp, kd, mean_cost, std_cost, n (one row per grid point)."""
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["kp", "kd", "mean_cost", "std_cost", "n"])
+        w.writerow(CSV_COLUMNS)
         for kp, kd, m, s, n in surface.rows():
             w.writerow([f"{kp:.6g}", f"{kd:.6g}", f"{m:.8g}", f"{s:.8g}", n])
 
 
 def read_csv(path: str | Path) -> Surface:
-    """Read a surface written by `write_csv` (scenario unknown: the default is attached)."""
-    data = np.genfromtxt(path, delimiter=",", names=True)
-    kp = np.unique(data["kp"])
-    kd = np.unique(data["kd"])
+    """Read a surface written by `write_csv` (scenario unknown: the default is attached); a file that is not a
+    full kp x kd grid of finite numbers is a one-line MavtuneError naming the file and the problem."""
+    path = Path(path)
+    try:
+        with path.open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            missing = [c for c in CSV_COLUMNS if c not in (reader.fieldnames or [])]
+            if missing:
+                raise MavtuneError(f"cost surface {path} has no column {missing[0]!r} "
+                                   f"(needs {', '.join(CSV_COLUMNS)})")
+            rows = []
+            for line, row in enumerate(reader, start=2):
+                try:
+                    values = [float(row[c]) for c in CSV_COLUMNS]
+                except (TypeError, ValueError):
+                    raise MavtuneError(f"cost surface {path}, line {line}: not a row of numbers") from None
+                if not all(np.isfinite(values)):
+                    raise MavtuneError(f"cost surface {path}, line {line}: a value is not finite")
+                rows.append(values)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MavtuneError(f"cannot read the cost surface {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    except csv.Error as exc:
+        raise MavtuneError(f"cost surface {path} is not a CSV file: {exc}") from None
+    data = np.array(rows, dtype=float).reshape(-1, len(CSV_COLUMNS))
+    kp, kd = np.unique(data[:, 0]), np.unique(data[:, 1])
+    pairs = {(a, b) for a, b in data[:, :2].tolist()}
+    if kp.size < 2 or kd.size < 2 or len(pairs) != data.shape[0] or data.shape[0] != kp.size * kd.size:
+        raise MavtuneError(f"cost surface {path} is not a full kp x kd grid with each point once "
+                           f"({data.shape[0]} rows, {kp.size} kp and {kd.size} kd values)")
+    d = data[np.lexsort((data[:, 1], data[:, 0]))]
     shape = (kp.size, kd.size)
-    if data.size != kp.size * kd.size:
-        raise MavtuneError(f"{path} is not a full kp x kd grid")
-    order = np.lexsort((data["kd"], data["kp"]))
-    d = data[order]
-    return Surface(kp=kp, kd=kd, mean=d["mean_cost"].reshape(shape), std=d["std_cost"].reshape(shape),
-                   n=d["n"].reshape(shape).astype(int), failed=np.zeros(shape, int), scenario=Scenario.default())
+    return Surface(kp=kp, kd=kd, mean=d[:, 2].reshape(shape), std=d[:, 3].reshape(shape),
+                   n=d[:, 4].reshape(shape).astype(int), failed=np.zeros(shape, int), scenario=Scenario.default())
 
 
 def plot_surface(ax, surface: Surface, points: Sequence[tuple[float, float]] = (), point_style: dict | None = None,

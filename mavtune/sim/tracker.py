@@ -30,7 +30,7 @@ W_SNAP = 1e-2
 HORIZONTAL_LIMITS = (4.0, 2.0, 40.0)  # |v| m/s, |a| m/s^2, |jerk| m/s^3
 VERTICAL_LIMITS = (2.0, 1.0, 40.0)
 TAIL_S = 1.0  # hold the last point this long beyond the primitive so its end is not rushed
-_VERSION = 1
+_VERSION = 2  # bump when the QP changes: the disk cache is keyed by it
 _lock = threading.Lock()
 
 
@@ -46,7 +46,7 @@ def _axis(target: np.ndarray, start: float, limits: tuple[float, float, float]) 
     qdiag = np.tile([Q_POS, 0.0, Q_ACC, Q_JERK], n)
     P = sp.diags(np.concatenate([qdiag, np.full(nu, W_SNAP)]), format="csc")
     q = np.zeros(nx + nu)
-    q[0:nx:4] = -Q_POS * target
+    q[0:nx:4] = -Q_POS * np.append(target[1:], target[-1])  # x_k (time k h) tracks target[k], k = 1 .. n
     # dynamics: x_{k+1} - A x_k - B u_k = 0 (x_0 known)
     eye = sp.eye(nx, format="csc")
     sub = sp.kron(sp.eye(n, k=-1), sp.csc_matrix(A), format="csc")
@@ -72,6 +72,7 @@ def _axis(target: np.ndarray, start: float, limits: tuple[float, float, float]) 
 
 
 def _cache_dir() -> Path:
+    """Where solved references are kept between processes ($MAVTUNE_CACHE, default ~/.cache/mavtune)."""
     return Path(os.environ.get("MAVTUNE_CACHE", Path.home() / ".cache" / "mavtune")) / "tracker"
 
 
@@ -81,14 +82,15 @@ def reference(primitive: str, primitive_s: float, altitude_m: float) -> np.ndarr
     key = f"v{_VERSION}|{primitive}|{primitive_s!r}|{altitude_m!r}|{Q_POS},{Q_ACC},{Q_JERK},{W_SNAP}|" \
           f"{HORIZONTAL_LIMITS}|{VERTICAL_LIMITS}|{TAIL_S}"
     path = _cache_dir() / (hashlib.sha256(key.encode()).hexdigest()[:20] + ".npy")
-    try:
-        ref = np.load(path)
-        ref.setflags(write=False)
-        return ref
-    except (OSError, ValueError):
-        pass
     target = primitives.sample(primitive, primitive_s, altitude_m, DT_S)
     n = target.shape[0]
+    try:
+        ref = np.load(path)
+        if ref.shape == (n, 9) and np.all(np.isfinite(ref)):  # a truncated or foreign file is solved again
+            ref.setflags(write=False)
+            return ref
+    except (OSError, ValueError):
+        pass
     tail = int(round(TAIL_S / DT_S))
     padded = np.vstack([target, np.repeat(target[-1:], tail, axis=0)])
     ref = np.empty((n, 9))

@@ -105,6 +105,48 @@ def test_claims_are_derived_from_the_runs(quick):
     assert row[4] == "yes"  # 28 rounds vs 56 with 2 vehicles and no reuse
 
 
+def test_payload_and_flatness_claims_are_derived_from_the_files(quick):
+    from scipy import stats
+
+    from mavtune.sim.surface import read_csv
+
+    report = (quick / "report.md").read_text()
+    runs = _runs(quick)
+    row = _claim_row(report, "the payload shifts the optimum")
+    pvals = []
+    for g in ("kp", "kd"):
+        a = [float(r[g]) for r in runs if r["payload_kg"] == "0"]
+        b = [float(r[g]) for r in runs if r["payload_kg"] == "0.9"]
+        if np.ptp(a) or np.ptp(b):
+            p = stats.ttest_ind(a, b, equal_var=False).pvalue
+        else:  # no spread at all: the means are equal or they differ
+            p = 1.0 if a[0] == b[0] else 0.0
+        pvals.append(p)
+        assert f"Δ{g} = {np.mean(b) - np.mean(a):+.4f} (Welch p = {p:.3g})" in row[2]
+    assert row[4] == ("yes" if min(pvals) < 0.025 else "**no**")
+
+    row = _claim_row(report, "the surface is flat near the optimum")
+    shares = []
+    for p, tag in (("0", "0kg"), ("0.9", "0.9kg")):
+        s = read_csv(quick / f"surface_{tag}.csv")
+        i, j = np.unravel_index(np.argmin(s.mean), s.mean.shape)
+        share = np.mean(s.mean <= s.mean[i, j] + s.std[i, j])
+        shares.append(share)
+        assert f"{p} kg: {100 * share:.0f} % of the square within J_min + σ" in row[2]
+    assert row[4] == ("yes" if min(shares) >= 0.25 else "**no**")
+
+
+def test_report_true_cost_column_equals_runs_csv(quick):
+    report = (quick / "report.md").read_text()
+    runs = _runs(quick)
+    for strategy in ("avg", "split"):
+        for p in ("0", "0.9"):
+            cost = np.array([float(r["true_cost"]) for r in runs if r["strategy"] == strategy and r["payload_kg"] == p])
+            row = next(ln for ln in report.splitlines() if ln.startswith(f"| {strategy} | {p} kg |"))
+            cells = [c.strip() for c in row.strip().strip("|").split("|")]
+            assert cells[11] == f"{cost.mean():.3f} ± {cost.std(ddof=1):.3f}"
+
+
 def test_true_cost_is_the_noise_free_cost_of_the_final_gains(quick):
     from mavtune.sim import Scenario, SimFleet
 

@@ -80,3 +80,20 @@ def test_flatness_share_and_verdict():
     assert f["box_rise"] == pytest.approx(10 * 2 * 0.1 ** 2)  # corner of the ±0.125 box on a 0.1 grid
     assert not C.claim_flat_near_optimum({0.0: _surface(bowl, 0.1)}).holds
     assert C.claim_flat_near_optimum({0.0: _surface(bowl, 2.0)}).holds  # noise swamps the bowl
+
+
+def test_mean_std_of_one_and_of_no_value():
+    assert C.mean_std([0.4]) == (0.4, 0.0)
+    m, s = C.mean_std([])
+    assert math.isnan(m) and math.isnan(s)
+    assert C.mean_std([1.0, 3.0]) == pytest.approx((2.0, math.sqrt(2.0)))
+
+
+def test_claims_with_missing_configurations_do_not_hold_and_do_not_crash():
+    only_avg = _runs({("avg", 0.0): TIGHT}, {"avg": 56})
+    claims = C.all_claims(only_avg, {}, 9.0)
+    assert [c.key for c in claims] == ["avg_spread", "split_time", "payload_shift", "flat"]
+    assert not any(c.holds for c in claims)
+    one_run = _runs({("avg", 0.0): TIGHT[:1], ("avg", 0.9): WIDE[:1]}, {"avg": 56})  # one run per payload
+    c = C.claim_payload_shifts_optimum(one_run, {})
+    assert not c.holds and math.isnan(c.figures["p_kp"])

@@ -87,4 +87,9 @@ def test_tune_draws_the_final_gains_on_a_given_surface(tmp_path):
     assert (out / "gains_on_surface.png").exists()
     assert "Final gains on the cost surface" in (out / "report.md").read_text()
     missing = runner.invoke(app, ["tune", "--quiet", "--surface", str(tmp_path / "none.csv")])
-    assert isinstance(missing.exception, MavtuneError) and "does not exist" in str(missing.exception)
+    assert isinstance(missing.exception, MavtuneError) and "No such file" in str(missing.exception)
+    broken = tmp_path / "broken.csv"
+    broken.write_text("kp,kd,mean_cost,std_cost,n\n0,0,1,0,1\n")
+    refused = runner.invoke(app, ["tune", "--quiet", "--surface", str(broken), "--out", str(tmp_path / "never")])
+    assert isinstance(refused.exception, MavtuneError) and "broken.csv" in str(refused.exception)
+    assert not (tmp_path / "never").exists()  # named before anything flew

@@ -124,3 +124,55 @@ def test_missing_surface_file_is_one_line_error(tmp_path):
     result = mavtune.tune(_quadratic, vehicles=2)
     with pytest.raises(mavtune.errors.MavtuneError, match="does not exist"):
         write_run_report(tmp_path, result, surface=tmp_path / "nope.csv")
+
+
+def _result(gains, flights_per_round, gain="kp"):
+    from mavtune.tuner import Round, TuningResult
+
+    rounds = [Round(i, 1, gain, (0.0, 1.0), [f.gains for f in fl], fl, 0.0, 9.0)
+              for i, fl in enumerate(flights_per_round)]
+    return TuningResult(gains, rounds, [], 1 if rounds else 0, "test")
+
+
+@pytest.mark.parametrize("case", ["no rounds", "nan and inf costs", "all lost", "one vehicle with a trace",
+                                  "three gains, zero cost"])
+def test_odd_results_still_give_a_report(tmp_path, case):
+    from mavtune.fleet import Trace
+
+    result = {
+        "no rounds": lambda: _result({"kp": 0.5, "kd": 0.2}, []),
+        "nan and inf costs": lambda: _result({"kp": 0.5}, [[Flight("v0", {"kp": 0.3}, math.nan),
+                                                            Flight("v1", {"kp": 0.6}, math.inf, Status.FAILED)]]),
+        "all lost": lambda: _result({"kp": 0.5}, [[Flight("v0", {"kp": 0.3}, math.nan, Status.LOST)]]),
+        "one vehicle with a trace": lambda: _result(
+            {"kp": 0.5, "kd": 0.3}, [[Flight("v0", {"kp": 0.3, "kd": 0.2}, 1.5, trace=Trace([0.0, 0.1], [2.0, 2.0],
+                                                                                           [2.0, 2.1]))]]),
+        "three gains, zero cost": lambda: _result({"a": 0.5, "b": 0.2, "c": 1.0},
+                                                  [[Flight("v0", {"a": 0.3, "b": 0.2, "c": 0.1}, 0.0)]], "a"),
+    }[case]()
+    text = write_run_report(tmp_path, result).read_text()
+    rows = _table_rows(text, "## Rounds") if result.rounds else []
+    assert len(rows) == len(result.rounds)
+    for name, value in result.gains.items():
+        assert re.search(rf"\| {name} \| {value:.6g} \|", text)
+    if not result.rounds:
+        assert "No round was flown." in text and not (tmp_path / "timeline.png").exists()
+    else:
+        assert (tmp_path / "timeline.png").read_bytes()[:4] == b"\x89PNG"
+    if case == "nan and inf costs":
+        assert rows[0][-3:-1] == ["nan", "inf"] and rows[0][-1] == "v1 failed"
+    if case == "all lost":
+        assert rows[0][-2:] == ["—", "v0 lost"]
+
+
+def test_report_into_an_unwritable_folder_is_one_line_error(tmp_path):
+    (tmp_path / "f").write_text("")
+    with pytest.raises(mavtune.errors.MavtuneError, match="cannot write the run report"):
+        write_run_report(tmp_path / "f" / "run", _result({"kp": 0.5}, []))
+
+
+def test_a_surface_file_that_does_not_parse_is_one_line_error(tmp_path):
+    bad = tmp_path / "surface.csv"
+    bad.write_text("kp,kd\n0,0\n")
+    with pytest.raises(mavtune.errors.MavtuneError, match="no column 'mean_cost'"):
+        write_run_report(tmp_path, _result({"kp": 0.5, "kd": 0.5}, []))

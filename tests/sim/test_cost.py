@@ -23,3 +23,11 @@ def test_iae_of_plant_samples_equals_the_kernels_cost(scenario):
         z[k] = plant.altitude_measured_m[0]
     ours = iae(ref[:, 2], z, scenario.filter_hz, plant.dt_s, skip=batch.settle_steps(scenario))
     assert ours == pytest.approx(flight.cost, rel=1e-6)
+
+
+def test_cost_names_are_in_the_kernels_column_order():
+    from mavtune.sim import kernel as K
+    from mavtune.sim.scenario import COST_NAMES
+
+    assert [COST_NAMES.index(n) for n in ("iae", "ise", "itae", "effort")] == \
+        [K.COST_IAE, K.COST_ISE, K.COST_ITAE, K.COST_EFFORT]

@@ -77,3 +77,33 @@ def test_repeat_flights_of_the_same_gains_spread_realistically():
     assert 0.03 < cv < 0.4
     quiet = SimFleet(1, Scenario.noise_free(), trace_hz=0)
     assert quiet.fly([ASSIGN[0]], 0)[0].cost == quiet.fly([ASSIGN[0]], 9)[0].cost
+
+
+def test_a_vehicle_that_hits_the_ground_is_failed_alone_with_a_penalty():
+    """No altitude feedback at all (kp = kd = 0) sinks vehicle 0 in this round; its neighbours fly on unchanged."""
+    assign = [{"kp": 0.0, "kd": 0.0}, ASSIGN[0], ASSIGN[1]]
+    flights = SimFleet(3, seed=0).fly(assign, round_id=1)
+    bad = flights[0]
+    assert bad.status is Status.FAILED and bad.info["failure"] == "hit the ground"
+    assert 1.0 < bad.info["t_fail_s"] < 9.0
+    assert len(bad.trace.t_s) < 90 and np.isfinite(bad.trace.z_m).all()
+    assert bad.cost > 10 * max(f.cost for f in flights[1:])
+    for j in (1, 2):
+        assert flights[j].status is Status.OK
+        assert SimFleet(1, seed=j).fly([assign[j]], round_id=1)[0].cost == flights[j].cost
+
+
+def test_any_integer_seed_is_taken_modulo_2_to_the_64():
+    g = [ASSIGN[0], ASSIGN[0]]
+    wrapped = SimFleet(2, seed=2**64 - 1, trace_hz=0).fly(g, 0)
+    assert wrapped[0].cost == SimFleet(1, seed=-1, trace_hz=0).fly(g[:1], 0)[0].cost
+    assert wrapped[1].cost == SimFleet(1, seed=0, trace_hz=0).fly(g[:1], 0)[0].cost
+
+
+def test_effort_index_counts_thrust_changes_not_the_payload_weight():
+    """effort − iae = weight · Σ|f − f_hover|/f_hover: a payload the mass estimator carries adds nothing to it."""
+    extra = []
+    for payload in (0.0, 0.9):
+        costs = SimFleet(1, Scenario.noise_free(payload_kg=payload), trace_hz=0).fly([ASSIGN[0]], 0)[0].info["costs"]
+        extra.append(costs["effort"] - costs["iae"])
+    assert 0 < extra[0] and extra[1] == pytest.approx(extra[0], rel=0.1)

@@ -5,6 +5,7 @@ import pytest
 from typer.testing import CliRunner
 
 from mavtune.cli import app
+from mavtune.errors import MavtuneError
 from mavtune.sim import surface as surf
 from mavtune.sim.scenario import Scenario
 from mavtune.sim.tracker import HORIZONTAL_LIMITS, VERTICAL_LIMITS, flight_reference, reference
@@ -20,6 +21,9 @@ def test_tracker_output_is_feasible_and_starts_at_rest(primitive):
     assert np.abs(ref[:, 8]).max() <= VERTICAL_LIMITS[1] + tol
     assert np.abs(ref[:, 3:5]).max() <= HORIZONTAL_LIMITS[0] + tol
     assert np.abs(ref[:, 6:8]).max() <= HORIZONTAL_LIMITS[1] + tol
+    jerk = np.diff(ref[:, 6:9], axis=0) / 0.01
+    assert np.abs(jerk[:, :2]).max() <= HORIZONTAL_LIMITS[2] + 0.1
+    assert np.abs(jerk[:, 2]).max() <= VERTICAL_LIMITS[2] + 0.1
     # consistent: position is the integral of velocity
     np.testing.assert_allclose(np.diff(ref[:, 2]) / 0.01, 0.5 * (ref[1:, 5] + ref[:-1, 5]), atol=0.02)
     assert reference(primitive, 8.0, 2.0) is ref  # cached
@@ -51,3 +55,66 @@ def test_surface_and_bench_commands(tmp_path):
     res = runner.invoke(app, ["bench", "--sizes", "1,8"])
     assert res.exit_code == 0, res.output
     assert "vehicle-steps/s" in res.output
+
+
+def test_tracker_reference_is_not_delayed_by_a_step(monkeypatch):
+    """With only the position weighted, a feasible target that starts at rest is followed at the same time
+    index (a one-step slip would leave an error of v·dt ≈ 3 mm here)."""
+    from mavtune.sim import tracker
+
+    monkeypatch.setattr(tracker, "Q_ACC", 0.0)
+    monkeypatch.setattr(tracker, "Q_JERK", 0.0)
+    monkeypatch.setattr(tracker, "W_SNAP", 1e-9)
+    s = np.arange(300) / 299.0
+    target = 2.0 + 0.5 * s**4 * (35 - 84 * s + 70 * s**2 - 20 * s**3)  # 0.5 m in 3 s; v, a, jerk 0 at both ends
+    pva = tracker._axis(target, 2.0, tracker.VERTICAL_LIMITS)
+    assert np.abs(pva[:, 0] - target).max() < 2e-4
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("", "no column 'kp'"),
+    ("a,b\n1,2\n", "no column 'kp'"),
+    ("kp,kd,mean_cost,std_cost,n\n", "not a full kp x kd grid"),
+    ("kp,kd,mean_cost,std_cost,n\n0,0,x,1,2\n0,1,1,1,2\n1,0,1,1,2\n1,1,1,1,2\n", "line 2: not a row of numbers"),
+    ("kp,kd,mean_cost,std_cost,n\n0,0,1,1\n", "line 2: not a row of numbers"),
+    ("kp,kd,mean_cost,std_cost,n\n0,0,nan,1,2\n0,1,1,1,2\n1,0,1,1,2\n1,1,1,1,2\n", "line 2: a value is not finite"),
+    ("kp,kd,mean_cost,std_cost,n\n0,0,1,1,2\n0,0,1,1,2\n1,0,1,1,2\n1,1,1,1,2\n", "each point once"),
+])
+def test_a_surface_csv_that_does_not_parse_is_one_line_error(tmp_path, text, problem):
+    path = tmp_path / "s.csv"
+    path.write_text(text)
+    with pytest.raises(MavtuneError, match=problem) as err:
+        surf.read_csv(path)
+    assert "\n" not in str(err.value)
+    with pytest.raises(MavtuneError, match="cannot read"):
+        surf.read_csv(tmp_path)
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["surface", "--grid", "1"], "grid >= 2"),
+    (["surface", "--grid", "2", "--repeats", "0"], "repeats >= 1"),
+    (["surface", "--grid", "2", "--repeats", "1", "--payload", "-0.5"], "--payload"),
+    (["surface", "--grid", "2", "--repeats", "1", "--cost", "rms"], "--cost"),
+    (["bench", "--sizes", "1", "--primitive-s", "-1"], "--primitive-s"),
+    (["bench", "--sizes", "1,x"], "--sizes"),
+])
+def test_bad_command_input_is_one_line_error_and_writes_nothing(tmp_path, args, problem):
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, [*args, *(["--out", str(out)] if args[0] == "surface" else [])])
+    assert isinstance(res.exception, MavtuneError), res.output
+    assert problem in str(res.exception) and "\n" not in str(res.exception)
+    assert not out.exists()
+
+
+def test_surface_into_a_file_or_unwritable_folder_is_one_line_error(tmp_path):
+    (tmp_path / "f").write_text("")
+    for out, problem in ((tmp_path / "f", "is a file"), (tmp_path / "f" / "sub", "cannot write")):
+        res = CliRunner().invoke(app, ["surface", "--grid", "2", "--repeats", "1", "--out", str(out)])
+        assert isinstance(res.exception, MavtuneError) and problem in str(res.exception)
+
+
+def test_default_scenario_optimum_lies_inside_the_gain_square():
+    """The normalised ranges put the default scenario's surface minimum inside [0, 1]², not on an edge."""
+    s = surf.compute_surface(grid=9, repeats=4, scenario=Scenario.default(), seed=0)
+    kp, kd = s.argmin()
+    assert 0.0 < kp < 1.0 and 0.0 < kd < 1.0
