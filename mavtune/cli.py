@@ -107,8 +107,10 @@ def tune_command(
         out = Path("runs") / time.strftime("tune-%Y%m%d-%H%M%S")
     if resume and not (out / JOURNAL).exists():
         raise MavtuneError(f"--resume: {out / JOURNAL} does not exist")
-    if surface is not None and not surface.is_file():
-        raise MavtuneError(f"--surface: {surface} does not exist")
+    if surface is not None:
+        from mavtune.sim.surface import read_csv
+
+        read_csv(surface)  # a missing or malformed surface is named before anything flies
     if stage and stage_rounds is None:
         from mavtune.run import plan_of
 

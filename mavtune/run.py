@@ -154,12 +154,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                 result = tuner.snapshot()
                 _write_summary(out_dir, config, plan, result, fleet, status, error, time.time() - started)
                 if report:
-                    from mavtune.report import write_run_report
-
-                    ending = {"finished": "", "stage": "in progress", "interrupted": "interrupted", "error": "stopped"}
-                    title = "mavtune tuning run" + (f" — {ending[status]} after {len(result.rounds)} rounds"
-                                                    if status != "finished" else "")
-                    write_run_report(out_dir, result, config, surface=surface, title=title)
+                    _report(console, out_dir, result, config, surface, status)
     if status == "interrupted":
         with Journal(journal) as book:  # the journal is the truth: a round can be recorded as Ctrl-C arrives
             recorded = len(book.rounds())
@@ -174,6 +169,19 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console.print(_result_table(result))
     console.print(f"run folder: {out_dir}")
     return result
+
+
+def _report(console: Console, out_dir: Path, result: TuningResult, config: Config, surface: Path | None,
+            status: str) -> None:
+    """Write the run report; a report that cannot be written is said, never hiding how the run ended."""
+    from mavtune.report import write_run_report
+
+    ending = {"finished": "", "stage": "in progress", "interrupted": "interrupted", "error": "stopped"}
+    title = "mavtune tuning run" + (f" — {ending[status]} after {len(result.rounds)} rounds" if ending[status] else "")
+    try:
+        write_run_report(out_dir, result, config, surface=surface, title=title)
+    except MavtuneError as exc:
+        console.print(f"[yellow]report not written: {exc}[/] (the journal and result.json are complete)")
 
 
 def _write_summary(out_dir: Path, config: Config, plan: Plan, result: TuningResult, fleet: Fleet, status: str,
