@@ -50,6 +50,8 @@ def main() -> None:
     ap.add_argument("--backend", choices=["toy", "sim"], default="toy")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
+    if args.rounds < 2 or args.vehicles < 1:
+        ap.error("need --rounds >= 2 (for the percentiles) and --vehicles >= 1")
 
     from mavtune.swarm import SwarmConfig, ZenohFleet
 

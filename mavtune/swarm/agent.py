@@ -2,7 +2,8 @@
 
 IDLE: hover on the current gains; on an Assignment for round k, check it against the envelope, apply it and
 acknowledge. On the Start of round k: FLYING — fly the primitive, report the cost and a decimated trace — back to
-IDLE. Idempotent on (session, round): a repeated assignment or start does not fly again, the stored result is resent.
+IDLE. Idempotent on (session, round): a repeated assignment or start does not fly again, the stored result is resent
+(unless the assignment now carries other gains: then the old result does not answer it, and the round is flown).
 """
 
 from __future__ import annotations
@@ -10,15 +11,17 @@ from __future__ import annotations
 import logging
 import math
 import queue
+import re
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Any
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.messages import (Ack, AgentState, Assignment, Hello, Probe, Result, Start, State, decode,
-                                    encode, result_from_flight)
+from mavtune.swarm.messages import (VEHICLE_PATTERN, Ack, AgentState, Assignment, Hello, Probe, Result, Start,
+                                    State, decode, encode, result_from_flight)
 from mavtune.swarm.transport import Keys, Link, open_client
 from mavtune.swarm.vehicles import Vehicle, finite_gains
 
@@ -80,13 +83,11 @@ class Agent:
         self._armed: _Armed | None = None
         self._results: OrderedDict[int, tuple[Gains, Result]] = OrderedDict()
         self._stop = threading.Event()
+        self._running = threading.Lock()  # held while run() handles messages; close() waits for it
 
     @classmethod
     def connect(cls, vehicle_id: str, vehicle: Vehicle, config: SwarmConfig, endpoint: str) -> "Agent":
         """Open a Zenoh client to the coordinator at `endpoint` and build the agent on it."""
-        from mavtune.swarm.messages import VEHICLE_PATTERN
-        import re
-
         if not re.match(VEHICLE_PATTERN, vehicle_id):
             raise MavtuneError(f"vehicle id {vehicle_id!r} must be 1-64 letters, digits, '_' or '-'")
         link = open_client(endpoint, lease_ms=config.lease_ms, connect_timeout_s=config.connect_timeout_s,
@@ -106,30 +107,33 @@ class Agent:
     def _enqueue(self, key: str, payload: bytes) -> None:
         self._inbox.put((key, payload))
 
-    def run(self, timeout_s: float | None = None) -> None:
-        """Handle messages until stop() (or timeout_s without any message, if given)."""
-        self.start()
-        while not self._stop.is_set():
-            try:
-                item = self._inbox.get(timeout=timeout_s if timeout_s is not None else 0.5)
-            except queue.Empty:
-                if timeout_s is not None:
-                    return
-                continue
-            if item is None:
-                break
-            self.handle(*item)
+    def run(self) -> None:
+        """Handle messages until stop() (a flight under way is finished first)."""
+        with self._running:
+            self.start()
+            while not self._stop.is_set():
+                item = self._inbox.get()
+                if item is None:
+                    break
+                self.handle(*item)
 
     def stop(self) -> None:
         """Make run() return."""
         self._stop.set()
         self._inbox.put(None)
 
-    def close(self) -> None:
-        """Stop, withdraw the liveliness token, release the vehicle."""
+    def close(self, timeout_s: float = 30.0) -> None:
+        """Stop, wait (up to timeout_s) for run() in another thread to finish its message, withdraw the liveliness
+        token, release the vehicle (a MAVLink vehicle gets its original gains back)."""
         self.stop()
-        self.link.close()
-        self.vehicle.close()
+        if self._running.acquire(timeout=timeout_s):
+            self._running.release()
+        else:
+            log.error("agent %s: run() still busy after %g s; closing anyway", self.id, timeout_s)
+        try:
+            self.link.close()
+        finally:
+            self.vehicle.close()
 
     # --- the state machine -----------------------------------------------------------------------------------
     def handle(self, key: str, payload: bytes) -> None:
@@ -158,6 +162,10 @@ class Agent:
             self._ack(msg.round, True, "already flown")
             self._send(stored[1].model_copy(update={"resent": True}))
             return
+        if stored is not None:  # the same round with other gains (a new run in this session): fly it afresh
+            log.warning("round %d: assignment with gains %s, not the %s flown before; flying it", msg.round,
+                        msg.gains, stored[0])
+            del self._results[msg.round]
         if self._armed is not None and self._armed.round == msg.round and self._armed.requested == msg.gains:
             self._ack(msg.round, True, "")
             return
@@ -167,9 +175,15 @@ class Agent:
             self._armed = None
             self._ack(msg.round, False, why)
             return
+        try:
+            self.vehicle.apply(applied)  # the backend checks them too (range, names) and may refuse
+        except MavtuneError as exc:
+            log.warning("round %d: the vehicle refused gains %s (%s)", msg.round, applied, exc)
+            self._armed = None
+            self._ack(msg.round, False, str(exc))
+            return
         if why:
             log.warning("round %d: %s", msg.round, why)
-        self.vehicle.apply(applied)
         self._armed = _Armed(msg.round, dict(msg.gains), applied)
         log.info("round %d: applied %s, waiting for the start", msg.round, applied)
         self._ack(msg.round, True, why)
@@ -190,10 +204,10 @@ class Agent:
         self._set_state(AgentState.FLYING, msg.round)
         try:
             flight = self.vehicle.fly(msg.round)
-        except Exception as exc:  # a crashed flight is a failed flight, reported, never silent
-            log.exception("round %d: flight failed", msg.round)
-            flight = Flight(vehicle=self.id, gains=armed.applied, cost=math.nan, status=Status.FAILED,
-                            info={"error": str(exc)})
+        except Exception as exc:  # a crash says nothing about the gains: LOST (flown again), reported, never silent
+            log.exception("round %d: flight crashed", msg.round)
+            flight = Flight(vehicle=self.id, gains=armed.applied, cost=math.nan, status=Status.LOST,
+                            info={"reason": "error", "detail": repr(exc)})
         self.flights_flown += 1
         flight.trace = decimate(flight.trace, self.config.trace_points)
         flight.gains = dict(armed.applied)
@@ -217,5 +231,5 @@ class Agent:
         self._send(Ack(session=self.config.session, token=self.config.token, round=round_id, vehicle=self.id,
                        accepted=accepted, reason=reason))
 
-    def _send(self, msg) -> None:
+    def _send(self, msg: Any) -> None:
         self.link.put(self.keys.frm(self.id), encode(msg))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import signal
 from pathlib import Path
 from typing import Optional
@@ -16,6 +17,23 @@ from mavtune.swarm.config import load_swarm_config
 def _logging(verbose: bool) -> None:
     logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def _interrupt_on_sigterm() -> None:
+    """SIGTERM acts as Ctrl-C: the running primitive is aborted and the vehicle's gains restored before exit (a
+    second SIGTERM is ignored meanwhile)."""
+
+    def on_sigterm(signum: int, frame: object) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_sigterm)
+
+
+def _state_dir(vehicle_id: str) -> Path:
+    """Where an agent keeps its vehicle's original gains until they are restored ($XDG_STATE_HOME/mavtune)."""
+    base = os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state"
+    return Path(base) / "mavtune" / f"agent-{vehicle_id}"
 
 
 def _mavlink_table(path: Optional[Path]) -> dict:
@@ -41,6 +59,8 @@ def agent_command(
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
     token: Optional[str] = typer.Option(None, "--token", help="Shared token (overrides the config)."),
     min_flight_s: float = typer.Option(0.0, "--min-flight-s", help="Make each flight last at least this wall time."),
+    state_dir: Optional[Path] = typer.Option(None, "--state-dir", help="mavlink: where the original gains are kept "
+                                             "until restored [$XDG_STATE_HOME/mavtune/agent-ID]."),
     toy_noise: float = typer.Option(0.0, "--toy-noise", help="toy: noise amplitude of the stand-in cost."),
     verbose: bool = typer.Option(False, "--verbose", "-v"),
 ) -> None:
@@ -52,11 +72,16 @@ def agent_command(
     cfg = load_swarm_config(config, session=session, token=token, connect=connect)
     if cfg.connect is None:
         raise MavtuneError("give the coordinator's endpoint: --connect tcp/HOST:PORT (or connect = ... in --config)")
+    _interrupt_on_sigterm()
     backend = make_vehicle(vehicle, seed=seed, scenario=scenario, mavlink=mavlink, noise=toy_noise,
-                           mavlink_settings=_mavlink_table(config), min_flight_s=min_flight_s)
-    logging.getLogger(__name__).info("agent %s: connecting to %s", id, cfg.connect)
-    agent = Agent.connect(id, backend, cfg, cfg.connect)
-    signal.signal(signal.SIGTERM, lambda *_: agent.stop())
+                           mavlink_settings=_mavlink_table(config), min_flight_s=min_flight_s,
+                           state_dir=state_dir or _state_dir(id))
+    try:
+        logging.getLogger(__name__).info("agent %s: connecting to %s", id, cfg.connect)
+        agent = Agent.connect(id, backend, cfg, cfg.connect)
+    except BaseException:
+        backend.close()
+        raise
     try:
         agent.run()
     except KeyboardInterrupt:
@@ -90,6 +115,7 @@ def coordinator_command(
     from mavtune.swarm.run import run_coordinator
 
     _logging(verbose)
+    _interrupt_on_sigterm()  # a kill still writes result.json (the rounds are in the journal anyway)
     cfg = load_swarm_config(config, listen=listen, session=session, token=token, settle_s=settle_s,
                             result_timeout_s=result_timeout_s, ack_timeout_s=ack_timeout_s,
                             presence_timeout_s=presence_timeout_s)

@@ -13,7 +13,7 @@ import queue
 import re
 import time
 from enum import Enum
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
@@ -96,31 +96,21 @@ class ZenohFleet:
         self._round = rnd
         for j in range(len(crew), len(assignments)):
             self._event("unassigned", round_id, None, f"no vehicle present for assignment {j}")
+        cfg = self.config
         try:
             for vid, gains in zip(crew, rnd.assignments):
-                self._send(self.keys.to(vid), Assignment(session=self.config.session, token=self.config.token,
-                                                         round=round_id, vehicle=vid, gains=gains))
-            deadline = time.monotonic() + self.config.ack_timeout_s
-            while rnd.waiting_ack() and self._pump(deadline):
-                pass
-            for vid in rnd.waiting_ack():
-                rnd.lost[vid] = f"no acknowledgement within {self.config.ack_timeout_s:g} s"
-                self._event("lost", round_id, vid, rnd.lost[vid])
+                self._send(self.keys.to(vid), Assignment(session=cfg.session, token=cfg.token, round=round_id,
+                                                         vehicle=vid, gains=gains))
+            self._pump_until(lambda: not rnd.waiting_ack(), cfg.ack_timeout_s)
+            self._lose(rnd, rnd.waiting_ack(), f"no acknowledgement within {cfg.ack_timeout_s:g} s")
+            if rnd.to_start():  # settle: the gain-change transient decays; drop-outs are still noticed
+                self._pump_until(lambda: False, cfg.settle_s)
             flyers = rnd.to_start()
             if flyers:
-                settle_end = time.monotonic() + self.config.settle_s
-                while self._pump(settle_end):
-                    pass
-                flyers = rnd.to_start()
-            if flyers:
-                self._send(self.keys.start, Start(session=self.config.session, token=self.config.token,
-                                                  round=round_id, vehicles=flyers))
-                deadline = time.monotonic() + self.config.result_timeout_s
-                while rnd.waiting_result() and self._pump(deadline):
-                    pass
-                for vid in rnd.waiting_result():
-                    rnd.lost[vid] = f"no result within {self.config.result_timeout_s:g} s"
-                    self._event("lost", round_id, vid, rnd.lost[vid])
+                self._send(self.keys.start, Start(session=cfg.session, token=cfg.token, round=round_id,
+                                                  vehicles=flyers))
+                self._pump_until(lambda: not rnd.waiting_result(), cfg.result_timeout_s)
+                self._lose(rnd, rnd.waiting_result(), f"no result within {cfg.result_timeout_s:g} s")
             return rnd.flights()
         finally:
             self._round = None
@@ -133,12 +123,25 @@ class ZenohFleet:
 
     # --- event handling ---------------------------------------------------------------------------------------
     def _drain(self) -> None:
+        """Handle every event waiting now, without blocking."""
         while True:
             try:
                 item = self._inbox.get_nowait()
             except queue.Empty:
                 return
             self._handle(*item)
+
+    def _pump_until(self, done: Callable[[], bool], timeout_s: float) -> None:
+        """Handle events until done() holds or timeout_s has passed."""
+        deadline = time.monotonic() + timeout_s
+        while not done() and self._pump(deadline):
+            pass
+
+    def _lose(self, rnd: "_Round", vehicles: list[str], why: str) -> None:
+        """Count these vehicles' flights of the round as LOST, and say so in the events."""
+        for vid in vehicles:
+            rnd.lost[vid] = why
+            self._event("lost", rnd.id, vid, why)
 
     def _pump(self, deadline: float) -> bool:
         """Handle one event (waiting until `deadline` for it); False once the deadline has passed."""
@@ -153,15 +156,18 @@ class ZenohFleet:
         return True
 
     def _handle(self, what: str, key: str, data: Any) -> None:
+        """Dispatch one event from the Zenoh callbacks (they only queue; all state changes happen here)."""
         if what == "live":
             self._on_liveliness(Keys.last_chunk(key), bool(data))
         else:
             self._on_message(key, data)
 
     def _allowed(self, vid: str) -> bool:
+        """True when the configured vehicle list (if any) names this vehicle."""
         return self.config.allowed_vehicles is None or vid in self.config.allowed_vehicles
 
     def _on_liveliness(self, vid: str, alive: bool) -> None:
+        """A vehicle's token appeared (probe it for a hello) or went away (its open flight is LOST)."""
         if not self._allowed(vid):
             log.warning("ignored vehicle %r: not in the configured vehicle list", vid)
             return
@@ -179,10 +185,10 @@ class ZenohFleet:
         if was_present:
             self._event("left", None if self._round is None else self._round.id, vid, "liveliness token deleted")
         if self._round is not None and vid in self._round.crew and self._round.open(vid):
-            self._round.lost[vid] = "vehicle left during the round"
-            self._event("lost", self._round.id, vid, self._round.lost[vid])
+            self._lose(self._round, [vid], "vehicle left during the round")
 
     def _on_message(self, key: str, payload: bytes) -> None:
+        """Validate one agent message and book it into the round; anything unexpected is dropped and counted."""
         msg = decode(payload, session=self.config.session, token=self.config.token, where=f"coordinator <- {key}")
         sender = Keys.last_chunk(key)
         if msg is None:
@@ -234,6 +240,7 @@ class ZenohFleet:
             rnd.results[sender] = msg
 
     def _event(self, event: str, round_id: int | None, vehicle: str | None, detail: str, **extra: Any) -> None:
+        """Keep one event (for result.json) and log it."""
         entry = {"t_s": round(time.monotonic() - self._t0, 3), "event": event, "round": round_id,
                  "vehicle": vehicle, "detail": detail, **extra}
         self.events.append(entry)
@@ -241,6 +248,7 @@ class ZenohFleet:
         log.log(level, "round %s: %s %s (%s)", round_id, vehicle or "", event, detail)
 
     def _send(self, key: str, msg: Any) -> None:
+        """Publish one message."""
         self.link.put(key, encode(msg))
 
 
@@ -261,12 +269,15 @@ class _Round:
         return vid not in self.results and vid not in self.refused and vid not in self.lost
 
     def waiting_ack(self) -> list[str]:
+        """Crew members whose acknowledgement has not come."""
         return [v for v in self.crew if self.open(v) and v not in self.acked]
 
     def to_start(self) -> list[str]:
+        """Crew members that acknowledged and are still in the round."""
         return [v for v in self.crew if self.open(v) and v in self.acked]
 
     def waiting_result(self) -> list[str]:
+        """Crew members whose outcome is still open."""
         return [v for v in self.crew if self.open(v)]
 
     def flights(self) -> list[Flight]:

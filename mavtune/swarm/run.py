@@ -41,6 +41,7 @@ def run_coordinator(listen: str, vehicles: int, out: str | Path, *, config: Swar
         log.info("resuming from the journal %s", journal)
     fleet = ZenohFleet(listen, config)
     t0 = time.monotonic()
+    result, error = None, None
     try:
         present = fleet.wait_for(vehicles)
         log.info("%d vehicles present: %s; tuning", len(present), present)
@@ -53,17 +54,24 @@ def run_coordinator(listen: str, vehicles: int, out: str | Path, *, config: Swar
                 user_on_round(rnd)
 
         result = mavtune.tune(fleet, journal=str(journal), on_round=on_round, **tune_kwargs)
+    except BaseException as exc:  # the rounds are in the journal; the events go to result.json all the same
+        error = str(exc) or type(exc).__name__
+        raise
     finally:
         fleet.close()
-    write_result(out / RESULT_NAME, result, fleet, wall_s=time.monotonic() - t0, listen=listen, vehicles=vehicles)
+        write_result(out / RESULT_NAME, result, fleet, wall_s=time.monotonic() - t0, listen=listen,
+                     vehicles=vehicles, error=error)
     return result
 
 
 def write_result(path: Path, result: Any, fleet: ZenohFleet, **extra: Any) -> None:
-    """Write result.json atomically: the engine's summary, every round's flights, drop-out events, dropped messages."""
-    data = result.to_dict()
-    data["rounds_log"] = [r.to_dict() | {"replayed": r.replayed} for r in result.rounds]
-    data["lost_flights"] = sum(1 for r in result.rounds for f in r.flights if f.status.value == "lost")
+    """Write result.json atomically: the engine's summary, every round's flights, drop-out events, dropped messages
+    (without a result — the run failed — the events and the error; the rounds stay in the journal)."""
+    data: dict[str, Any] = {"gains": None}
+    if result is not None:
+        data = result.to_dict()
+        data["rounds_log"] = [r.to_dict() | {"replayed": r.replayed} for r in result.rounds]
+        data["lost_flights"] = sum(1 for r in result.rounds for f in r.flights if f.status.value == "lost")
     data.update({"fleet": "zenoh", "session": fleet.config.session, "events": fleet.events,
                  "dropped_messages": fleet.dropped, **extra})
     tmp = path.with_suffix(".json.tmp")

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import threading
+import time
 from typing import Any, Callable
 
 import zenoh
@@ -19,6 +21,14 @@ from mavtune.errors import MavtuneError
 log = logging.getLogger(__name__)
 
 ROOT = "mavtune"
+
+_CONNECT_ATTEMPT_S = 1.0
+"""An agent's connection attempts are this short so that Ctrl-C is seen between them (Zenoh blocks signals)."""
+
+
+def zenoh_reason(exc: BaseException) -> str:
+    """Zenoh's error text without the Rust source locations it appends (" at /root/.cargo/…/x.rs:12.")."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(exc)).strip()
 
 
 class Keys:
@@ -71,7 +81,7 @@ def zenoh_config(mode: str, endpoint: str, *, lease_ms: int = 2000, connect_time
         for key, value in (tls or {}).items():
             cfg.insert_json5(f"transport/link/tls/{key}", json.dumps(value))
     except zenoh.ZError as exc:
-        raise MavtuneError(f"invalid Zenoh setting: {exc}") from None
+        raise MavtuneError(f"invalid Zenoh setting: {zenoh_reason(exc)}") from None
     return cfg
 
 
@@ -82,15 +92,20 @@ class Link:
         try:
             self._session = zenoh.open(config)
         except zenoh.ZError as exc:
-            raise MavtuneError(f"cannot open the Zenoh {what}: {exc}") from None
+            raise MavtuneError(f"cannot open the Zenoh {what}: {zenoh_reason(exc)}") from None
         self._keep: list[Any] = []
         self._lock = threading.Lock()
         self._closed = False
 
     def put(self, key: str, payload: bytes) -> None:
-        """Publish one message (reliable; blocks rather than drops when congested)."""
-        if not self._closed:
+        """Publish one message (reliable; blocks rather than drops when congested); nothing once closed."""
+        if self._closed:
+            return
+        try:
             self._session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+        except zenoh.ZError:
+            if not self._closed:  # closed by another thread meanwhile: the message had nowhere to go anyway
+                raise
 
     def subscribe(self, key: str, on_message: Callable[[str, bytes], None]) -> None:
         """Call on_message(key, payload) for every sample published on `key`."""
@@ -146,6 +161,18 @@ def open_router(endpoint: str, *, lease_ms: int = 2000, tls: dict[str, Any] | No
 
 def open_client(endpoint: str, *, lease_ms: int = 2000, connect_timeout_s: float = -1.0,
                 tls: dict[str, Any] | None = None) -> Link:
-    """An agent's link: a Zenoh client connecting to the coordinator at `endpoint`."""
-    return Link(zenoh_config("client", endpoint, lease_ms=lease_ms, connect_timeout_s=connect_timeout_s, tls=tls),
-                f"client of {endpoint}")
+    """An agent's link: a Zenoh client connecting to the coordinator at `endpoint`, trying for connect_timeout_s
+    (-1: until it answers) in short attempts so that Ctrl-C works while waiting."""
+    deadline = None if connect_timeout_s < 0 else time.monotonic() + connect_timeout_s
+    waiting_logged = False
+    while True:
+        attempt_s = _CONNECT_ATTEMPT_S if deadline is None else min(_CONNECT_ATTEMPT_S, deadline - time.monotonic())
+        cfg = zenoh_config("client", endpoint, lease_ms=lease_ms, connect_timeout_s=max(attempt_s, 0.05), tls=tls)
+        try:
+            return Link(cfg, f"client of {endpoint}")
+        except MavtuneError as exc:
+            if "Timeout" not in str(exc) or (deadline is not None and time.monotonic() >= deadline):
+                raise
+            if not waiting_logged:
+                log.info("waiting for the coordinator at %s", endpoint)
+                waiting_logged = True

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Protocol, runtime_checkable
+from pathlib import Path
+from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -19,7 +20,7 @@ class Vehicle(Protocol):
     backend: str
 
     def apply(self, gains: Gains) -> None:
-        """Set the controller gains (normalised); the vehicle hovers on them until `fly`."""
+        """Set the controller gains (normalised); the vehicle hovers on them until `fly`. MavtuneError refuses them."""
         ...
 
     def fly(self, round_id: int) -> Flight:
@@ -34,45 +35,70 @@ class Vehicle(Protocol):
 class FleetVehicle:
     """One vehicle of a single-vehicle Fleet (SimFleet(1), MavlinkFleet([url])) behind the agent's interface.
 
-    `apply` keeps the gains; the fleet sets them on the vehicle, lets the transient settle and flies at `fly`.
+    `apply` checks the gains with `validate` (the backend's own check, raising MavtuneError) and keeps them; the
+    fleet sets them on the vehicle, lets the transient settle and flies at `fly`. `after_close` runs once the
+    fleet is closed.
     """
 
-    def __init__(self, fleet: Any, backend: str):
+    def __init__(self, fleet: Any, backend: str, validate: Callable[[Gains], Any] | None = None,
+                 after_close: Callable[[], None] | None = None):
         if fleet.size != 1:
             raise MavtuneError(f"an agent drives exactly one vehicle; its {backend} fleet has {fleet.size}")
         self._fleet = fleet
         self.backend = backend
+        self._validate = validate
+        self._after_close = after_close
         self._gains: Gains | None = None
 
     def apply(self, gains: Gains) -> None:
+        """Keep the gains for the next `fly`, once the backend accepts them."""
+        if self._validate is not None:
+            self._validate(gains)
         self._gains = dict(gains)
 
     def fly(self, round_id: int) -> Flight:
+        """Fly the kept gains as a round of one."""
         if self._gains is None:
             raise MavtuneError("fly() before any gains were applied")
         return self._fleet.fly([self._gains], round_id)[0]
 
     def close(self) -> None:
+        """Close the fleet (a MAVLink one restores the original gains)."""
         self._fleet.close()
+        if self._after_close is not None:
+            self._after_close()
 
 
 def sim_vehicle(scenario: Any = None, seed: int = 0, trace_hz: float = 10.0) -> FleetVehicle:
     """A simulated vehicle: SimFleet of one, seeded so it reproduces vehicle j of an in-process fleet (seed S+j)."""
     try:
         from mavtune.sim import SimFleet
+        from mavtune.sim.gains import parse_assignment
     except ImportError as exc:
         raise MavtuneError(f"the simulator (mavtune.sim.SimFleet) is not available: {exc}") from None
-    return FleetVehicle(SimFleet(1, scenario, seed=seed, trace_hz=trace_hz), "sim")
+    return FleetVehicle(SimFleet(1, scenario, seed=seed, trace_hz=trace_hz), "sim", parse_assignment)
 
 
-def mavlink_vehicle(url: str, settings: dict[str, Any] | None = None) -> FleetVehicle:
-    """A MAVLink vehicle (PX4 / ArduPilot / mavsim) at `url`: MavlinkFleet of one; closing restores its gains."""
+def mavlink_vehicle(url: str, settings: dict[str, Any] | None = None,
+                   state_dir: str | Path | None = None) -> FleetVehicle:
+    """A MAVLink vehicle (PX4 / ArduPilot / mavsim) at `url`: MavlinkFleet of one; closing restores its gains.
+
+    The originals are saved in `state_dir` (original_params.json) before any change and removed once they are
+    back on the vehicle: an agent killed mid-run restores, when started again, the gains it found the first time —
+    not the candidate gains the vehicle still holds.
+    """
     try:
         from mavtune.vehicles.mavlink.config import load_mavlink_config
-        from mavtune.vehicles.mavlink.fleet import MavlinkFleet
+        from mavtune.vehicles.mavlink.fleet import ORIGINALS_FILE, MavlinkFleet
     except ImportError as exc:
         raise MavtuneError(f"the MAVLink vehicle backend is not available: {exc}") from None
-    return FleetVehicle(MavlinkFleet([url], load_mavlink_config(dict(settings or {}))), "mavlink")
+    fleet = MavlinkFleet([url], load_mavlink_config(dict(settings or {})), out_dir=state_dir)
+
+    def forget_originals() -> None:
+        if state_dir is not None and fleet.restored:  # the final gains are confirmed on the vehicle
+            (Path(state_dir) / ORIGINALS_FILE).unlink(missing_ok=True)
+
+    return FleetVehicle(fleet, "mavlink", fleet.vehicles[0].param_values, forget_originals)
 
 
 def toy_cost(gains: Gains, seed: int, round_id: int, noise: float = 0.0) -> float:
@@ -144,8 +170,6 @@ def load_scenario(name: str | None) -> Any:
         return Scenario.default()
     if key == "noise_free":
         return Scenario.noise_free()
-    from pathlib import Path
-
     path = Path(name)
     if not path.exists():
         raise MavtuneError(f"scenario {name!r} is neither 'default', 'noise_free' nor an existing JSON file")
@@ -157,8 +181,9 @@ def load_scenario(name: str | None) -> Any:
 
 def make_vehicle(kind: str, *, seed: int = 0, scenario: str | None = None, mavlink: str | None = None,
                  mavlink_settings: dict[str, Any] | None = None, noise: float = 0.0,
-                 min_flight_s: float = 0.0) -> Vehicle:
-    """Build the backend an agent drives: 'sim' (SimFleet of one), 'toy' (stand-in), or 'mavlink' (URL)."""
+                 min_flight_s: float = 0.0, state_dir: str | Path | None = None) -> Vehicle:
+    """Build the backend an agent drives: 'sim' (SimFleet of one), 'toy' (stand-in), or 'mavlink' (URL; its
+    originals kept in state_dir until restored)."""
     vehicle: Vehicle
     if kind == "sim":
         vehicle = sim_vehicle(load_scenario(scenario), seed=seed)
@@ -167,7 +192,7 @@ def make_vehicle(kind: str, *, seed: int = 0, scenario: str | None = None, mavli
     elif kind == "mavlink":
         if not mavlink:
             raise MavtuneError("--vehicle mavlink needs --mavlink URL (e.g. udpin:127.0.0.1:14540)")
-        vehicle = mavlink_vehicle(mavlink, mavlink_settings)
+        vehicle = mavlink_vehicle(mavlink, mavlink_settings, state_dir)
     else:
         raise MavtuneError(f"unknown vehicle backend {kind!r}; use sim, toy or mavlink")
     if min_flight_s > 0:

@@ -21,6 +21,16 @@ PYTHON = sys.executable
 REPO = Path(__file__).resolve().parents[2]
 
 
+def wait_until(condition, timeout_s: float) -> bool:
+    """Poll condition() until it holds (True) or timeout_s passes (False)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
 def free_port() -> int:
     """A TCP port free on 127.0.0.1 right now."""
     with socket.socket() as s:
@@ -69,12 +79,8 @@ class Procs:
         return path.read_text(errors="replace") if path.exists() else ""
 
     def wait_log(self, name: str, text: str, timeout_s: float) -> bool:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if text in self.log(name):
-                return True
-            time.sleep(0.05)
-        return False
+        """True once `text` appears in the process's log, False after timeout_s."""
+        return wait_until(lambda: text in self.log(name), timeout_s)
 
     def kill(self, name: str) -> None:
         p = self.procs[name]

@@ -93,3 +93,82 @@ def test_decimate_keeps_at_most_n_points_and_the_last():
     d = decimate(tr, 100)
     assert len(d.t_s) <= 100 and d.t_s[0] == 0 and d.t_s[-1] == 999
     assert decimate(tr, 0) is None and decimate(tr, 5000) is tr
+
+
+def test_same_round_with_other_gains_is_flown_again_not_answered_from_the_store():
+    agent, vehicle, keys = make()
+    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 0.4, "kd": 0.2}))
+    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 0.9, "kd": 0.2}))
+    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    results = of(agent, Result)
+    assert agent.flights_flown == 2 and [r.gains["kp"] for r in results] == [0.4, 0.9]
+    assert not results[1].resent and results[1].cost != results[0].cost
+
+
+def test_gains_the_backend_refuses_are_refused_at_assignment_and_never_applied():
+    from mavtune.swarm.vehicles import sim_vehicle
+
+    cfg = SwarmConfig(session="s", token="t")
+    vehicle = sim_vehicle(seed=0)
+    agent, keys = Agent("v0", vehicle, cfg, Recorder()), Keys("s")
+    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 1.5, "kd": 0.2}))
+    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    ack = of(agent, Ack)[-1]
+    assert ack.accepted is False and "kp" in ack.reason
+    assert vehicle._gains is None and agent.flights_flown == 0
+
+
+class Crashing(FleetVehicle):
+    """A vehicle whose flight raises (a bug or an I/O error), optionally after a delay."""
+
+    def __init__(self, delay_s=0.0):
+        super().__init__(ToyFleet(1), "toy")
+        self.delay_s = delay_s
+
+    def fly(self, round_id):
+        import time
+
+        time.sleep(self.delay_s)
+        raise OSError("link gone")
+
+
+def test_a_crashed_flight_is_lost_not_failed():
+    cfg = SwarmConfig(session="s", token="t")
+    agent, keys = Agent("v0", Crashing(), cfg, Recorder()), Keys("s")
+    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 0.4, "kd": 0.2}))
+    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    result = of(agent, Result)[0]
+    assert result.status.value == "lost" and "link gone" in result.info["detail"]
+
+
+class ClosingRecorder(Recorder):
+    """A link that refuses to publish once closed."""
+
+    closed = False
+
+    def put(self, key, payload):
+        assert not self.closed, "published on a closed link"
+        super().put(key, payload)
+
+    def close(self):
+        self.closed = True
+
+
+def test_close_waits_for_the_flight_under_way_and_its_result():
+    import threading
+
+    agent, keys = Agent("v0", Crashing(delay_s=0.3), SwarmConfig(session="s", token="t"), ClosingRecorder()), Keys("s")
+    t = threading.Thread(target=agent.run, daemon=True)
+    t.start()
+    agent._enqueue(keys.to("v0"), encode(Assignment(session="s", token="t", round=0, vehicle="v0",
+                                                    gains={"kp": 0.4, "kd": 0.2})))
+    agent._enqueue(keys.start, encode(Start(session="s", token="t", round=0, vehicles=["v0"])))
+    import time
+
+    deadline = time.monotonic() + 5
+    while agent.state.value != "flying" and time.monotonic() < deadline:
+        time.sleep(0.01)
+    agent.close(timeout_s=10)
+    t.join(timeout=5)
+    assert not t.is_alive() and len(of(agent, Result)) == 1

@@ -38,3 +38,56 @@ def test_key_layout():
     assert (k.alive("v0"), k.to("v0"), k.frm("*"), k.start) == (
         "mavtune/s1/alive/v0", "mavtune/s1/to/v0", "mavtune/s1/from/*", "mavtune/s1/start")
     assert Keys.last_chunk(k.frm("v7")) == "v7"
+
+
+def test_port_in_use_is_one_line_without_rust_source_locations():
+    from mavtune.swarm.transport import open_router
+
+    from .conftest import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    first = open_router(endpoint)
+    try:
+        with pytest.raises(MavtuneError, match="in use") as err:
+            open_router(endpoint)
+        assert "\n" not in str(err.value) and ".rs" not in str(err.value)
+    finally:
+        first.close()
+
+
+def test_waiting_for_the_coordinator_gives_python_control_back():
+    """Zenoh blocks signals while it connects: the agent must try in short attempts so Ctrl-C works meanwhile."""
+    import signal
+    import threading
+    import time
+
+    from mavtune.swarm.transport import open_client
+
+    class Signalled(Exception):
+        pass
+
+    def on_usr1(*_):
+        raise Signalled
+
+    previous = signal.signal(signal.SIGUSR1, on_usr1)
+    timer = threading.Timer(1.5, lambda: signal.raise_signal(signal.SIGUSR1))
+    t0 = time.monotonic()
+    try:
+        timer.start()
+        with pytest.raises(Signalled):
+            open_client("tcp/127.0.0.1:1", connect_timeout_s=-1)  # nothing listens there, ever
+        assert time.monotonic() - t0 < 4.0
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGUSR1, previous)
+
+
+def test_a_finite_connect_timeout_ends_with_a_one_line_error():
+    import time
+
+    from mavtune.swarm.transport import open_client
+
+    t0 = time.monotonic()
+    with pytest.raises(MavtuneError, match="tcp/127.0.0.1:1") as err:
+        open_client("tcp/127.0.0.1:1", connect_timeout_s=1.5)
+    assert 1.4 < time.monotonic() - t0 < 5.0 and ".rs" not in str(err.value)

@@ -110,3 +110,62 @@ def test_fault_flags():
     assert f.param_drop == {"MPC_Z_P": 3} and f.diverge == {"MPC_Z_P": 1.2}
     with pytest.raises(MavtuneError, match="not understood"):
         parse_faults(["explode:1"])
+
+
+def _from(component: int, msg):
+    """A message as pymavlink decodes it when sent by system 1, `component`."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=component)
+    return mav.decode(bytearray(msg.pack(mav)))
+
+
+def test_only_the_autopilot_component_answers_parameters_and_sets_the_mode():
+    import socket
+
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from mavtune.vehicles.mavlink.link import MavlinkLink
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    link = MavlinkLink(f"udpin:127.0.0.1:{port}")
+    try:
+        def heartbeat(custom_mode):
+            return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
+                                                     mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode, 4, 3)
+
+        link._handle(_from(1, heartbeat(PX4.custom_mode_word("OFFBOARD"))))
+        link._handle(_from(154, heartbeat(PX4.custom_mode_word("POSCTL"))))  # a camera claiming PX4
+        link._handle(_from(154, mavlink.MAVLink_param_value_message(b"MPC_Z_P", 9.0, 9, 1, 0)))
+        assert link.state.mode == "OFFBOARD" and link.state.component == 1 and "MPC_Z_P" not in link.state.params
+        link._handle(_from(1, mavlink.MAVLink_param_value_message(b"MPC_Z_P", 1.0, 9, 1, 0)))
+        assert link.state.params["MPC_Z_P"][0] == 1.0
+    finally:
+        link.close()
+
+
+def test_sigterm_raises_keyboard_interrupt_while_a_fleet_is_open_and_is_given_back_after():
+    import os
+    import signal
+
+    from mavtune.vehicles.mavlink.fleet import sigterm_as_interrupt
+
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+    undo = sigterm_as_interrupt()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(1000):  # the handler runs between bytecodes
+                pass
+        assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN  # a second one must not break the restore
+    finally:
+        undo()
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+
+
+def test_urls_need_a_valid_port():
+    for bad in ("udpin:127.0.0.1:abc", "udpin:127.0.0.1:70000", "tcp::5760"):
+        with pytest.raises(MavtuneError, match="port"):
+            parse_url(bad)

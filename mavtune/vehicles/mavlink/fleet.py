@@ -5,11 +5,12 @@ from __future__ import annotations
 import json
 import logging
 import os
+import signal
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
@@ -48,6 +49,26 @@ def read_originals(out_dir: str | Path | None) -> dict[str, dict[str, float]]:
         raise MavtuneError(f"{path} is not a valid originals file ({exc}); move it away to start afresh") from None
 
 
+def sigterm_as_interrupt() -> Callable[[], None]:
+    """Make SIGTERM raise KeyboardInterrupt in the main thread, so `kill` restores the gains as Ctrl-C does (a
+    second SIGTERM is ignored while they are restored); returns the undo. Leaves any other handler alone."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        return lambda: None
+
+    def on_sigterm(signum: int, frame: Any) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_sigterm)
+
+    def undo() -> None:
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGTERM) in (on_sigterm, signal.SIG_IGN):
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+    return undo
+
+
 class MavlinkFleet:
     """Vehicles behind MAVLink URLs flown concurrently; closing restores every vehicle's original gains.
 
@@ -80,6 +101,7 @@ class MavlinkFleet:
         self._closed = False
         self._problems: dict[str, str | None] = {}
         self.restored: bool | None = None  # set by finish(): every vehicle confirmed its final gains
+        self.kept_tuned = False  # set by finish(): the tuned gains, not the originals, were left on the vehicles
         saved = read_originals(self.out_dir)
         self.vehicles: list[MavlinkVehicle] = []
         with ThreadPoolExecutor(max_workers=len(urls)) as pool:
@@ -105,6 +127,7 @@ class MavlinkFleet:
                 raise MavtuneError("refusing to start: " + "; ".join(problems))
         if self.out_dir is not None:
             write_originals(self.out_dir, self.original_params)
+        self._undo_sigterm = sigterm_as_interrupt()
         self._event("connected", vehicles=[v.name for v in self.vehicles])
 
     def _event(self, kind: str, **data: Any) -> None:
@@ -141,15 +164,12 @@ class MavlinkFleet:
         return ready
 
     def fly(self, assignments: Sequence[Gains], round_id: int) -> list[Flight]:
-        """Fly assignment i on the i-th ready vehicle, all at once; a vehicle that cannot fly gives a LOST flight."""
+        """Fly assignment i on the i-th ready vehicle, all at once; a vehicle that cannot fly gives a LOST flight
+        (also an assignment beyond the vehicles ready now: one may have dropped out since `size` was asked)."""
         ready = self._ready()
-        if len(assignments) > len(ready):
-            raise MavtuneError(f"round {round_id}: {len(assignments)} assignments for {len(ready)} ready vehicles")
-        if not assignments:
-            return []
-        with ThreadPoolExecutor(max_workers=len(assignments)) as pool:
+        flights = []
+        with ThreadPoolExecutor(max_workers=max(1, min(len(assignments), len(ready)))) as pool:
             futures = [pool.submit(v.fly, dict(a), round_id) for v, a in zip(ready, assignments)]
-            flights = []
             for v, a, fut in zip(ready, assignments, futures):
                 try:
                     flights.append(fut.result())
@@ -164,6 +184,12 @@ class MavlinkFleet:
                     log.error("%s: flight in round %d crashed: %r", v.name, round_id, exc)
                     flights.append(Flight(v.name, dict(a), float("nan"), Status.LOST, None,
                                           {"round_id": round_id, "reason": "error", "detail": repr(exc)}))
+        idle = [v for v in self.vehicles if v not in ready]
+        for j, a in enumerate(assignments[len(ready):]):
+            who = idle[j] if j < len(idle) else None
+            flights.append(Flight(who.name if who else "", dict(a), float("nan"), Status.LOST, None,
+                                  {"round_id": round_id, "reason": "not_ready",
+                                   "detail": (who.ready_problem() if who else None) or "no vehicle ready"}))
         for f in flights:
             if f.status is not Status.OK:
                 self._event("aborted" if f.status is Status.FAILED else "lost", vehicle=f.vehicle, round=round_id,
@@ -175,6 +201,7 @@ class MavlinkFleet:
         with ThreadPoolExecutor(max_workers=len(self.vehicles)) as pool:
             oks = list(pool.map(lambda v: _finish(v, tuned), self.vehicles))
         self.restored = all(oks)
+        self.kept_tuned = tuned is not None and all(oks)
         self._event("finished", restored=all(oks), kept_tuned=tuned is not None)
         return all(oks)
 
@@ -187,8 +214,11 @@ class MavlinkFleet:
             if self.restored is None:  # not finished by the caller yet
                 self.finish(self.tuned if self.config.keep_tuned else None)
         finally:
-            for v in self.vehicles:
-                v.close()
+            try:
+                for v in self.vehicles:
+                    v.close()
+            finally:
+                self._undo_sigterm()
 
     def __enter__(self) -> "MavlinkFleet":
         return self

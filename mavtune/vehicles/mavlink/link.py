@@ -35,6 +35,9 @@ def parse_url(url: str) -> tuple[str, int]:
         raise MavtuneError(
             f"MAVLink URL {url!r} is not understood; use udpin:HOST:PORT, udp:HOST:PORT, tcp:HOST:PORT or serial:DEV[:BAUD]"
         )
+    host, _, port = url.split(":", 1)[1].rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise MavtuneError(f"MAVLink URL {url!r} needs HOST:PORT with a port in 1..65535")
     return url, 57600
 
 
@@ -83,6 +86,9 @@ class MavlinkLink:
             self._conn = mavutil.mavlink_connection(
                 device, baud=baud, source_system=source_system, source_component=mavlink.MAV_COMP_ID_MISSIONPLANNER
             )
+        except ModuleNotFoundError as exc:  # pymavlink imports pyserial only for serial links
+            raise MavtuneError(f"cannot open MAVLink connection {url!r}: serial links need {exc.name} "
+                               "(pip install pyserial)") from None
         except Exception as exc:  # pymavlink raises OSError/ValueError/serial errors
             raise MavtuneError(f"cannot open MAVLink connection {url!r}: {exc}") from None
         self.state = VehicleState()
@@ -122,8 +128,8 @@ class MavlinkLink:
                 return  # another ground station or a peripheral, not the autopilot
             if self.target_system is None:
                 self.target_system = src
-            if src != self.target_system:
-                return
+            if src != self.target_system or st.component not in (None, msg.get_srcComponent()):
+                return  # another vehicle, or another component of ours (its mode is not the autopilot's)
             with self._cond:
                 st.system, st.component = src, msg.get_srcComponent()
                 st.mav_autopilot, st.mav_type = msg.autopilot, msg.type
@@ -152,6 +158,8 @@ class MavlinkLink:
         elif mtype == "EXTENDED_SYS_STATE":
             with self._cond:
                 st.landed_state = msg.landed_state
+        elif mtype in ("PARAM_VALUE", "COMMAND_ACK") and msg.get_srcComponent() != st.component:
+            return  # a camera or gimbal of the same system answering with its own parameters
         elif mtype == "PARAM_VALUE":
             name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else msg.param_id.decode().rstrip("\x00")
             with self._cond:
@@ -206,6 +214,13 @@ class MavlinkLink:
             return
         with self._send_lock:
             fn(self._conn.mav)
+
+    def request_rate(self, message_id: int, rate_hz: float) -> None:
+        """Ask the autopilot to stream a message at rate_hz (MAV_CMD_SET_MESSAGE_INTERVAL; ArduPilot streams
+        nothing a ground station did not ask for on some links). Unacknowledged: the stream itself is awaited."""
+        self.send(lambda m: m.command_long_send(
+            self.target_system or 0, self.target_component, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+            message_id, 1e6 / rate_hz, 0, 0, 0, 0, 0))
 
     @property
     def target_component(self) -> int:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -13,8 +14,9 @@ from mavtune.vehicles.mavlink.link import VehicleState
 from mavtune.vehicles.mavlink.profiles import AutopilotProfile
 
 # Abort reasons. Those caused by the gains make the flight FAILED; the others say nothing about the gains
-# (the pilot or the link intervened) and make it LOST, so the tuner flies the point again.
-GAIN_FAULTS = frozenset({"altitude_error", "non_finite"})
+# (the pilot or the link intervened) and make it LOST, so the tuner flies the point again. "not_settled": the
+# new gains did not hold a calm hover within calm_timeout_s; "not_calm": the safe gains did not, before the change.
+GAIN_FAULTS = frozenset({"altitude_error", "non_finite", "not_settled"})
 ABORT_REASONS = GAIN_FAULTS | {"heartbeat_lost", "position_lost", "mode_change", "disarmed", "interrupted", "not_calm"}
 
 
@@ -35,6 +37,9 @@ def preflight_problem(
         return f"not airborne (landed state {st.landed_state})"
     if st.position is None:
         return "no LOCAL_POSITION_NED received"
+    position_age_s = time.monotonic() - st.position.wall_s
+    if position_age_s > safety.position_timeout_s:
+        return f"no LOCAL_POSITION_NED for {position_age_s:.1f} s"
     altitude = -st.position.z_m
     if not math.isfinite(altitude) or altitude < safety.min_altitude_m:
         return f"altitude {altitude:.2f} m is below the minimum {safety.min_altitude_m:g} m"

@@ -9,6 +9,8 @@ import threading
 import time
 from typing import Any, Mapping
 
+from pymavlink.dialects.v20 import common as mavlink
+
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.vehicles.mavlink.config import MavlinkConfig
@@ -30,6 +32,8 @@ log = logging.getLogger(__name__)
 
 TRACE_HZ = 10.0  # decimation of the trace kept in each Flight
 CALM_HOLD_S = 0.5  # vehicle seconds the hover must stay calm before new gains / the primitive
+CLOCK_RESET_S = 5.0  # a position sample this much older than the phase start means time_boot_ms restarted
+POSITION_HZ = 50.0  # LOCAL_POSITION_NED rate asked of the autopilot (the cost is computed on a 100 Hz grid)
 
 
 class MavlinkVehicle:
@@ -57,6 +61,9 @@ class MavlinkVehicle:
         self._hover_ned: tuple[float, float, float] | None = None
         self._mode_before: str | None = None
         self._abort_request: str | None = None  # set from another thread (Ctrl-C) to stop the running primitive
+        self._aborted = False  # the last primitive was aborted: integrators may be wound up, recover longer
+        self._finished = False  # finish() left the vehicle with its final gains; close() must not undo that
+        self._restore_pending = False  # the link went down before the last safe gains were confirmed
         self.link = MavlinkLink(url, source_system=self.config.source_system, target_system=self.config.target_system)
         try:
             self._connect(originals)
@@ -69,6 +76,10 @@ class MavlinkVehicle:
         cfg = self.config
         if not self.link.wait_for(lambda st: st.heartbeats > 0, cfg.heartbeat_wait_s):
             raise MavtuneError(f"{self.url}: no HEARTBEAT from an autopilot within {cfg.heartbeat_wait_s:g} s")
+        self.link.request_rate(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, POSITION_HZ)
+        self.link.request_rate(mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 1.0)
+        if cfg.altitude_source == "distance_sensor":
+            self.link.request_rate(mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR, POSITION_HZ)
         st = self.link.snapshot()
         self.profile = profile_from_heartbeat(st.mav_autopilot)
         if cfg.autopilot != "auto" and cfg.autopilot != self.profile.autopilot.value:
@@ -92,6 +103,9 @@ class MavlinkVehicle:
         self.current_params = {rg.vehicle_param: present[rg.vehicle_param] for rg in self.gains.values()}
         self.last_safe_params = dict(self.original_params)
         self.streamer = SetpointStreamer(self.link, cfg.setpoint_hz)
+        # the readiness check needs a position: wait for the stream (wall time; a radio link may start it slowly)
+        if not self.link.wait_for(lambda st: st.position is not None, cfg.heartbeat_wait_s):
+            log.warning("%s: no LOCAL_POSITION_NED within %g s of the first HEARTBEAT", self.name, cfg.heartbeat_wait_s)
         log.info("%s: %s, gains %s, originals %s", self.name, self.profile.autopilot.value,
                  {g: rg.vehicle_param for g, rg in self.gains.items()}, self.original_params)
 
@@ -161,7 +175,8 @@ class MavlinkVehicle:
         st = self.link.snapshot()
         pos = st.position
         self._hover_ned = (pos.x_m, pos.y_m, pos.z_m)
-        self._mode_before = st.mode
+        if self._mode_before is None:  # taking control again after a link loss: give back the first mode
+            self._mode_before = st.mode
         hover = Setpoint(self._hover_ned)
         self.streamer.set_target(lambda t: hover)
         self.streamer.start()
@@ -194,15 +209,24 @@ class MavlinkVehicle:
 
     # ---- flying ----------------------------------------------------------------------------------------------
     def _altitude(self, sample: PositionSample) -> float:
+        """Altitude (m, up) at a position sample: −z, or the rangefinder's reading when configured."""
         if self.config.altitude_source == "distance_sensor":
             d = self.link.state.distance_m
             return math.nan if d is None else d
         return -sample.z_m
 
+    def _altitude_stale(self, sample: PositionSample) -> bool:
+        """True when the configured rangefinder has fallen silent (its last reading is too old to measure with)."""
+        if self.config.altitude_source != "distance_sensor":
+            return False
+        t = self.link.state.distance_t_s
+        return t is None or sample.t_s - t > self.config.safety.position_timeout_s
+
     def _phase(self, samples: "queue.Queue[PositionSample]", t0: float, duration_s: float, ref, record,
-               calm=None, check_error: bool = True) -> str | None:
+               calm=None, check_error: bool = True, hold_s: float = CALM_HOLD_S) -> str | None:
         """Follow the streamed target for duration_s of vehicle time from t0, checking every sample for an abort;
-        with `calm` (a sample → bool), go on after duration_s until calm(sample), up to config.calm_timeout_s."""
+        with `calm` (a sample → bool), go on after duration_s until calm(sample) has held for hold_s, up to
+        config.calm_timeout_s after it."""
         safety = self.config.safety
         last_wall = time.monotonic()
         calm_since: float | None = None
@@ -219,7 +243,11 @@ class MavlinkVehicle:
             if self._abort_request:
                 return self._abort_request
             if s.t_s < t0:
-                continue
+                if t0 - s.t_s > CLOCK_RESET_S:  # the vehicle's clock went back: the autopilot rebooted
+                    return "position_lost"
+                continue  # a sample from before this phase, still queued
+            if self._altitude_stale(s):
+                return "position_lost"
             t = s.t_s - t0
             z, z_ref = self._altitude(s), ref(t)
             reason = abort_reason(z, z_ref if check_error else z, self.link.state, self.link.heartbeat_age_s(),
@@ -228,29 +256,36 @@ class MavlinkVehicle:
                 record.append((t, z_ref, z))
             if reason:
                 return reason
-            if calm is not None:  # calm must last CALM_HOLD_S of vehicle time
+            if calm is not None:  # calm must last hold_s of vehicle time
                 calm_since = (calm_since if calm_since is not None else s.t_s) if calm(s) else None
-            if t >= duration_s and (calm is None or (calm_since is not None and s.t_s - calm_since >= CALM_HOLD_S)):
+            if t >= duration_s and (calm is None or (calm_since is not None and s.t_s - calm_since >= hold_s)):
                 return None
-            if calm is not None and t >= duration_s + self.config.calm_timeout_s:
+            if calm is not None and t >= duration_s + hold_s + self.config.calm_timeout_s:
                 return "not_calm"
 
     def request_abort(self, reason: str = "interrupted") -> None:
-        """Ask the running primitive (if any) to stop at its next sample; thread-safe."""
+        """Stop the running flight at its next sample, or the next flight before it changes anything (a flight
+        about to start is stopped too); thread-safe."""
         self._abort_request = reason
 
+    def _calm(self, hover_alt_m: float):
+        """The calm test around the hover altitude: small altitude error and small vertical speed."""
+        cfg = self.config
+        return lambda s: abs(-s.z_m - hover_alt_m) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps
+
     def _recover(self) -> str | None:
-        """Before new gains: hover with the current (safe) gains until calm, e.g. after an aborted primitive."""
+        """Before new gains: hover with the current (safe) gains until calm. After an aborted primitive, hover
+        config.recover_s first and then stay calm for recover_s, so that integrators the abort wound up (PX4's
+        velocity integrator, a mass estimator) have unwound before the next flight is measured: a calm start
+        that is still unwinding adds its whole decay to the next cost."""
         samples: queue.Queue[PositionSample] = queue.Queue()
         self.link.add_position_listener(samples.put)
         try:
             hover_alt = -self._hover_ned[2]
-            cfg = self.config
-            return self._phase(
-                samples, self.link.state.position.t_s, 0.0, lambda t: hover_alt, None,
-                lambda s: abs(-s.z_m - hover_alt) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps,
-                check_error=False,
-            )
+            wait_s, hold_s = (self.config.recover_s, max(CALM_HOLD_S, self.config.recover_s)) if self._aborted \
+                else (0.0, CALM_HOLD_S)
+            return self._phase(samples, self.link.state.position.t_s, wait_s, lambda t: hover_alt, None,
+                               self._calm(hover_alt), check_error=False, hold_s=hold_s)
         finally:
             self.link.remove_position_listener(samples.put)
 
@@ -264,13 +299,9 @@ class MavlinkVehicle:
             start = self.link.state.position
             base = self._altitude(start)
             hover_alt = -self._hover_ned[2]
-
-            def calm(s: PositionSample) -> bool:
-                return abs(-s.z_m - hover_alt) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps
-
-            reason = self._phase(samples, start.t_s, cfg.settle_s, lambda t: base, None, calm)
-            if reason:
-                return reason, recorded
+            reason = self._phase(samples, start.t_s, cfg.settle_s, lambda t: base, None, self._calm(hover_alt))
+            if reason:  # the new gains do not hold a calm hover: their fault, not the weather's
+                return ("not_settled" if reason == "not_calm" else reason), recorded
             circle = Circle(self._hover_ned, cfg.primitive_s, cfg.circle_diameter_m, cfg.elevation_m)
             t0 = self.link.state.position.t_s
             base = self._altitude(self.link.state.position) if cfg.altitude_source == "distance_sensor" else hover_alt
@@ -284,8 +315,10 @@ class MavlinkVehicle:
     def fly(self, gains: Gains, round_id: int) -> Flight:
         """Set `gains` (normalised), settle, fly the primitive and measure it; aborts restore the last safe gains."""
         with self._lock:
-            self._abort_request = None
-            return self._fly(dict(gains), round_id)
+            try:
+                return self._fly(dict(gains), round_id)
+            finally:
+                self._abort_request = None
 
     def _fly(self, gains: Gains, round_id: int) -> Flight:
         info: dict[str, Any] = {"round_id": round_id, "url": self.url, "autopilot": self.profile.autopilot.value}
@@ -303,9 +336,13 @@ class MavlinkVehicle:
         if problem:
             if self._in_control and not self._released and self.link.snapshot().mode != self.profile.flight_mode \
                     and self.link.heartbeat_age_s() <= self.config.safety.heartbeat_timeout_s:
-                self._pilot_took_over()
+                info["restored_original"] = self._pilot_took_over()
                 return lost("mode_change", problem)
             return lost("not_ready", problem)
+        if self._restore_pending:  # the link is back: first of all the gains the aborted flight left behind
+            if not self._restore(self.last_safe_params, "the last safe gains"):
+                return lost("not_ready", "the last safe gains are not confirmed yet")
+            self._restore_pending = False
         if not self._in_control:
             problem = self._take_control()
             if problem:
@@ -313,6 +350,7 @@ class MavlinkVehicle:
         reason = self._recover()
         if reason:
             return lost(reason, "the vehicle did not come back to a calm hover before the gain change")
+        self._aborted = False
         try:
             self.apply_gains(gains)
         except ParamNotConfirmed as exc:
@@ -328,28 +366,39 @@ class MavlinkVehicle:
                 self.last_safe_params = dict(values)
                 return Flight(self.name, gains, cost, Status.OK, trace, info)
             reason = "non_finite"
-        # abort: hover (already streamed), restore the last safe gains, classify
+        # abort: hover (already streamed), restore safe gains, classify
+        self._aborted = True
         info["reason"] = reason
         log.warning("%s: round %d aborted: %s", self.name, round_id, reason)
         if reason == "mode_change":
-            self._pilot_took_over()
-        elif reason in ("heartbeat_lost", "position_lost"):
-            self._in_control = False  # the autopilot's own failsafe may have taken over; re-check before flying
-            self.streamer.stop()
-            if not self.config.safety.rejoin_after_link_loss:
-                self._released = f"link lost in round {round_id}"
-        restored = self._restore(self.last_safe_params, "the last safe gains")
+            restored = self._pilot_took_over()
+        else:
+            if reason in ("heartbeat_lost", "position_lost"):
+                self._in_control = False  # the autopilot's failsafe may have taken over; re-check before flying
+                self.streamer.stop()
+                if not self.config.safety.rejoin_after_link_loss:
+                    self._released = f"link lost in round {round_id}"
+            # a vehicle leaving the run gets its own gains back now; one that flies on, the last that flew well
+            restored = self._restore(*((self.original_params, "the original gains") if self._released
+                                       else (self.last_safe_params, "the last safe gains")))
         info["restored_last_safe"] = restored
-        if not restored:
-            self._released = f"last safe gains could not be restored after {reason}"
-        if reason in GAIN_FAULTS and recorded:
-            info["partial_cost"] = altitude_cost(*zip(*recorded), filter_hz=self.config.filter_hz)
+        if not restored and not self._released:
+            if reason in ("heartbeat_lost", "position_lost"):
+                self._restore_pending = True  # retried before the next flight, once the link is back
+            else:
+                self._released = f"safe gains could not be restored after {reason}"
+        if reason in GAIN_FAULTS:
+            if len(recorded) >= 2:
+                info["partial_cost"] = altitude_cost(*zip(*recorded), filter_hz=self.config.filter_hz)
             return Flight(self.name, gains, math.inf, Status.FAILED, trace, info)
         return Flight(self.name, gains, math.nan, Status.LOST, trace, info)
 
-    def _pilot_took_over(self) -> None:
+    def _pilot_took_over(self) -> bool:
+        """The pilot switched modes: stop commanding and give back the original gains (the vehicle is out of the
+        run); True when they were confirmed."""
         self._released = "the pilot changed the mode; this vehicle is left to the pilot"
         self._release(pilot=True)
+        return self._restore(self.original_params, "the original gains")
 
     # ---- the end ---------------------------------------------------------------------------------------------
     def finish(self, tuned: Gains | None = None) -> bool:
@@ -365,6 +414,7 @@ class MavlinkVehicle:
             if ok:
                 log.info("%s: %s set: %s", self.name, what, target)
             self._release(pilot=self._released is not None and "pilot" in self._released)
+            self._finished = ok
             return ok
 
     def close(self) -> None:
@@ -372,7 +422,8 @@ class MavlinkVehicle:
         if self._closed:
             return
         try:
-            if any(self.current_params.get(k) != v for k, v in self.original_params.items()) or self._in_control:
+            if not self._finished and (self._in_control or any(
+                    self.current_params.get(k) != v for k, v in self.original_params.items())):
                 self.finish()
         finally:
             self._closed = True

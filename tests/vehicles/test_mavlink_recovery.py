@@ -1,0 +1,86 @@
+"""MAVLink vehicle edge cases through `mavtune mavsim`: start-up on a running stream, recovery after an abort,
+a gain fault before the primitive, keep_tuned, more assignments than ready vehicles, an agent restarted after a crash."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from mavtune.fleet import Status
+from mavtune.vehicles.mavlink import MavlinkFleet, MavlinkVehicle
+
+from mavlink_harness import fast_config, mavsim, read_params
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
+
+PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
+GOOD = {"kp": 0.3, "kd": 0.5}
+DIVERGING = {"kp": 0.9, "kd": 0.5}  # MPC_Z_P = 1.36 > 1.0 with the diverge fault below
+
+
+def test_connecting_to_a_vehicle_already_streaming_in_real_time_waits_for_its_position():
+    """The readiness check needs a LOCAL_POSITION_NED; it used to run before the first one arrived."""
+    with mavsim(autopilot="px4", speed=1.0) as url:
+        read_params(url, ["MPC_Z_P"])  # the vehicle is up and streaming before the fleet connects
+        fleet = MavlinkFleet([url], fast_config())
+        try:
+            assert fleet.size == 1
+        finally:
+            fleet.close()
+
+
+def test_the_flight_after_an_abort_costs_what_it_cost_before():
+    """An aborted flight winds up the altitude integrator; the next flight must not pay for its unwinding."""
+    with mavsim("--fault", "diverge:MPC_Z_P:1.0", autopilot="px4") as url:
+        with MavlinkVehicle(url, fast_config()) as vehicle:
+            before = vehicle.fly(GOOD, 0)
+            aborted = vehicle.fly(DIVERGING, 1)
+            after = vehicle.fly(GOOD, 2)
+    assert before.status is Status.OK and aborted.status is Status.FAILED and after.status is Status.OK
+    assert after.cost < 2.0 * before.cost, (before.cost, after.cost)
+
+
+def test_gains_that_diverge_before_the_primitive_starts_are_failed_not_lost():
+    """A LOST flight is flown again; a gain that cannot even hover would be flown again and again."""
+    with mavsim("--fault", "diverge:MPC_Z_P:1.0", autopilot="px4") as url:
+        with MavlinkVehicle(url, fast_config(settle_s=4.0)) as vehicle:
+            flight = vehicle.fly(DIVERGING, 0)
+        assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
+    assert flight.status is Status.FAILED and flight.info["reason"] == "altitude_error"
+    assert flight.info["samples"] == 0 and flight.info["restored_last_safe"] is True
+
+
+def test_keep_tuned_leaves_the_tuned_gains_and_extra_assignments_are_lost():
+    with mavsim(autopilot="px4") as url:
+        fleet = MavlinkFleet([url], fast_config(keep_tuned=True))
+        try:
+            flights = fleet.fly([GOOD, GOOD], 0)  # one vehicle ready, two assignments
+            fleet.tuned = GOOD
+        finally:
+            fleet.close()
+        assert [f.status for f in flights] == [Status.OK, Status.LOST]
+        assert flights[1].info["reason"] == "not_ready"
+        assert fleet.kept_tuned is True
+        assert read_params(url, list(PX4_ORIGINALS)) == pytest.approx({"MPC_Z_P": 0.52, "MPC_Z_VEL_P_ACC": 8.5})
+
+
+def test_an_agent_restarted_after_a_crash_restores_the_gains_it_first_found(tmp_path):
+    from mavtune.swarm.vehicles import mavlink_vehicle
+
+    settings = fast_config().model_dump()
+    with mavsim(autopilot="px4") as url:
+        first = mavlink_vehicle(url, settings, tmp_path)
+        first.apply(GOOD)
+        assert first.fly(0).status is Status.OK
+        dead = first._fleet.vehicles[0]  # the agent dies: no restore, candidate gains stay on the vehicle
+        dead.streamer.stop()
+        dead.link.close()
+        first._fleet._undo_sigterm()
+        assert read_params(url, ["MPC_Z_P"]) == pytest.approx({"MPC_Z_P": 0.52})
+        saved = json.loads((tmp_path / "original_params.json").read_text())
+        assert saved == {url: PX4_ORIGINALS}
+        second = mavlink_vehicle(url, settings, tmp_path)
+        second.close()
+        assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
+    assert not (tmp_path / "original_params.json").exists()  # restored: nothing left to remember
