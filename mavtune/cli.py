@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 from pathlib import Path
@@ -190,7 +191,7 @@ def bank_lookup(
     found = GainBank.load(bank_file).lookup(mass_kg)
     lo, hi = found.between
     where = (f"between {lo:g} and {hi:g} kg" if lo != hi else f"at {lo:g} kg") + (
-        "" if found.inside else f" (outside the tuned masses: held, not extrapolated)")
+        "" if found.inside else " (outside the tuned masses: held, not extrapolated)")
     typer.echo(" ".join(f"{k}={v:.5g}" for k, v in found.gains.items()) + f"  # {where}")
 
 
@@ -224,10 +225,18 @@ from mavtune.experiments.reproduce import reproduce_command  # noqa: E402
 app.command("reproduce")(reproduce_command)
 
 
+def _sigterm_as_ctrl_c(signum: int, frame: object) -> None:
+    """SIGTERM (a service manager, `kill`) ends a command like Ctrl-C: flights aborted, gains restored, journal and
+    result.json kept. A second SIGTERM is ignored while that happens."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
 def main() -> None:
     """Entry point: run the app, turning MavtuneError into a one-line message and exit status 2."""
     from mavtune.run import Interrupted
 
+    signal.signal(signal.SIGTERM, _sigterm_as_ctrl_c)
     try:
         app()
     except Interrupted as exc:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from collections import Counter
 from pathlib import Path
@@ -25,7 +26,6 @@ from mavtune.plan import Plan, clock as _clock_s, make_plan
 from mavtune.tuner import Round, StageDone, Tuner, TuningResult
 
 JOURNAL = "journal.sqlite"
-FLEET_REPORTS = ("original_params", "restored", "kept_tuned", "dropped")  # fleet attributes kept in result.json
 
 
 class Interrupted(MavtuneError):
@@ -130,10 +130,12 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
             console.print(f"resuming {journal}: {recorded} rounds recorded will not be flown again")
         console.print(_plan_panel(config, plan))
         (out_dir / "config.json").write_text(json.dumps(config.model_dump(mode="json"), indent=2))
-        fleet = build_fleet(config, out_dir)
-        tuner = Tuner(settings, fleet, book, stage_rounds=stage_rounds)
+        fleet: Fleet | None = None
+        tuner: Tuner | None = None
         started, status, error = time.time(), "error", None
         try:
+            fleet = build_fleet(config, out_dir)
+            tuner = Tuner(settings, fleet, book, stage_rounds=stage_rounds)
             with RoundView(console, plan, quiet) as view:
                 tuner.on_round = view
                 tuner.run()
@@ -144,16 +146,17 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
             status = "stage"
         except KeyboardInterrupt:
             status = "interrupted"
-        except MavtuneError as exc:
-            error = str(exc)
+        except Exception as exc:
+            error = str(exc) or type(exc).__name__
             raise
         finally:
             try:
-                fleet.close()  # real vehicles get their original gains back here, whatever happened
+                if fleet is not None:
+                    fleet.close()  # real vehicles get their original gains back here, whatever happened
             finally:
-                result = tuner.snapshot()
+                result = tuner.snapshot() if tuner is not None else None
                 _write_summary(out_dir, config, plan, result, fleet, status, error, time.time() - started)
-                if report:
+                if report and result is not None:
                     _report(console, out_dir, result, config, surface, status)
     if status == "interrupted":
         with Journal(journal) as book:  # the journal is the truth: a round can be recorded as Ctrl-C arrives
@@ -184,21 +187,27 @@ def _report(console: Console, out_dir: Path, result: TuningResult, config: Confi
         console.print(f"[yellow]report not written: {exc}[/] (the journal and result.json are complete)")
 
 
-def _write_summary(out_dir: Path, config: Config, plan: Plan, result: TuningResult, fleet: Fleet, status: str,
-                   error: str | None, wall_s: float) -> None:
-    """result.json: how the run ended, the gains, every round, and what the fleet reports of itself."""
-    by_status = Counter(f.status.value for r in result.rounds for f in r.flights)
-    summary = {
-        "status": status, "error": error, **result.to_dict(),
-        "rounds_log": [r.to_dict() | {"replayed": r.replayed} for r in result.rounds],
-        "flights_by_status": {s.value: by_status.get(s.value, 0) for s in Status},
-        "fleet": config.fleet.kind, "wall_s": wall_s,
-        "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s},
-        "flight_time_s": len(result.rounds) * plan.round_s,
-        "events": list(getattr(fleet, "events", []) or []),
-        **{k: getattr(fleet, k) for k in FLEET_REPORTS if hasattr(fleet, k)},
-    }
-    (out_dir / "result.json").write_text(json.dumps(summary, indent=2, default=str))
+def _write_summary(out_dir: Path, config: Config, plan: Plan, result: TuningResult | None, fleet: Fleet | None,
+                   status: str, error: str | None, wall_s: float) -> None:
+    """result.json, written atomically: how the run ended, the gains, every round, what the fleet reports."""
+    summary: dict[str, Any] = {"status": status, "error": error, "gains": None, "rounds": 0, "flights": 0}
+    if result is not None:
+        by_status = Counter(f.status.value for r in result.rounds for f in r.flights)
+        summary |= result.to_dict() | {
+            "rounds_log": [r.to_dict() | {"replayed": r.replayed} for r in result.rounds],
+            "flights_by_status": {s.value: by_status.get(s.value, 0) for s in Status},
+            "flight_time_s": len(result.rounds) * plan.round_s,
+        }
+        if status != "finished":  # only a finished run has tuned gains; the rest is where the search stood
+            summary["latest_gains"], summary["gains"] = summary["gains"], None
+    summary |= {"fleet": config.fleet.kind, "wall_s": wall_s,
+                "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s}}
+    if fleet is not None and hasattr(fleet, "report"):
+        summary |= fleet.report()  # e.g. drop-out events, original parameters and whether they were restored
+    path = out_dir / "result.json"
+    partial = path.with_suffix(".json.partial")
+    partial.write_text(json.dumps(summary, indent=2, default=str))
+    os.replace(partial, path)
 
 
 def _plan_panel(config: Config, plan: Plan) -> str:

@@ -2,6 +2,5 @@
 
 from mavtune.swarm.config import SwarmConfig, load_swarm_config
 from mavtune.swarm.coordinator import CoordinatorState, ZenohFleet
-from mavtune.swarm.run import run_coordinator
 
-__all__ = ["SwarmConfig", "load_swarm_config", "ZenohFleet", "CoordinatorState", "run_coordinator"]
+__all__ = ["SwarmConfig", "load_swarm_config", "ZenohFleet", "CoordinatorState"]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
 from pathlib import Path
 from typing import Optional
 
@@ -19,17 +18,6 @@ def _logging(verbose: bool) -> None:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 
-def _interrupt_on_sigterm() -> None:
-    """SIGTERM acts as Ctrl-C: the running primitive is aborted and the vehicle's gains restored before exit (a
-    second SIGTERM is ignored meanwhile)."""
-
-    def on_sigterm(signum: int, frame: object) -> None:
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, on_sigterm)
-
-
 def _state_dir(vehicle_id: str) -> Path:
     """Where an agent keeps its vehicle's original gains until they are restored ($XDG_STATE_HOME/mavtune)."""
     base = os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state"
@@ -38,14 +26,9 @@ def _state_dir(vehicle_id: str) -> Path:
 
 def _mavlink_table(path: Optional[Path]) -> dict:
     """The [mavlink] table of the agent's config file, if any (settings of a MAVLink vehicle)."""
-    if path is None or not path.exists():
-        return {}
-    import tomllib
+    from mavtune.config import read_toml
 
-    try:
-        return dict(tomllib.loads(path.read_text()).get("mavlink", {}))
-    except tomllib.TOMLDecodeError as exc:
-        raise MavtuneError(f"config file {path} is not valid TOML: {exc}") from None
+    return dict(read_toml(path).get("mavlink", {})) if path is not None and path.exists() else {}
 
 
 def agent_command(
@@ -72,7 +55,6 @@ def agent_command(
     cfg = load_swarm_config(config, session=session, token=token, connect=connect)
     if cfg.connect is None:
         raise MavtuneError("give the coordinator's endpoint: --connect tcp/HOST:PORT (or connect = ... in --config)")
-    _interrupt_on_sigterm()
     backend = make_vehicle(vehicle, seed=seed, scenario=scenario, mavlink=mavlink, noise=toy_noise,
                            mavlink_settings=_mavlink_table(config), min_flight_s=min_flight_s,
                            state_dir=state_dir or _state_dir(id))
@@ -92,38 +74,38 @@ def agent_command(
 
 def coordinator_command(
     listen: Optional[str] = typer.Option(None, "--listen", help="Zenoh endpoint to listen on [tcp/0.0.0.0:7447]."),
-    vehicles: int = typer.Option(2, "--vehicles", help="Vehicles to wait for before round 1."),
-    out: Path = typer.Option(..., "--out", help="Output directory: journal.sqlite and result.json."),
-    resume: bool = typer.Option(False, "--resume", help="Continue from the journal in --out (it must exist)."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Swarm config file (TOML; its swarm table or top level)."),
+    vehicles: Optional[int] = typer.Option(None, "--vehicles", help="Vehicles to wait for before round 1 [2]."),
+    out: Path = typer.Option(..., "--out", help="Run folder: journal.sqlite, result.json, report; resumed if it "
+                                                "holds a journal."),
+    resume: bool = typer.Option(False, "--resume", help="Require --out to hold a journal and continue it."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Run config (TOML: [tuning], [flight], [swarm])."),
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
     token: Optional[str] = typer.Option(None, "--token", help="Shared token (overrides the config)."),
     settle_s: Optional[float] = typer.Option(None, "--settle-s", help="Wait between acknowledgements and start."),
     result_timeout_s: Optional[float] = typer.Option(None, "--result-timeout-s", help="Wait for results."),
     ack_timeout_s: Optional[float] = typer.Option(None, "--ack-timeout-s", help="Wait for acknowledgements."),
     presence_timeout_s: Optional[float] = typer.Option(None, "--presence-timeout-s", help="Wait for vehicles."),
-    method: str = typer.Option("eql", "--method", help="Line search."),
-    epsilon: float = typer.Option(0.125, "--epsilon", help="Tolerance as a fraction of each gain's range."),
-    bootstraps: int = typer.Option(2, "--bootstraps", help="Passes over the gains."),
-    strategy: str = typer.Option("avg", "--strategy", help="avg (same gains on every vehicle) or split."),
-    reuse: bool = typer.Option(True, "--reuse/--no-reuse", help="Reuse the point kept from the last iteration."),
-    initial_kd: float = typer.Option(0.2, "--initial-kd", help="Initial normalised k_D."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Engine seed."),
+    method: Optional[str] = typer.Option(None, "--method", help="Line search [eql]."),
+    epsilon: Optional[float] = typer.Option(None, "--epsilon", help="Tolerance as a fraction of each gain's range."),
+    bootstraps: Optional[int] = typer.Option(None, "--bootstraps", help="Passes over the gains [2]."),
+    strategy: Optional[str] = typer.Option(None, "--strategy", help="avg | split | groups [avg]."),
+    reuse: Optional[bool] = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twice in a search."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Seed recorded with the run."),
     verbose: bool = typer.Option(False, "--verbose", "-v"),
 ) -> None:
-    """Coordinate a swarm over Zenoh: wait for the vehicles, tune, write OUT/result.json and OUT/journal.sqlite."""
-    from mavtune.swarm.run import run_coordinator
+    """Coordinate a swarm over Zenoh — `mavtune tune --fleet zenoh` with the swarm's settings as flags."""
+    from mavtune.config import load_config
+    from mavtune.run import JOURNAL, run, saved_config
 
     _logging(verbose)
-    _interrupt_on_sigterm()  # a kill still writes result.json (the rounds are in the journal anyway)
-    cfg = load_swarm_config(config, listen=listen, session=session, token=token, settle_s=settle_s,
-                            result_timeout_s=result_timeout_s, ack_timeout_s=ack_timeout_s,
-                            presence_timeout_s=presence_timeout_s)
-    result = run_coordinator(cfg.listen, vehicles, out, config=cfg, resume=resume,
-                             space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, method=method, epsilon=epsilon,
-                             bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial={"kd": initial_kd},
-                             seed=seed)
-    typer.echo(f"gains {result.gains} after {len(result.rounds)} rounds; {out / 'result.json'}")
+    if resume and not (out / JOURNAL).exists():
+        raise MavtuneError(f"--resume: there is no journal at {out / JOURNAL}")
+    flags = {"fleet.kind": "zenoh", "tuning.vehicles": vehicles, "tuning.method": method, "tuning.epsilon": epsilon,
+             "tuning.bootstraps": bootstraps, "tuning.strategy": strategy, "tuning.reuse": reuse, "tuning.seed": seed,
+             "swarm.listen": listen, "swarm.session": session, "swarm.token": token, "swarm.settle_s": settle_s,
+             "swarm.result_timeout_s": result_timeout_s, "swarm.ack_timeout_s": ack_timeout_s,
+             "swarm.presence_timeout_s": presence_timeout_s}
+    run(load_config(config, flags, base=saved_config(out) if config is None else None), out, quiet=True)
 
 
 __all__ = ["agent_command", "coordinator_command", "MavtuneError"]

@@ -40,8 +40,10 @@ def vehicle_order(vehicle_id: str) -> list[Any]:
 class ZenohFleet:
     """Fleet over Zenoh: assignment j of a round goes to the j-th present vehicle sorted by id."""
 
-    def __init__(self, listen: str, config: SwarmConfig, link: Link | None = None):
+    def __init__(self, listen: str, config: SwarmConfig, link: Link | None = None, expected: int = 1):
         self.config = config
+        self.expected = expected  # vehicles to wait for before round 1 (the paper's semaphore)
+        self._quorum = False
         self.keys = Keys(config.session)
         self.listen = listen
         self.state = CoordinatorState.IDLE
@@ -66,10 +68,19 @@ class ZenohFleet:
 
     @property
     def size(self) -> int:
-        """How many vehicles are present now (waits, up to presence_timeout_s, while none is)."""
+        """How many vehicles are present now: before round 1 it waits for `expected` of them, later while none is
+        (each wait up to presence_timeout_s)."""
+        if not self._quorum:
+            self.wait_for(self.expected)
+            self._quorum = True
         if not self.present:
             self.wait_for(1)
         return len(self.present)
+
+    def report(self) -> dict[str, Any]:
+        """What result.json keeps of this fleet: the session, every drop-out event, the dropped messages."""
+        return {"session": self.config.session, "listen": self.listen, "events": self.events,
+                "dropped_messages": self.dropped}
 
     def wait_for(self, n: int, timeout_s: float | None = None) -> list[str]:
         """Block until at least n vehicles are present; MavtuneError after timeout_s (default presence_timeout_s)."""
@@ -301,10 +312,8 @@ class _Round:
 
 
 def fleet_from_config(config: Any, out_dir: Any = None) -> ZenohFleet:
-    """The ZenohFleet a run configuration names ([swarm] section): listen, wait for tuning.vehicles agents, return it.
-
-    `mavtune tune --fleet zenoh` uses this; unless [swarm] says otherwise the settle time is [flight].settle_s.
-    """
+    """The ZenohFleet a run configuration names ([swarm] section), listening, expecting tuning.vehicles agents
+    before round 1. Unless [swarm] says otherwise the settle time is [flight].settle_s."""
     from mavtune.swarm.config import load_swarm_config
 
     swarm = dict(getattr(config, "swarm", {}) or {})
@@ -312,10 +321,4 @@ def fleet_from_config(config: Any, out_dir: Any = None) -> ZenohFleet:
     if flight is not None:
         swarm.setdefault("settle_s", flight.settle_s)
     cfg = load_swarm_config(None, **swarm)
-    fleet = ZenohFleet(cfg.listen, cfg)
-    try:
-        fleet.wait_for(int(config.tuning.vehicles))
-    except BaseException:
-        fleet.close()
-        raise
-    return fleet
+    return ZenohFleet(cfg.listen, cfg, expected=int(config.tuning.vehicles))

@@ -1,4 +1,4 @@
-"""run_coordinator: result.json is written even when the run fails (the events must not be lost)."""
+"""A coordinator run that fails still writes result.json: the drop-out events and the error are not lost."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import json
 
 import pytest
 
+from mavtune.config import load_config
 from mavtune.errors import MavtuneError
-from mavtune.swarm import SwarmConfig, run_coordinator
+from mavtune.run import run
 
 from .conftest import free_port
 
@@ -15,8 +16,11 @@ pytestmark = pytest.mark.timeout(30)
 
 
 def test_a_run_that_fails_still_writes_result_json(tmp_path):
-    config = SwarmConfig(session="r1", token="x", presence_timeout_s=0.5)
+    config = load_config(None, {"fleet.kind": "zenoh", "tuning.vehicles": 2, "swarm.session": "r1",
+                                "swarm.token": "x", "swarm.presence_timeout_s": 0.5,
+                                "swarm.listen": f"tcp/127.0.0.1:{free_port()}"})
     with pytest.raises(MavtuneError, match="0 of 2 vehicles"):
-        run_coordinator(f"tcp/127.0.0.1:{free_port()}", 2, tmp_path, config=config, initial={"kd": 0.2})
+        run(config, tmp_path, quiet=True)
     result = json.loads((tmp_path / "result.json").read_text())
-    assert result["gains"] is None and "0 of 2 vehicles" in result["error"] and result["session"] == "r1"
+    assert result["status"] == "error" and result["gains"] is None
+    assert "0 of 2 vehicles" in result["error"] and result["session"] == "r1" and result["events"] == []

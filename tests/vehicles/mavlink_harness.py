@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import socket
 import subprocess
 import sys
@@ -58,3 +59,15 @@ def read_params(url: str, names: list[str]) -> dict[str, float]:
         return {n: client.read(n) for n in names}
     finally:
         link.close()
+
+
+def tune_mavlink(urls: list[str], out, config: MavlinkConfig, **tuning) -> dict:
+    """`mavtune tune --fleet mavlink` in-process (quiet, no report); the result.json it wrote, also on an error
+    (which is raised after the gains are restored and the file is written)."""
+    from mavtune.config import load_config
+    from mavtune.run import run
+
+    flags = {"fleet.kind": "mavlink", "mavlink": {**config.model_dump(mode="json"), "urls": list(urls)},
+             **{f"tuning.{k}": v for k, v in tuning.items()}}
+    run(load_config(None, flags), out, quiet=True, report=False)
+    return json.loads((out / "result.json").read_text())

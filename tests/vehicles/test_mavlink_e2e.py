@@ -10,10 +10,10 @@ import pytest
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Status
 from mavtune.journal import Journal
-from mavtune.vehicles.mavlink import MavlinkFleet, MavlinkVehicle, make_mavlink_vehicle, run_mavlink_tuning
+from mavtune.vehicles.mavlink import MavlinkFleet, MavlinkVehicle, make_mavlink_vehicle
 from mavtune.vehicles.mavlink.config import GainParam
 
-from mavlink_harness import fast_config, mavsim, read_params
+from mavlink_harness import fast_config, mavsim, read_params, tune_mavlink
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
 
@@ -22,7 +22,7 @@ PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
 
 def test_tune_one_px4_vehicle_end_to_end(tmp_path):
     with mavsim(autopilot="px4") as url:
-        summary = run_mavlink_tuning([url], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
+        summary = tune_mavlink([url], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
     assert summary["restored"] is True
     assert summary["original_params"] == {url: PX4_ORIGINALS}
@@ -32,18 +32,18 @@ def test_tune_one_px4_vehicle_end_to_end(tmp_path):
     assert on_disk["gains"] == summary["gains"] and on_disk["restored"] is True
     assert json.loads((tmp_path / "original_params.json").read_text()) == {url: PX4_ORIGINALS}
     with Journal(tmp_path / "journal.sqlite") as j:
-        assert len(j.rounds()) == len(summary["rounds"])
+        assert len(j.rounds()) == summary["rounds"]
         assert j.get("original_params") == {url: PX4_ORIGINALS}
 
 
 def test_tune_two_vehicles_px4_and_ardupilot_47_concurrently(tmp_path):
     with mavsim(autopilot="px4", seed=1) as a, mavsim(autopilot="ardupilot-4.7", seed=2, sysid=2) as b:
-        summary = run_mavlink_tuning([a, b], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
+        summary = tune_mavlink([a, b], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
         assert read_params(a, list(PX4_ORIGINALS)) == PX4_ORIGINALS
         assert read_params(b, ["PSC_D_POS_P", "PSC_D_VEL_P"]) == {"PSC_D_POS_P": 1.0, "PSC_D_VEL_P": 5.0}
     assert summary["restored"] is True
     assert summary["original_params"][b] == {"PSC_D_POS_P": 1.0, "PSC_D_VEL_P": 5.0}
-    for rnd in summary["rounds"]:
+    for rnd in summary["rounds_log"]:
         assert [f["vehicle"] for f in rnd["flights"]] == [a, b]  # avg: both fly every round
         assert all(f["status"] == "ok" for f in rnd["flights"])
 

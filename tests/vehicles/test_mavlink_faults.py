@@ -9,10 +9,9 @@ import pytest
 
 from mavtune.errors import MavtuneError
 from mavtune.journal import Journal
-from mavtune.vehicles.mavlink import run_mavlink_tuning
 from mavtune.vehicles.mavlink.config import SafetyConfig
 
-from mavlink_harness import fast_config, mavsim, read_params
+from mavlink_harness import fast_config, mavsim, read_params, tune_mavlink
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
 
@@ -20,7 +19,7 @@ PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
 
 
 def _flights(summary):
-    return [f for r in summary["rounds"] for f in r["flights"]]
+    return [f for r in summary["rounds_log"] for f in r["flights"]]
 
 
 def _journal_rounds(out):
@@ -31,19 +30,19 @@ def _journal_rounds(out):
 def test_heartbeat_gap_aborts_the_primitive_and_the_run_continues(tmp_path):
     cfg = fast_config(safety=SafetyConfig(heartbeat_timeout_s=0.6, position_timeout_s=1.0, max_altitude_error_m=1.0))
     with mavsim("--fault", "heartbeat-gap:2:1.2", autopilot="px4") as url:
-        summary = run_mavlink_tuning([url], tmp_path, cfg, bootstraps=1, epsilon=0.25)
+        summary = tune_mavlink([url], tmp_path, cfg, bootstraps=1, epsilon=0.25)
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
     lost = [f for f in _flights(summary) if f["status"] == "lost"]
     assert [f["info"]["reason"] for f in lost] in (["heartbeat_lost"], ["position_lost"])
     assert lost[0]["info"]["restored_last_safe"] is True
     assert summary["restored"] is True and summary["gains"] is not None
-    assert len(_journal_rounds(tmp_path)) == len(summary["rounds"])
+    assert len(_journal_rounds(tmp_path)) == summary["rounds"]
 
 
 def test_pilot_mode_change_releases_the_vehicle_and_keeps_the_rounds(tmp_path):
     with mavsim("--fault", "mode-change:3", autopilot="px4") as url:
         with pytest.raises(MavtuneError, match="no vehicle"):
-            run_mavlink_tuning([url], tmp_path, fast_config(safety=SafetyConfig(
+            tune_mavlink([url], tmp_path, fast_config(safety=SafetyConfig(
                 heartbeat_timeout_s=0.6, position_timeout_s=1.0, ready_wait_s=0.5)), bootstraps=1, epsilon=0.25)
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
     summary = json.loads((tmp_path / "result.json").read_text())
@@ -51,23 +50,23 @@ def test_pilot_mode_change_releases_the_vehicle_and_keeps_the_rounds(tmp_path):
     flights = _flights(summary)
     assert [f["status"] for f in flights[:2]] == ["ok", "ok"]
     assert flights[2]["status"] == "lost" and flights[2]["info"]["reason"] == "mode_change"
-    assert len(_journal_rounds(tmp_path)) == len(summary["rounds"]) >= 3
+    assert len(_journal_rounds(tmp_path)) == summary["rounds"] >= 3
 
 
 def test_unconfirmed_param_set_aborts_that_flight_and_restores(tmp_path):
     with mavsim("--fault", "param-drop:MPC_Z_P:3", autopilot="px4") as url:
-        summary = run_mavlink_tuning([url], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
+        summary = tune_mavlink([url], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
     lost = [f for f in _flights(summary) if f["status"] == "lost"]
     assert len(lost) == 1 and lost[0]["info"]["reason"] == "param_not_confirmed"
     assert summary["restored"] is True and summary["gains"] is not None
-    assert len(_journal_rounds(tmp_path)) == len(summary["rounds"])
+    assert len(_journal_rounds(tmp_path)) == summary["rounds"]
 
 
 def test_diverging_gain_is_aborted_as_failed_and_avoided(tmp_path):
     # MPC_Z_P = 0.1 + 1.4 kp > 1.0 (kp > 0.643) makes the altitude oscillate with growing amplitude
     with mavsim("--fault", "diverge:MPC_Z_P:1.0", autopilot="px4") as url:
-        summary = run_mavlink_tuning([url], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
+        summary = tune_mavlink([url], tmp_path, fast_config(), bootstraps=1, epsilon=0.25)
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
     failed = [f for f in _flights(summary) if f["status"] == "failed"]
     assert failed and all(f["info"]["reason"] == "altitude_error" for f in failed)
@@ -75,4 +74,4 @@ def test_diverging_gain_is_aborted_as_failed_and_avoided(tmp_path):
     assert all(f["info"]["restored_last_safe"] for f in failed)
     assert summary["gains"]["kp"] < 0.643
     assert summary["restored"] is True
-    assert len(_journal_rounds(tmp_path)) == len(summary["rounds"])
+    assert len(_journal_rounds(tmp_path)) == summary["rounds"]

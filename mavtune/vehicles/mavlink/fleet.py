@@ -196,6 +196,12 @@ class MavlinkFleet:
                             reason=f.info.get("reason"))
         return flights
 
+    def report(self) -> dict[str, Any]:
+        """What result.json keeps of this fleet: the originals, whether they (or the tuned gains) were confirmed
+        on every vehicle at the end, and every event."""
+        return {"original_params": self.original_params, "restored": bool(self.restored) and not self.kept_tuned,
+                "kept_tuned": self.kept_tuned, "events": self.events}
+
     def finish(self, tuned: Gains | None = None) -> bool:
         """Leave every vehicle with its originals (or `tuned`, normalised) and release it; True if all confirmed."""
         with ThreadPoolExecutor(max_workers=len(self.vehicles)) as pool:
