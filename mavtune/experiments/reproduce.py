@@ -4,8 +4,9 @@
 2. repeated tuning runs for {avg, split} × {0, 0.9 kg} in the paper's setting (2 vehicles, EQL, ε 0.125,
    2 bootstraps, initial kd 0.2, no reuse), each with its own seeds; `runs.csv`, the table of mean ± std next
    to the paper's, and the final gains drawn on the surfaces (green avg, red split);
-3. `report.md`: the paper's claims tested on these data (`mavtune.report.claims`), plus the timelines of one
-   avg and one split run (Figs. 6–7).
+3. `report.md`: the paper's claims tested on these data (`mavtune.report.claims`), the timelines of one
+   avg and one split run (Figs. 6–7), and what reuse, speculation and more vehicles add
+   (`mavtune.experiments.extensions`, `extensions.csv`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from mavtune.config import Config, load_config
+from mavtune.experiments import extensions as ext
 from mavtune.report import claims as C
 from mavtune.report import markdown as md
 from mavtune.report.folders import out_folder
@@ -109,6 +111,7 @@ def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: 
         surface_tasks = {p: bar.add_task(f"surface {_payload_tag(p)} (flights)", total=flights_per_surface)
                          for p in camp.payloads_kg}
         runs_task = bar.add_task("tuning runs", total=n_configs * camp.runs)
+        variants_task = bar.add_task("beyond the paper (runs)", total=len(ext.VARIANTS) * camp.runs)
         t0 = time.perf_counter()
         for p in camp.payloads_kg:
             task = surface_tasks[p]
@@ -132,6 +135,10 @@ def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: 
                                  "rounds": len(result.rounds), "flights": result.flights, "true_cost": math.nan})
                     bar.advance(runs_task)
         timings["tuning runs"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        variants = ext.run_variants(camp.runs, camp.seed, advance=lambda: bar.advance(variants_task))
+        ext.write_csv(variants, out / ext.EXTENSIONS_CSV)
+        timings["beyond the paper"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     for p in camp.payloads_kg:  # the noise-free cost of every final gain pair, one batch per payload
@@ -160,7 +167,8 @@ def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: 
     timings["total"] = time.perf_counter() - t_all
     rep = Reproduction(out, camp, runs, surfaces, claims, timings)
     _write_summary(rep, round_s)
-    (out / "report.md").write_text(_report_text(rep, paper_cfg.flight, round_s, figures, timelines, quick))
+    (out / "report.md").write_text(_report_text(rep, paper_cfg.flight, round_s, figures, timelines, quick,
+                                                ext.section(variants, round_s)))
     return rep
 
 
@@ -251,8 +259,10 @@ def _json_default(o: Any) -> Any:
     return str(o)
 
 
-def _report_text(rep: Reproduction, flight, round_s: float, figures: list, timelines: list, quick: bool) -> str:
-    """report.md of the reproduction: setting, table beside the paper's, claims, figures, wall times."""
+def _report_text(rep: Reproduction, flight, round_s: float, figures: list, timelines: list, quick: bool,
+                 extensions: list[str]) -> str:
+    """report.md of the reproduction: setting, table beside the paper's, claims, figures, what the paper's
+    method gains from reuse, speculation and more vehicles, wall times."""
     camp = rep.campaign
     table = config_table(rep.runs, round_s, camp.payloads_kg)
     lines = [
@@ -308,7 +318,7 @@ def _report_text(rep: Reproduction, flight, round_s: float, figures: list, timel
     for strategy, p, name in timelines:
         lines += [f"- {strategy}, payload {p:g} kg, run 0: [{name}/report.md]({name}/report.md)",
                   f"  {md.image(f'{name}/timeline.png', f'timeline {strategy}')}"]
-    lines += ["", "## Wall time", "",
+    lines += ["", *extensions, "## Wall time", "",
               md.table(["stage", "s"], [[k, f"{v:.1f}"] for k, v in rep.timings_s.items()], ["l", "r"]), "",
               "Files: `runs.csv` (one row per run), `summary.json` (the table and claims as data), "
               "`surface_*.csv`, the figures, one run report per strategy.", ""]

@@ -157,6 +157,27 @@ def test_true_cost_is_the_noise_free_cost_of_the_final_gains(quick):
         assert float(r["true_cost"]) == pytest.approx(f.cost, rel=1e-12)
 
 
+def test_beyond_the_paper_table_equals_extensions_csv(quick):
+    from mavtune.experiments.extensions import EXTENSIONS_CSV, VARIANTS
+
+    with (quick / EXTENSIONS_CSV).open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    report = (quick / "report.md").read_text()
+    assert "## Beyond the paper" in report
+    for v in VARIANTS:
+        g = [r for r in rows if r["variant"] == v.label]
+        assert len(g) == Campaign.quick().runs
+        line = next(ln for ln in report.splitlines() if ln.startswith(f"| {v.label} |"))
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        assert float(cells[3]) == pytest.approx(np.mean([int(r["rounds"]) for r in g]), abs=0.05)
+        spread = math.hypot(np.std([float(r["kp"]) for r in g], ddof=1), np.std([float(r["kd"]) for r in g], ddof=1))
+        assert float(cells[6]) == pytest.approx(spread, abs=5e-4)
+    # the round counts the plan promises: 56, 36, 28, 20 rounds for two vehicles; 8 with eight
+    by_label = {v.label: {int(r["rounds"]) for r in rows if r["variant"] == v.label} for v in VARIANTS}
+    assert [by_label[v.label] for v in VARIANTS[:4]] == [{56}, {36}, {28}, {20}]
+    assert by_label[VARIANTS[-1].label] == {8}
+
+
 @pytest.mark.slow
 def test_full_reproduce_within_five_minutes(tmp_path):
     import time
