@@ -11,6 +11,10 @@ from typing import List, Optional
 import typer
 
 from mavtune.errors import MavtuneError
+from mavtune.options import (
+    BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt, StrategyOpt, VehiclesOpt,
+    config_from_flags,
+)
 
 app = typer.Typer(
     name="mavtune",
@@ -21,41 +25,6 @@ app = typer.Typer(
 )
 
 
-def _overrides(**flags) -> dict:
-    """Flags given on the command line, as dotted config keys (unset flags are None and left out)."""
-    return {k.replace("__", "."): v for k, v in flags.items() if v is not None}
-
-
-def _bootstraps(value: Optional[str]) -> int | str | None:
-    if value is None or value == "auto":
-        return value
-    try:
-        return int(value)
-    except ValueError:
-        raise MavtuneError(f"--bootstraps must be a whole number or 'auto', got {value!r}") from None
-
-
-ConfigOpt = typer.Option(None, "--config", "-c", help="TOML config file ([tuning], [flight], [sim], [fleet], ...).")
-VehiclesOpt = typer.Option(None, "--vehicles", "-n", help="Vehicles flying each round.")
-StrategyOpt = typer.Option(None, "--strategy", help="avg | split | groups.")
-ReplicatesOpt = typer.Option(None, "--replicates", help="groups: vehicles per point (r).")
-MethodOpt = typer.Option(None, "--method", help="eql | fibonacci | golden | dichotomy | nsection.")
-EpsilonOpt = typer.Option(None, "--epsilon", help="Tolerance as a fraction of each gain's range, in (0, 0.5).")
-BootstrapsOpt = typer.Option(None, "--bootstraps", help="Passes over the gains, or 'auto' for the paper's stop rule.")
-ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twice in one line search.")
-BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
-
-
-def _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base=None,
-            **more):
-    from mavtune.config import load_config
-
-    return load_config(config, base=base, overrides=_overrides(
-        tuning__vehicles=vehicles, tuning__strategy=strategy, tuning__replicates=replicates, tuning__method=method,
-        tuning__epsilon=epsilon, tuning__bootstraps=_bootstraps(bootstraps), tuning__reuse=reuse,
-        flight__battery_s=battery_s, **more))
-
-
 @app.command("plan")
 def plan_command(
     config: Optional[Path] = ConfigOpt, vehicles: Optional[int] = VehiclesOpt, strategy: Optional[str] = StrategyOpt,
@@ -64,11 +33,11 @@ def plan_command(
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
 ) -> None:
     """Print, before anything flies, the rounds, flights, flight time and batteries a run needs."""
-    from mavtune.run import plan_of, _plan_panel
+    from mavtune.run import plan_of, plan_panel
     from rich.console import Console
 
-    cfg = _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s)
-    Console().print(_plan_panel(cfg, plan_of(cfg)))
+    cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s)
+    Console().print(plan_panel(cfg, plan_of(cfg)))
 
 
 @app.command("tune")
@@ -99,7 +68,7 @@ def tune_command(
     from mavtune.run import JOURNAL, run, saved_config
 
     base = saved_config(out) if out is not None and config is None else None  # resume a folder as it was run
-    cfg = _config(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base,
+    cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base,
                   tuning__seed=seed, sim__payload_kg=payload, fleet__kind=fleet, swarm__listen=listen,
                   mavlink__urls=mavlink or None, mavlink__keep_tuned=keep_tuned)
     if out is None:
@@ -144,7 +113,7 @@ def bank_build(
         raise MavtuneError(f"--payloads must be numbers separated by commas, got {payloads!r}") from None
     console, bank = Console(), GainBank.load(out / "bank.json", missing_ok=True)
     for payload in masses:
-        cfg = _config(config, vehicles, strategy, None, None, None, None, None, None, tuning__seed=seed,
+        cfg = config_from_flags(config, vehicles, strategy, None, None, None, None, None, None, tuning__seed=seed,
                       sim__payload_kg=payload)
         folder = out / f"payload-{payload:g}kg"
         console.rule(f"payload {payload:g} kg")

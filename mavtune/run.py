@@ -128,7 +128,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
         book.bind(settings.fingerprint())
         if recorded := len(book.rounds()):
             console.print(f"resuming {journal}: {recorded} rounds recorded will not be flown again")
-        console.print(_plan_panel(config, plan))
+        console.print(plan_panel(config, plan))
         (out_dir / "config.json").write_text(json.dumps(config.model_dump(mode="json"), indent=2))
         fleet: Fleet | None = None
         tuner: Tuner | None = None
@@ -210,7 +210,7 @@ def _write_summary(out_dir: Path, config: Config, plan: Plan, result: TuningResu
     os.replace(partial, path)
 
 
-def _plan_panel(config: Config, plan: Plan) -> str:
+def plan_panel(config: Config, plan: Plan) -> str:
     t = config.tuning
     head = (f"[bold]plan[/]  {t.method} ε={t.epsilon:g} over {', '.join(t.space)} · {t.vehicles} × "
             f"{config.fleet.kind} vehicles · strategy {t.strategy}{'' if t.reuse else ' (no reuse)'}")

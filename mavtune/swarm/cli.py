@@ -10,6 +10,10 @@ from typing import Optional
 import typer
 
 from mavtune.errors import MavtuneError
+from mavtune.options import (
+    BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt, StrategyOpt, VehiclesOpt,
+    config_from_flags,
+)
 from mavtune.swarm.config import load_swarm_config
 
 
@@ -74,38 +78,33 @@ def agent_command(
 
 def coordinator_command(
     listen: Optional[str] = typer.Option(None, "--listen", help="Zenoh endpoint to listen on [tcp/0.0.0.0:7447]."),
-    vehicles: Optional[int] = typer.Option(None, "--vehicles", help="Vehicles to wait for before round 1 [2]."),
     out: Path = typer.Option(..., "--out", help="Run folder: journal.sqlite, result.json, report; resumed if it "
                                                 "holds a journal."),
     resume: bool = typer.Option(False, "--resume", help="Require --out to hold a journal and continue it."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Run config (TOML: [tuning], [flight], [swarm])."),
+    config: Optional[Path] = ConfigOpt, vehicles: Optional[int] = VehiclesOpt, strategy: Optional[str] = StrategyOpt,
+    replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
+    epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
+    reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
     token: Optional[str] = typer.Option(None, "--token", help="Shared token (overrides the config)."),
     settle_s: Optional[float] = typer.Option(None, "--settle-s", help="Wait between acknowledgements and start."),
     result_timeout_s: Optional[float] = typer.Option(None, "--result-timeout-s", help="Wait for results."),
     ack_timeout_s: Optional[float] = typer.Option(None, "--ack-timeout-s", help="Wait for acknowledgements."),
     presence_timeout_s: Optional[float] = typer.Option(None, "--presence-timeout-s", help="Wait for vehicles."),
-    method: Optional[str] = typer.Option(None, "--method", help="Line search [eql]."),
-    epsilon: Optional[float] = typer.Option(None, "--epsilon", help="Tolerance as a fraction of each gain's range."),
-    bootstraps: Optional[int] = typer.Option(None, "--bootstraps", help="Passes over the gains [2]."),
-    strategy: Optional[str] = typer.Option(None, "--strategy", help="avg | split | groups [avg]."),
-    reuse: Optional[bool] = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twice in a search."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Seed recorded with the run."),
     verbose: bool = typer.Option(False, "--verbose", "-v"),
 ) -> None:
     """Coordinate a swarm over Zenoh — `mavtune tune --fleet zenoh` with the swarm's settings as flags."""
-    from mavtune.config import load_config
     from mavtune.run import JOURNAL, run, saved_config
 
     _logging(verbose)
     if resume and not (out / JOURNAL).exists():
         raise MavtuneError(f"--resume: there is no journal at {out / JOURNAL}")
-    flags = {"fleet.kind": "zenoh", "tuning.vehicles": vehicles, "tuning.method": method, "tuning.epsilon": epsilon,
-             "tuning.bootstraps": bootstraps, "tuning.strategy": strategy, "tuning.reuse": reuse, "tuning.seed": seed,
-             "swarm.listen": listen, "swarm.session": session, "swarm.token": token, "swarm.settle_s": settle_s,
-             "swarm.result_timeout_s": result_timeout_s, "swarm.ack_timeout_s": ack_timeout_s,
-             "swarm.presence_timeout_s": presence_timeout_s}
-    run(load_config(config, flags, base=saved_config(out) if config is None else None), out, quiet=True)
+    cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
+                            base=saved_config(out) if config is None else None, fleet__kind="zenoh",
+                            swarm__listen=listen, swarm__session=session, swarm__token=token,
+                            swarm__settle_s=settle_s, swarm__result_timeout_s=result_timeout_s,
+                            swarm__ack_timeout_s=ack_timeout_s, swarm__presence_timeout_s=presence_timeout_s)
+    run(cfg, out, quiet=True)
 
 
 __all__ = ["agent_command", "coordinator_command", "MavtuneError"]

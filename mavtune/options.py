@@ -1,0 +1,44 @@
+"""The command-line options every tuning command shares, and how flags become a validated Config."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+
+from mavtune.errors import MavtuneError
+
+ConfigOpt = typer.Option(None, "--config", "-c", help="TOML config file ([tuning], [flight], [sim], [fleet], ...).")
+VehiclesOpt = typer.Option(None, "--vehicles", "-n", help="Vehicles flying each round.")
+StrategyOpt = typer.Option(None, "--strategy", help="avg | split | groups.")
+ReplicatesOpt = typer.Option(None, "--replicates", help="groups: vehicles per point (r).")
+MethodOpt = typer.Option(None, "--method", help="eql | fibonacci | golden | dichotomy | nsection.")
+EpsilonOpt = typer.Option(None, "--epsilon", help="Tolerance as a fraction of each gain's range, in (0, 0.5).")
+BootstrapsOpt = typer.Option(None, "--bootstraps", help="Passes over the gains, or 'auto' for the paper's stop rule.")
+ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twice in one line search.")
+BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
+
+
+def bootstraps_flag(value: Optional[str]) -> int | str | None:
+    """--bootstraps: a whole number, or 'auto' for the paper's stop rule."""
+    if value is None or value == "auto":
+        return value
+    try:
+        return int(value)
+    except ValueError:
+        raise MavtuneError(f"--bootstraps must be a whole number or 'auto', got {value!r}") from None
+
+
+def config_from_flags(config: Optional[Path], vehicles: Optional[int], strategy: Optional[str],
+                      replicates: Optional[int], method: Optional[str], epsilon: Optional[float],
+                      bootstraps: Optional[str], reuse: Optional[bool], battery_s: Optional[float],
+                      base: dict[str, Any] | None = None, **more: Any):
+    """The run's Config: the file (or `base`), then the flags given; `more` are further `section__field` flags."""
+    from mavtune.config import load_config
+
+    flags = dict(tuning__vehicles=vehicles, tuning__strategy=strategy, tuning__replicates=replicates,
+                 tuning__method=method, tuning__epsilon=epsilon, tuning__bootstraps=bootstraps_flag(bootstraps),
+                 tuning__reuse=reuse, flight__battery_s=battery_s, **more)
+    return load_config(config, base=base,
+                       overrides={k.replace("__", "."): v for k, v in flags.items() if v is not None})
