@@ -112,16 +112,16 @@ def _noise(seed: int) -> Callable[[float], float]:
 
 
 def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.0, battery_s: float = 600.0) -> Plan:
-    """Count rounds for these settings; each gain's line search is counted once, times the bootstraps."""
+    """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps."""
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
-    rounds = rounds_max = evaluations = 0
-    for lo, hi in settings.space.values():
-        minimisers = [lo + (hi - lo) * (i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]
-        costs = [lambda x, m=m: abs(x - m) for m in minimisers] + [_noise(seed) for seed in range(NOISE_PROBES)]
-        rounds += max(_rehearse(settings, lo, hi, cost) for cost in costs)
-        rounds_max += _rounds_without_speculation(settings, lo, hi)
-        evaluations += make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse,
-                                   points=settings.points).budget()
-    return Plan(rounds * bootstraps, max(rounds, rounds_max) * bootstraps, settings.vehicles,
-                evaluations * bootstraps, bootstraps, primitive_s, settle_s, battery_s,
-                stop_rule=settings.bootstraps is None)
+    # every gain's line search has the same shape relative to its range: rehearse one, count it per gain
+    lo, hi = 0.0, 1.0
+    minimisers = [(i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]
+    costs = [lambda x, m=m: abs(x - m) for m in minimisers] + [_noise(seed) for seed in range(NOISE_PROBES)]
+    per_search = max(_rehearse(settings, lo, hi, cost) for cost in costs)
+    per_search_max = max(per_search, _rounds_without_speculation(settings, lo, hi))
+    evaluations = make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse,
+                              points=settings.points).budget()
+    searches = len(settings.space) * bootstraps
+    return Plan(per_search * searches, per_search_max * searches, settings.vehicles, evaluations * searches,
+                bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None)

@@ -165,15 +165,17 @@ class LineSearch(ABC):
         """Exactly how many cost evaluations a whole search needs."""
         return sum(self.needs(reuse))
 
-    def speculate(self, n: int, exclude: Sequence[float] = (), max_nodes: int = 4096) -> list[float]:
+    def speculate(self, n: int, exclude: Sequence[float] = (), max_nodes: int | None = None) -> list[float]:
         """Up to `n` unknown points most likely to be needed by later iterations, most likely first.
 
-        Walks the tree of comparison outcomes from the current state; an outcome whose costs are all known
-        is followed for certain, otherwise each outcome gets an equal share of its parent's probability.
-        A point's score is the probability that the search will ask for it. Only meaningful with reuse.
+        Walks the tree of comparison outcomes from the current state, most probable first, for at most
+        `max_nodes` (default 64·n) states; an outcome whose costs are all known is followed for certain, otherwise
+        each outcome gets an equal share of its parent's probability. A point's score is the probability that
+        the search will ask for it. Only meaningful with reuse.
         """
         if n <= 0 or not self.reuse or self.done:
             return []
+        max_nodes = max_nodes or 64 * n
         taken = {self.key(p) for p in exclude} | {self.key(p) for p in self.ask()}
         score: dict[int, float] = {}
         where: dict[int, float] = {}
