@@ -134,6 +134,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
         tuner: Tuner | None = None
         started, status, error = time.time(), "error", None
         try:
+            console.print(_fleet_line(config))
             fleet = build_fleet(config, out_dir)
             tuner = Tuner(settings, fleet, book, stage_rounds=stage_rounds)
             with RoundView(console, plan, quiet) as view:
@@ -208,6 +209,18 @@ def _write_summary(out_dir: Path, config: Config, plan: Plan, result: TuningResu
     partial = path.with_suffix(".json.partial")
     partial.write_text(json.dumps(summary, indent=2, default=str))
     os.replace(partial, path)
+
+
+def _fleet_line(config: Config) -> str:
+    """What the run is about to connect to, said before any wait."""
+    n, kind = config.tuning.vehicles, config.fleet.kind
+    if kind == "zenoh":
+        listen = config.swarm.get("listen", "tcp/0.0.0.0:7447")
+        return (f"waiting for {n} agents on {listen} (session {config.swarm.get('session', 'mavtune')!r}); "
+                f"start them with `mavtune agent --id ID --connect {listen} ...`")
+    if kind == "mavlink":
+        return f"connecting to {n} MAVLink vehicles: {', '.join(config.mavlink.get('urls', []))}"
+    return f"flying {n} simulated vehicles (seed {config.tuning.seed})"
 
 
 def plan_panel(config: Config, plan: Plan) -> str:
