@@ -1,0 +1,64 @@
+"""Strategies: every vehicle flies, asked points come first, costs merge per point over the flights that measured."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, strategies as st
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Flight, Status
+from mavtune.search import make_search
+from mavtune.strategy import Strategy
+
+
+@given(st.sampled_from(["avg", "split", "groups"]), st.integers(1, 6), st.integers(1, 3),
+       st.sampled_from(["eql", "golden", "nsection"]), st.booleans(), st.integers(0, 5))
+def test_assign_uses_every_vehicle_and_flies_the_asked_points_first(name, half, r, method, reuse, steps):
+    vehicles = 2 * half
+    replicates = r if vehicles % r == 0 else 1
+    rule = Strategy.make(name, vehicles, replicates)
+    search = make_search(method, 0.0, 1.0, 0.1, reuse=reuse, points=3)
+    for k in range(steps):  # walk the search a few iterations on a bowl
+        if search.done:
+            break
+        asked = search.ask()
+        search.tell(asked, [(p - 0.3) ** 2 for p in asked])
+    if search.done:
+        return
+    asked = search.ask()
+    points = rule.assign(search, vehicles)
+    assert len(points) == vehicles
+    slots = rule.slots(vehicles)
+    must = asked[:slots]
+    assert all(p in points for p in must)
+    if name == "avg":
+        assert set(points) == {asked[0]}
+    if name == "groups":
+        for p in set(points) - set(asked):  # speculative points are flown by a whole group
+            assert points.count(p) == rule.replicates
+    if not reuse:
+        assert set(points) <= set(asked)  # no speculation without reuse: spare vehicles replicate
+
+
+def test_reduce_averages_measured_flights_and_drops_points_never_measured():
+    search = make_search("eql", 0.0, 1.0, 0.125)
+    points = [0.125, 0.125, 0.875, 0.875]
+    flights = [Flight("a", {}, 1.0), Flight("b", {}, 3.0, Status.OK),
+               Flight("c", {}, math.nan, Status.LOST), Flight("d", {}, math.nan, Status.LOST)]
+    told, costs = Strategy.reduce(search, points, flights)
+    assert told == [0.125] and costs == [2.0]
+    flights[3] = Flight("d", {}, math.inf, Status.FAILED)
+    told, costs = Strategy.reduce(search, points, flights)
+    assert told == [0.125, 0.875] and costs == [2.0, math.inf]
+
+
+@pytest.mark.parametrize("name, vehicles, r, message", [
+    ("sideways", 2, None, "unknown strategy"),
+    ("split", 0, None, "at least 1"),
+    ("groups", 4, 3, "do not divide"),
+])
+def test_bad_strategies_are_named(name, vehicles, r, message):
+    with pytest.raises(MavtuneError, match=message):
+        Strategy.make(name, vehicles, r)
