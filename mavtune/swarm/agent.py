@@ -2,7 +2,8 @@
 
 IDLE: hover on the current gains; on an Assignment for round k, check it against the envelope, apply it and
 acknowledge. On the Start of round k: FLYING — fly the primitive, report the cost and a decimated trace — back to
-IDLE. Idempotent on (session, round): a repeated assignment or start does not fly again, the stored result is resent
+IDLE. When the run ends (Finish) or the coordinator disappears, the vehicle is released: a MAVLink vehicle goes
+back to its original gains (or the tuned ones, if its config keeps them). Idempotent on (session, round): a repeated assignment or start does not fly again, the stored result is resent
 (unless the assignment now carries other gains: then the old result does not answer it, and the round is flown).
 """
 
@@ -20,8 +21,8 @@ from typing import Any
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.messages import (VEHICLE_PATTERN, Ack, AgentState, Assignment, Hello, Probe, Result, Start,
-                                    State, decode, encode, result_from_flight)
+from mavtune.swarm.messages import (VEHICLE_PATTERN, Ack, AgentState, Assignment, Finish, Hello, Probe, Result,
+                                    Start, State, decode, encode, result_from_flight)
 from mavtune.swarm.transport import Keys, Link, open_client
 from mavtune.swarm.vehicles import Vehicle, finite_gains
 
@@ -84,6 +85,7 @@ class Agent:
         self._results: OrderedDict[int, tuple[Gains, Result]] = OrderedDict()
         self._stop = threading.Event()
         self._running = threading.Lock()  # held while run() handles messages; close() waits for it
+        self._released = True  # the vehicle is on safe gains (no run has changed them since the last release)
 
     @classmethod
     def connect(cls, vehicle_id: str, vehicle: Vehicle, config: SwarmConfig, endpoint: str) -> "Agent":
@@ -99,6 +101,7 @@ class Agent:
         """Subscribe, announce presence (liveliness token) and say hello."""
         self.link.subscribe(self.keys.to(self.id), self._enqueue)
         self.link.subscribe(self.keys.start, self._enqueue)
+        self.link.watch_liveliness(self.keys.coordinator, self._on_coordinator)
         self.link.declare_token(self.keys.alive(self.id))
         self._send(Hello(session=self.config.session, token=self.config.token, vehicle=self.id,
                          backend=self.vehicle.backend, state=self.state, envelope=self.config.envelope))
@@ -106,6 +109,10 @@ class Agent:
 
     def _enqueue(self, key: str, payload: bytes) -> None:
         self._inbox.put((key, payload))
+
+    def _on_coordinator(self, key: str, alive: bool) -> None:
+        if not alive:  # handled in run()'s thread, between flights
+            self._inbox.put((key, b""))
 
     def run(self) -> None:
         """Handle messages until stop() (a flight under way is finished first)."""
@@ -138,6 +145,9 @@ class Agent:
     # --- the state machine -----------------------------------------------------------------------------------
     def handle(self, key: str, payload: bytes) -> None:
         """Process one incoming payload (anything invalid or foreign is dropped with a log line)."""
+        if key == self.keys.coordinator and not payload:
+            self._release(None, "the coordinator is gone")
+            return
         msg = decode(payload, session=self.config.session, token=self.config.token, where=f"agent {self.id} <- {key}")
         if msg is None:
             return
@@ -149,6 +159,9 @@ class Agent:
             self._on_assignment(msg)
         elif isinstance(msg, Start):
             self._on_start(msg)
+        elif isinstance(msg, Finish):
+            self._release(msg.gains, "the run is over")
+            self._ack(msg.round, True, "released")
         else:
             log.warning("dropped %s at agent %s: unexpected %s", key, self.id, msg.kind)
 
@@ -176,6 +189,7 @@ class Agent:
             self._ack(msg.round, False, why)
             return
         try:
+            self._released = False
             self.vehicle.apply(applied)  # the backend checks them too (range, names) and may refuse
         except MavtuneError as exc:
             log.warning("round %d: the vehicle refused gains %s (%s)", msg.round, applied, exc)
@@ -219,6 +233,18 @@ class Agent:
         self._send(result)
         log.info("round %d: cost %.6g (%s)", msg.round, result.cost, result.status.value)
         self._set_state(AgentState.IDLE, msg.round)
+
+    def _release(self, tuned: Gains | None, why: str) -> None:
+        """Leave the vehicle on safe gains once per run: its originals, or the tuned ones where configured."""
+        self._armed = None
+        if self._released:
+            return
+        log.info("agent %s: %s; releasing the vehicle%s", self.id, why, "" if tuned is None else f" (tuned {tuned})")
+        try:
+            self.vehicle.release(tuned)
+        except MavtuneError as exc:
+            log.error("agent %s: releasing the vehicle failed: %s", self.id, exc)
+        self._released = True
 
     # --- helpers ---------------------------------------------------------------------------------------------
     def _set_state(self, state: AgentState, round_id: int) -> None:

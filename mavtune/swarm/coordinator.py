@@ -18,7 +18,7 @@ from typing import Any, Callable, Sequence
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
 from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.messages import Ack, Assignment, Hello, Probe, Result, Start, State, decode, encode
+from mavtune.swarm.messages import Ack, Assignment, Finish, Hello, Probe, Result, Start, State, decode, encode
 from mavtune.swarm.transport import Keys, Link, open_router
 
 log = logging.getLogger(__name__)
@@ -43,7 +43,9 @@ class ZenohFleet:
     def __init__(self, listen: str, config: SwarmConfig, link: Link | None = None, expected: int = 1):
         self.config = config
         self.expected = expected  # vehicles to wait for before round 1 (the paper's semaphore)
+        self.tuned: Gains | None = None  # set when the run finished: agents configured to keep gains keep these
         self._quorum = False
+        self._finishing: set[str] = set()  # vehicles asked to release that have not answered yet
         self.keys = Keys(config.session)
         self.listen = listen
         self.state = CoordinatorState.IDLE
@@ -57,6 +59,7 @@ class ZenohFleet:
         self.link = link if link is not None else open_router(listen, lease_ms=config.lease_ms, tls=config.tls)
         self.link.subscribe(self.keys.frm("*"), lambda k, p: self._inbox.put(("msg", k, p)))
         self.link.watch_liveliness(self.keys.alive("*"), lambda k, a: self._inbox.put(("live", k, a)))
+        self.link.declare_token(self.keys.coordinator)  # agents release their vehicles when it goes
         log.info("coordinator listening on %s, session %s", listen, config.session)
 
     # --- Fleet protocol ----------------------------------------------------------------------------------------
@@ -128,9 +131,22 @@ class ZenohFleet:
             self.state = CoordinatorState.OPTIMIZE
 
     def close(self) -> None:
-        """Close the Zenoh router (agents notice and wait for the next coordinator)."""
+        """Tell the agents the run is over (they release their vehicles: original gains back, or the tuned ones
+        where configured), wait up to ack_timeout_s for them to confirm, close the router."""
         self.state = CoordinatorState.IDLE
-        self.link.close()
+        try:
+            self._finishing = set(self.present)
+            if self._finishing:
+                self._send(self.keys.start, Finish(session=self.config.session, token=self.config.token,
+                                                   gains=self.tuned))
+                deadline = time.monotonic() + self.config.ack_timeout_s
+                while self._finishing and self._pump(deadline):
+                    pass
+                for vid in sorted(self._finishing):
+                    self._event("unreleased", None, vid, "no confirmation that the vehicle was released; its agent "
+                                "releases it when it notices the coordinator is gone")
+        finally:
+            self.link.close()
 
     # --- event handling ---------------------------------------------------------------------------------------
     def _drain(self) -> None:
@@ -222,6 +238,10 @@ class ZenohFleet:
                 self._event("joined", None if self._round is None else self._round.id, sender,
                             f"backend {msg.backend or '?'}")
             return
+        if isinstance(msg, Ack) and msg.round == -1 and sender in self._finishing:
+            self._finishing.discard(sender)
+            self._event("released", None, sender, msg.reason)
+            return
         rnd = self._round
         if isinstance(msg, State):
             log.debug("%s: round %d %s", sender, msg.round, msg.state.name)
@@ -255,7 +275,8 @@ class ZenohFleet:
         entry = {"t_s": round(time.monotonic() - self._t0, 3), "event": event, "round": round_id,
                  "vehicle": vehicle, "detail": detail, **extra}
         self.events.append(entry)
-        level = logging.WARNING if event in ("lost", "left", "refused", "late_result", "unassigned") else logging.INFO
+        level = logging.WARNING if event in ("lost", "left", "refused", "late_result", "unassigned", "unreleased") \
+            else logging.INFO
         log.log(level, "round %s: %s %s (%s)", round_id, vehicle or "", event, detail)
 
     def _send(self, key: str, msg: Any) -> None:

@@ -90,6 +90,14 @@ class Start(_Message):
     vehicles: list[Annotated[str, Field(pattern=VEHICLE_PATTERN)]]
 
 
+class Finish(_Message):
+    """Coordinator → all agents: the run is over; leave the vehicle on its original gains (or, where the agent is
+    configured to keep them, on these tuned gains; None when the run did not finish)."""
+
+    kind: Literal["finish"] = "finish"
+    gains: dict[str, float] | None = None
+
+
 class TraceMsg(BaseModel):
     """A decimated altitude trace on the wire (seconds, metres)."""
 
@@ -130,7 +138,7 @@ class State(_Message):
     state: AgentState
 
 
-Message = Annotated[Union[Hello, Probe, Assignment, Ack, Start, Result, State], Field(discriminator="kind")]
+Message = Annotated[Union[Hello, Probe, Assignment, Ack, Start, Finish, Result, State], Field(discriminator="kind")]
 _ADAPTER: TypeAdapter[Message] = TypeAdapter(Message)
 
 

@@ -50,6 +50,11 @@ class Keys:
         return f"{self.prefix}/from/{vehicle}"
 
     @property
+    def coordinator(self) -> str:
+        """The coordinator's liveliness token: agents release their vehicles when it goes."""
+        return f"{self.prefix}/coordinator"
+
+    @property
     def start(self) -> str:
         """Coordinator → all agents: the start signal of a round."""
         return f"{self.prefix}/start"

@@ -27,6 +27,10 @@ class Vehicle(Protocol):
         """Fly the reference primitive with the applied gains and return the flight (cost, status, trace)."""
         ...
 
+    def release(self, tuned: Gains | None = None) -> None:
+        """The run is over: leave the vehicle on safe gains (its originals, or `tuned` where configured to keep)."""
+        ...
+
     def close(self) -> None:
         """Land / release the vehicle."""
         ...
@@ -61,6 +65,13 @@ class FleetVehicle:
         if self._gains is None:
             raise MavtuneError("fly() before any gains were applied")
         return self._fleet.fly([self._gains], round_id)[0]
+
+    def release(self, tuned: Gains | None = None) -> None:
+        """The run is over: a MAVLink vehicle goes back to its original gains (or `tuned`, if its config keeps
+        tuned gains); it can still fly a resumed run afterwards."""
+        end_run = getattr(self._fleet, "end_run", None)
+        if end_run is not None:
+            end_run(tuned)
 
     def close(self) -> None:
         """Close the fleet (a MAVLink one restores the original gains)."""
@@ -144,6 +155,9 @@ class PacedVehicle:
 
     def apply(self, gains: Gains) -> None:
         self.inner.apply(gains)
+
+    def release(self, tuned: Gains | None = None) -> None:
+        self.inner.release(tuned)
 
     def fly(self, round_id: int) -> Flight:
         t0 = time.monotonic()

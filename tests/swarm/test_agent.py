@@ -8,7 +8,7 @@ import pytest
 
 from mavtune.swarm.agent import Agent, check_envelope, decimate
 from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.messages import Ack, Assignment, Result, Start, decode, encode
+from mavtune.swarm.messages import Ack, Assignment, Finish, Result, Start, decode, encode
 from mavtune.swarm.transport import Keys
 from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
 from mavtune.fleet import Trace
@@ -27,6 +27,9 @@ class Recorder:
         pass
 
     def declare_token(self, *a):
+        pass
+
+    def watch_liveliness(self, *a):
         pass
 
     def close(self):
@@ -172,3 +175,31 @@ def test_close_waits_for_the_flight_under_way_and_its_result():
     agent.close(timeout_s=10)
     t.join(timeout=5)
     assert not t.is_alive() and len(of(agent, Result)) == 1
+
+
+class Releases(FleetVehicle):
+    """A toy vehicle that records every release (what a MAVLink vehicle does: originals back, or tuned gains)."""
+
+    def __init__(self):
+        super().__init__(ToyFleet(1), "toy")
+        self.released = []
+
+    def release(self, tuned=None):
+        self.released.append(tuned)
+
+
+def test_the_vehicle_is_released_once_when_the_run_ends_or_the_coordinator_goes():
+    cfg = SwarmConfig(session="s", token="t")
+    vehicle = Releases()
+    agent, keys = Agent("v0", vehicle, cfg, Recorder()), Keys("s")
+    agent.handle(keys.coordinator, b"")  # nothing applied yet: nothing to release
+    assert vehicle.released == []
+    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 0.4, "kd": 0.2}))
+    agent.handle(keys.start, encode(Finish(session="s", token="t", gains={"kp": 0.5, "kd": 0.3})))
+    assert vehicle.released == [{"kp": 0.5, "kd": 0.3}]
+    assert of(agent, Ack)[-1].round == -1 and of(agent, Ack)[-1].reason == "released"
+    agent.handle(keys.coordinator, b"")  # the coordinator closing after Finish releases nothing twice
+    assert len(vehicle.released) == 1
+    send(agent, keys, Assignment(session="s", token="t", round=1, vehicle="v0", gains={"kp": 0.6, "kd": 0.2}))
+    agent.handle(keys.coordinator, b"")  # a crashed coordinator: originals back
+    assert vehicle.released == [{"kp": 0.5, "kd": 0.3}, None]

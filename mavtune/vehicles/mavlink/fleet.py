@@ -168,6 +168,7 @@ class MavlinkFleet:
         (also an assignment beyond the vehicles ready now: one may have dropped out since `size` was asked)."""
         ready = self._ready()
         flights = []
+        self.restored = None  # gains change again: whatever was restored before must be restored anew
         with ThreadPoolExecutor(max_workers=max(1, min(len(assignments), len(ready)))) as pool:
             futures = [pool.submit(v.fly, dict(a), round_id) for v, a in zip(ready, assignments)]
             for v, a, fut in zip(ready, assignments, futures):
@@ -211,14 +212,21 @@ class MavlinkFleet:
         self._event("finished", restored=all(oks), kept_tuned=tuned is not None)
         return all(oks)
 
+    def end_run(self, tuned: Gains | None = None) -> bool:
+        """The run is over: the originals back on every vehicle, or `tuned` when config.keep_tuned; the vehicles
+        can fly a resumed run afterwards."""
+        if tuned is not None:
+            self.tuned = tuned
+        return self.finish(self.tuned if self.config.keep_tuned else None)
+
     def close(self) -> None:
         """Restore the originals (or the tuned gains when config.keep_tuned and `tuned` is set), close the links."""
         if self._closed:
             return
         self._closed = True
         try:
-            if self.restored is None:  # not finished by the caller yet
-                self.finish(self.tuned if self.config.keep_tuned else None)
+            if self.restored is None:  # not finished since the gains last changed
+                self.end_run()
         finally:
             try:
                 for v in self.vehicles:

@@ -351,6 +351,7 @@ class MavlinkVehicle:
         if reason:
             return lost(reason, "the vehicle did not come back to a calm hover before the gain change")
         self._aborted = False
+        self._finished = False  # candidate gains go on the vehicle: close() must restore again
         try:
             self.apply_gains(gains)
         except ParamNotConfirmed as exc:
