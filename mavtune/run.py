@@ -70,7 +70,7 @@ class RoundView:
     """Live progress: a bar over the planned rounds and one line per round (gain, bracket, points, costs)."""
 
     def __init__(self, console: Console, plan: Plan, quiet: bool = False):
-        self.console, self.plan, self.quiet = console, plan, quiet
+        self.plan, self.quiet = plan, quiet
         self.progress = Progress(
             TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
             console=console, disable=quiet, transient=False,
@@ -159,9 +159,8 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                 _write_summary(out_dir, config, plan, result, fleet, status, error, time.time() - started)
                 if report and result is not None:
                     _report(console, out_dir, result, config, surface, status)
+        recorded = len(book.rounds())  # the journal is the truth: a round can be recorded as Ctrl-C arrives
     if status == "interrupted":
-        with Journal(journal) as book:  # the journal is the truth: a round can be recorded as Ctrl-C arrives
-            recorded = len(book.rounds())
         raise Interrupted(f"interrupted: the journal keeps {recorded} rounds; `mavtune tune --out {out_dir}` resumes")
     if status == "stage":
         console.print(f"stage done: {tuner.flown} rounds flown now, {len(result.rounds)} of at most "
