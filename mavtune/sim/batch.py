@@ -56,6 +56,7 @@ def constants(scenario: Scenario) -> np.ndarray:
     cp[K.C_SPREAD_MASS] = scenario.spread.mass
     cp[K.C_SPREAD_KF] = scenario.spread.motor_constant
     cp[K.C_PAYLOAD] = scenario.payload_kg
+    cp[K.C_PAYLOAD_NEW] = 0.0 if scenario.payload_known else scenario.payload_kg
     cp[K.C_LP_ALPHA] = lowpass_alpha(scenario.filter_hz, DT_S)
     cp[K.C_Z_GROUND] = 0.0
     cp[K.C_FAIL_ERR] = scenario.failure_error_m

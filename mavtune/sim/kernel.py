@@ -41,7 +41,8 @@ FAST = {"contract", "arcp", "nsz", "afn"}
  C_E_HALF,  # exp(-dt / (2 tau_motor)): the rotor lag over half a step
  C_KZ_ROTOR, C_KD_ROTOR, C_KH_ROTOR,  # rotor axial inflow, in-plane drag (N / (rpm m/s)), translational lift
  C_JPX, C_JPY, C_JPZ,  # the plant's inertia, payload included (C_JX.. are the controller's nominal model)
- NCP) = range(46)
+ C_PAYLOAD_NEW,  # the payload mass the estimator does not know yet at the start, kg
+ NCP) = range(47)
 
 # ---- per-vehicle parameters `vp` --------------------------------------------------------------------------------
 V_MASS, V_KF, V_KXZ, V_KVZ, V_WX, V_WY, NVP = range(7)
@@ -104,7 +105,8 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
     The mass estimate has converged to this vehicle hovering in this flight's mean wind (its own mass and rotor
     spread, translational lift), but not to the payload: the payload is new to the estimator (the paper's payload
     case), so its first estimate is the one it held before the payload was strapped on, and the vehicle sags
-    until the estimator catches up. Without a payload the start is converged.
+    until the estimator catches up (unless the scenario says the payload is known). Without a payload the start is
+    converged.
     """
     g = cp[C_G]
     rs[0] = _mix64(seed ^ _SALT_SPREAD)
@@ -138,7 +140,7 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
         a[i] = 0.0
     # the estimator's hover equilibrium without the payload: commanded thrust (m_nom + dm) g through the nominal
     # k_f gives (kf / kf_nom) (m_nom + dm) g of rotor thrust, plus the translational lift
-    a[A_DM] = ((mass - cp[C_PAYLOAD]) * g - lift) * cp[C_KF] / (kf * g) - cp[C_MNOM]
+    a[A_DM] = ((mass - cp[C_PAYLOAD_NEW]) * g - lift) * cp[C_KF] / (kf * g) - cp[C_MNOM]
     n1, n2 = _normal2(rs)  # stationary start of the gust and position-error processes
     a[A_GX] = cp[C_GUST_XY] * n1
     a[A_GY] = cp[C_GUST_XY] * n2

@@ -89,9 +89,10 @@ def test_translational_lift_raises_a_vehicle_in_a_side_wind():
 
 def test_payload_is_new_to_the_mass_estimator_sag_then_recovery():
     """The paper's payload case: the estimator starts at what it held without the payload, so the vehicle sags
-    below its hover point, then the estimator (dm/dt = km e_z) brings it back; without the payload it holds."""
-    def hover(payload_kg):
-        plant = Plant(1, Scenario.noise_free(payload_kg=payload_kg))
+    below its hover point, then the estimator (dm/dt = km e_z) brings it back; without the payload, or with one
+    the estimator already knows, it holds."""
+    def hover(payload_kg, known=False):
+        plant = Plant(1, Scenario.noise_free(payload_kg=payload_kg, payload_known=known))
         plant.reset([0.0, 0.0, 2.0])
         plant.set_gains(15.0, 8.0)
         z = np.empty(3000)
@@ -104,6 +105,7 @@ def test_payload_is_new_to_the_mass_estimator_sag_then_recovery():
     assert sag > 0.15  # ~ 0.9 g / (2.3 * 15) = 0.26 m, less as the estimator catches up
     assert 2.0 - z[-1] < 0.1 * sag  # recovered within 30 s
     assert np.abs(hover(0.0) - 2.0).max() < 1e-9
+    assert np.abs(hover(0.9, known=True) - 2.0).max() < 1e-9  # a converged estimate carries it from the start
 
 
 def test_payload_adds_inertia_and_drag():
