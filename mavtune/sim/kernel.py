@@ -163,18 +163,18 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
 
 
 @njit(cache=True, fastmath=FAST)
+def _rotation(qw, qx, qy, qz):
+    """Rotation matrix (row-major r00 .. r22, body to world) of the unit quaternion (w, x, y, z)."""
+    return (1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy),
+            2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx),
+            2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy))
+
+
+@njit(cache=True, fastmath=FAST)
 def _rigid(s, a, vp, cp, mix, decay, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, airx, airy, airz):
     """Paper eq. (1) with rotor and body aerodynamics: derivatives of velocity, quaternion and body rates at one
     RK4 stage, the rotors having moved a fraction (1 - decay) from their speeds towards their commands."""
-    r00 = 1.0 - 2.0 * (qy * qy + qz * qz)
-    r01 = 2.0 * (qx * qy - qw * qz)
-    r02 = 2.0 * (qx * qz + qw * qy)
-    r10 = 2.0 * (qx * qy + qw * qz)
-    r11 = 1.0 - 2.0 * (qx * qx + qz * qz)
-    r12 = 2.0 * (qy * qz - qw * qx)
-    r20 = 2.0 * (qx * qz - qw * qy)
-    r21 = 2.0 * (qy * qz + qw * qx)
-    r22 = 1.0 - 2.0 * (qx * qx + qy * qy)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation(qw, qx, qy, qz)
     ux = vx - airx  # air-relative velocity, world frame
     uy = vy - airy
     uz = vz - airz
@@ -275,15 +275,7 @@ def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
     dt = cp[C_DT]
     g = cp[C_G]
     qw, qx, qy, qz = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    r00 = 1.0 - 2.0 * (qy * qy + qz * qz)
-    r01 = 2.0 * (qx * qy - qw * qz)
-    r02 = 2.0 * (qx * qz + qw * qy)
-    r10 = 2.0 * (qx * qy + qw * qz)
-    r11 = 1.0 - 2.0 * (qx * qx + qz * qz)
-    r12 = 2.0 * (qy * qz - qw * qx)
-    r20 = 2.0 * (qx * qz - qw * qy)
-    r21 = 2.0 * (qy * qz + qw * qx)
-    r22 = 1.0 - 2.0 * (qx * qx + qy * qy)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation(qw, qx, qy, qz)
     ex = ref[0] - px
     ey = ref[1] - py
     ez = ref[2] - pz
