@@ -113,9 +113,11 @@ def test_surface_into_a_file_or_unwritable_folder_is_one_line_error(tmp_path):
         assert isinstance(res.exception, MavtuneError) and problem in str(res.exception)
 
 
-def test_default_scenario_optimum_lies_inside_the_gain_square():
-    """The normalised ranges put the default scenario's surface minimum inside [0, 1]², not on an edge."""
-    s = surf.compute_surface(grid=9, repeats=4, scenario=Scenario.default(), seed=0)
+@pytest.mark.parametrize("payload_kg", [0.0, 0.9])
+def test_the_optimum_lies_inside_the_gain_square(payload_kg):
+    """The normalised ranges put the surface minimum of the default and of the payload scenario inside [0, 1]²,
+    not on an edge."""
+    s = surf.compute_surface(grid=9, repeats=4, scenario=Scenario(payload_kg=payload_kg), seed=0)
     kp, kd = s.argmin()
     assert 0.0 < kp < 1.0 and 0.0 < kd < 1.0
 
