@@ -1,9 +1,11 @@
 """The paper's altitude index for samples measured outside the simulator (MAVLink vehicles, logs).
 
-The same definition as the simulator's kernel: the altitude measurement and the reference go through the
-same first-order low-pass (cutoff filter_hz, both started at the first reference value, so the filter lag is
-not counted as error), and |z_f − z_ref,f| is summed at every dt_s step from sample `skip` on. Units: m per
-sample, as in the kernel; tests/sim/test_cost.py checks that both give the same number for one flight.
+The same definition as the simulator's kernel: `z_m` is the altitude the vehicle's controller measured (a real
+vehicle's lidar or estimate, as logged; in the simulator the delayed, noisy reading its controller acted on) and
+`z_ref_m` the reference it was tracking at that sample; both go through the same first-order low-pass (cutoff
+filter_hz, both started at the first reference value, so the filter lag is not counted as error), and
+|z_f − z_ref,f| is summed at every dt_s step from sample `skip` on. Units: m per sample, as in the kernel;
+tests/sim/test_cost.py checks that both give the same number for one flight.
 """
 
 from __future__ import annotations
