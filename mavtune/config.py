@@ -45,7 +45,10 @@ class Tuning(_Section):
     seed: int = 0
     adaptive: bool = False
     confidence: float = Field(0.9, gt=0.5, lt=1.0, description="adaptive: p_correct a comparison needs to move on")
-    cap: int | None = Field(None, ge=1, description="adaptive: most flights of one point (default 4 rounds' worth)")
+    cap: int | None = Field(None, ge=1, description="adaptive: most flights of one point in one comparison "
+                            "(default 4 rounds' worth)")
+    stop_undecided: bool = Field(False, description="adaptive: a comparison undecided at the cap stops the search")
+    refly: bool = Field(False, description="reuse: a point carried into the next comparison is flown again there")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":
@@ -100,7 +103,7 @@ class Config(_Section):
                         bootstraps=None if t.bootstraps == "auto" else t.bootstraps, vehicles=t.vehicles,
                         strategy=t.strategy, reuse=t.reuse, initial=dict(t.initial), replicates=t.replicates,
                         points=t.points, max_bootstraps=t.max_bootstraps, seed=t.seed, adaptive=t.adaptive,
-                        confidence=t.confidence, cap=t.cap)
+                        confidence=t.confidence, cap=t.cap, stop_undecided=t.stop_undecided, refly=t.refly)
 
     def scenario(self):
         """The simulated scenario: the [sim] section with the primitive and timing of [flight]."""

@@ -137,6 +137,8 @@ class Settings:
     adaptive: bool = False
     confidence: float = 0.9
     cap: int | None = None
+    refly: bool = False
+    stop_undecided: bool = False
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -170,7 +172,7 @@ class Settings:
             self.points = max(2, self.strategy_rule.slots(int(self.vehicles)))
         if self.adaptive:
             cap = self.cap if self.cap is not None else 4 * self.strategy_rule.per_point(int(self.vehicles))
-            self.adaptive_rule = Adaptive(float(self.confidence), int(cap))
+            self.adaptive_rule = Adaptive(float(self.confidence), int(cap), bool(self.stop_undecided))
         else:
             self.adaptive_rule = None
         self.search(0.0, 1.0)  # validates
@@ -178,7 +180,7 @@ class Settings:
     def search(self, lo: float, hi: float, pool: NoisePool | None = None) -> LineSearch:
         """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool`."""
         return make_search(self.method, lo, hi, self.epsilon, reuse=self.reuse, points=self.points,
-                           adaptive=self.adaptive_rule, pool=pool)
+                           adaptive=self.adaptive_rule, pool=pool, refly=self.refly and self.reuse)
 
     def start_gains(self) -> Gains:
         """The gains before tuning: the given initial values, mid-range for the rest."""
@@ -195,10 +197,12 @@ class Settings:
             "replicates": self.strategy_rule.replicates if self.strategy == "groups" else None,
             "points": self.points if self.method == "nsection" else None,
             "reuse": bool(self.reuse),
+            "refly": bool(self.refly and self.reuse) or None,
             "initial": self.start_gains(),
             "max_bootstraps": self.max_bootstraps if self.bootstraps is None else None,
             "adaptive": None if self.adaptive_rule is None else {"confidence": self.adaptive_rule.confidence,
-                                                                  "cap": self.adaptive_rule.cap},
+                                                                  "cap": self.adaptive_rule.cap,
+                                                                  "stop": self.adaptive_rule.stop},
         }
 
 

@@ -41,6 +41,7 @@ class Adaptive:
 
     confidence: float = 0.9
     cap: int = 8
+    stop: bool = False  # a comparison still undecided at the cap stops the narrowing instead of guessing
 
     def __post_init__(self) -> None:
         if not 0.5 < self.confidence < 1.0:
@@ -64,7 +65,7 @@ class LineSearch(ABC):
     name: ClassVar[str]
 
     def __init__(self, lo: float, hi: float, epsilon: float, *, reuse: bool = True,
-                 adaptive: Adaptive | None = None, pool: NoisePool | None = None):
+                 adaptive: Adaptive | None = None, pool: NoisePool | None = None, refly: bool = False):
         lo, hi, epsilon = float(lo), float(hi), float(epsilon)
         if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
             raise MavtuneError(f"search interval [{lo}, {hi}] is empty: lo must be below hi")
@@ -72,6 +73,7 @@ class LineSearch(ABC):
             raise MavtuneError(f"epsilon {epsilon} is outside (0, 0.5)")
         self.lo, self.hi, self.epsilon, self.reuse = lo, hi, epsilon, reuse
         self.adaptive = adaptive
+        self.refly = refly  # a point carried from a finished comparison gets fresh flights in the next one
         self.pool = pool if pool is not None else NoisePool()
         self._owner = object()  # this search's points are its own groups in a pool shared by a run
         self.width0 = hi - lo
@@ -85,6 +87,7 @@ class LineSearch(ABC):
         self.evaluations = 0  # points the finished iterations needed flown (as counted by budget())
         self._used: set[int] = set()
         self._failed_tries = 0
+        self._before: dict[int, int] = {}  # flights a point carried into this comparison had before it
         self.stop_reason: str | None = None  # why the search stopped narrowing before its tolerance
         self._settle()
 
@@ -157,17 +160,22 @@ class LineSearch(ABC):
         """Every point flown in this search and the costs of its flights (without reuse, of every iteration)."""
         return {self._where[k]: list(v) for k, v in self._flown.items()}
 
+    def _fresh(self, k: int) -> int:
+        """Flights of point k in this comparison (a carried point's earlier flights decided the last one)."""
+        return len(self._samples.get(k, ())) - self._before.get(k, 0)
+
     def ask(self) -> list[float]:
         """The points of the current iteration that need flights: those without any (all of them without
-        reuse), else — the comparison undecided — its points below the cap, fewest flights and lowest mean first."""
+        reuse; with `refly` also a carried point without a flight in this comparison), else — the comparison
+        undecided — its points below the cap of flights in this comparison, fewest and lowest mean first."""
         if self.done:
             return []
         points = self._points(self._state)
-        unknown = [p for p in points if not self._samples.get(self.key(p))]
+        unknown = [p for p in points if not self._samples.get(k := self.key(p)) or (self.refly and not self._fresh(k))]
         if unknown:
             return unknown
         cap = self.adaptive.cap if self.adaptive is not None else 0
-        more = [(len(self._samples[self.key(p)]), self.stats(p).mean, p) for p in points]
+        more = [(self._fresh(self.key(p)), self.stats(p).mean, p) for p in points]
         return [p for n, _, p in sorted(more) if n < cap]
 
     def tell(self, points: Sequence[float], costs: Sequence[float]) -> None:
@@ -196,13 +204,13 @@ class LineSearch(ABC):
     def _decided(self, keys: Sequence[int], p: float) -> bool:
         """True when the comparison may move on: not adaptive, confident enough, or every point at the cap."""
         a = self.adaptive
-        return a is None or p >= a.confidence or all(len(self._samples[k]) >= a.cap for k in keys)
+        return a is None or p >= a.confidence or all(self._fresh(k) >= a.cap for k in keys)
 
     def _settle(self) -> None:
         """Advance through every iteration whose points are all known and whose comparison is decided."""
         while self.stop_reason is None and (points := self._points(self._state)) is not None:
             keys = [self.key(p) for p in points]
-            if any(not self._samples.get(k) for k in keys):
+            if any(not self._samples.get(k) or (self.refly and not self._fresh(k)) for k in keys):
                 return
             best, p, stats = self._decide(keys)
             if all(s.mean == math.inf for s in stats):
@@ -210,16 +218,23 @@ class LineSearch(ABC):
                 return
             if not self._decided(keys, p):
                 return
+            if self.adaptive is not None and self.adaptive.stop and not p >= self.adaptive.confidence:
+                shown = ", ".join(f"{x:.4g}" for x in points)
+                self.stop_reason = (f"the comparison of {shown} was undecided (p_correct {p:.2f}) at the cap of "
+                                    f"{self.adaptive.cap} flights a point, so the search stopped narrowing")
+                return
             for k in keys:
-                if not self.reuse or k not in self._used:
+                if not self.reuse or self.refly or k not in self._used:
                     self.evaluations += 1
                     self._used.add(k)
             self.history.append(Iteration(self._bracket(self._state), tuple(points), tuple(s.mean for s in stats),
                                           best, tuple(s.se for s in stats), tuple(s.n for s in stats), p))
             self._state = self._advance(self._state, best)
             self._failed_tries = 0
+            self._before = {k: len(self._samples[k]) for k in keys}
             if not self.reuse:
                 self._samples.clear()
+                self._before.clear()
 
     def _all_failed(self, points: Sequence[float], keys: Sequence[int]) -> None:
         """Every point of the comparison failed: it decides nothing. Fly it again, or stop narrowing."""
@@ -236,7 +251,7 @@ class LineSearch(ABC):
 
     def needs(self, reuse: bool | None = None) -> list[int]:
         """New points each iteration asks for, in order (every method here is path-independent in this)."""
-        reuse = self.reuse if reuse is None else reuse
+        reuse = (self.reuse and not self.refly) if reuse is None else reuse
         state, known, counts = self._initial(), set(), []
         while (points := self._points(state)) is not None:
             keys = {self.key(p) for p in points} if reuse else [self.key(p) for p in points]
