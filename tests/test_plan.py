@@ -68,5 +68,5 @@ def test_adaptive_plan_says_the_expected_and_the_worst_case():
     plain = make_plan(Settings(space=SPACE, initial={"kd": 0.2}))
     adaptive = make_plan(Settings(space=SPACE, initial={"kd": 0.2}, adaptive=True, cap=4))
     assert plain.rounds <= adaptive.rounds < adaptive.rounds_max
-    assert adaptive.rounds_max == 2 * 2 * 9 * 2  # every point of every search flown to the cap: 2 rounds of 2
+    assert adaptive.rounds_max == 4 * 7 * 2 * 2  # 4 searches × 7 comparisons × 2 points × 2 rounds to the cap
     assert "expected (at most" in adaptive.describe()
