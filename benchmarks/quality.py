@@ -29,6 +29,7 @@ import json
 import math
 import os
 import platform
+import resource
 import subprocess
 import sys
 import time
@@ -59,19 +60,19 @@ class Sizes:
     grid: int
     map_repeats: int
     truth_repeats: int  # first pass at every scored point
-    truth_max: int  # the optimum's candidates, and the cap for points near the 2 % line
+    truth_max: int  # the optimum's search, and the cap for points near the 2 % line
     runs: int
     sweep: tuple[int, ...]
-    candidates: int = 24  # map points re-flown to pick the optimum
+    starts: int = 8  # lowest map points the optimum's search starts from (with the box centre)
     tuning: tuple[tuple[str, Any], ...] = ()  # flags added to every configuration (quick: one bootstrap)
 
     @classmethod
     def full(cls, runs: int = 40) -> "Sizes":
-        return cls(grid=33, map_repeats=64, truth_repeats=256, truth_max=2048, runs=runs, sweep=(1, 2, 4, 8, 16, 32))
+        return cls(grid=33, map_repeats=32, truth_repeats=256, truth_max=1024, runs=runs, sweep=(1, 2, 4, 8, 16, 32))
 
     @classmethod
     def quick(cls, runs: int = 2) -> "Sizes":
-        return cls(grid=5, map_repeats=4, truth_repeats=8, truth_max=16, runs=runs, sweep=(1, 2), candidates=4,
+        return cls(grid=5, map_repeats=4, truth_repeats=8, truth_max=16, runs=runs, sweep=(1, 2), starts=2,
                    tuning=(("tuning.bootstraps", 1),))
 
 
@@ -299,41 +300,64 @@ class Truth:
         return n >= repeats and abs(e - WITHIN_PCT) < 3 * se
 
 
-def map_and_optimum(truth: Truth, sizes: Sizes) -> dict[str, Any]:
-    """Fly the grid map, re-fly its best points with the most repeats, and fix the optimum; describe both."""
+CENTRE = (0.5, 0.5)  # the zero-flight baseline: the centre of the gain box
+
+
+def fly_map(truth: Truth, sizes: Sizes) -> dict[str, Any]:
+    """The grid map on `map_repeats` paired repeats: mean cost and excess over its lowest point, with SEs."""
     axis = np.linspace(0.0, 1.0, sizes.grid)
     grid = [(float(a), float(b)) for a in axis for b in axis]
     truth.ensure(grid, sizes.map_repeats)
     means = np.array([truth.mean(p, sizes.map_repeats) for p in grid])
     best = grid[int(np.argmin(means))]
     excess = np.array([truth.excess(p, best)[:2] for p in grid])  # on the map's repeats (all equal there)
-    near = [grid[i] for i in np.argsort(means) if excess[i, 0] < 3 * excess[i, 1] + 0.5]
-    candidates = (near or [best])[:sizes.candidates]
-    truth.ensure(candidates, sizes.truth_max)
-    cand_means = np.array([truth.mean(p) for p in candidates])
-    truth.optimum = opt = candidates[int(np.argmin(cand_means))]
-    tied = [p for p in candidates if truth.excess(p)[0] < 2 * truth.excess(p)[1] or p == opt]
-    c_opt = truth.costs[_key(opt)]
-    wins = _bootstrap_argmin(np.array([truth.costs[_key(p)][:sizes.truth_max] for p in candidates]))
-    centre = (0.5, 0.5)
-    truth.ensure([centre], sizes.truth_max)
-    c_e, c_se, _ = truth.excess(centre)
-    return {
-        "grid": sizes.grid, "map_repeats": sizes.map_repeats,
-        "map": {"kp": axis.tolist(), "kd": axis.tolist(), "mean_cost": means.reshape(sizes.grid, -1).tolist(),
-                "excess_pct": excess[:, 0].reshape(sizes.grid, -1).tolist(),
-                "excess_se_pct": excess[:, 1].reshape(sizes.grid, -1).tolist()},
-        "map_median_se_pct": float(np.median(excess[:, 1])),
-        "map_max_se_pct": float(np.max(excess[:, 1])),
-        "worst_over_best": float(means.max() / means.min()),
-        "optimum": {"kp": opt[0], "kd": opt[1], "mean_cost": float(c_opt.mean()), "repeats": int(c_opt.size),
-                    "se_pct": float(c_opt.std(ddof=1) / math.sqrt(c_opt.size) / c_opt.mean() * 100),
-                    "single_flight_cv_pct": float(c_opt.std(ddof=1) / c_opt.mean() * 100)},
-        "candidates": [{"kp": p[0], "kd": p[1], "excess_pct": truth.excess(p)[0], "se_pct": truth.excess(p)[1],
-                        "argmin_share": float(w)} for p, w in zip(candidates, wins)],
-        "indistinguishable": [{"kp": p[0], "kd": p[1]} for p in tied],
-        "centre": {"kp": centre[0], "kd": centre[1], "excess_pct": c_e, "se_pct": c_se},
-    }
+    near = excess[:, 0] < 10.0
+    return {"grid": sizes.grid, "map_repeats": sizes.map_repeats,
+            "map": {"kp": axis.tolist(), "kd": axis.tolist(), "mean_cost": means.reshape(sizes.grid, -1).tolist(),
+                    "excess_pct": excess[:, 0].reshape(sizes.grid, -1).tolist(),
+                    "excess_se_pct": excess[:, 1].reshape(sizes.grid, -1).tolist()},
+            "map_best": {"kp": best[0], "kd": best[1]},
+            "map_median_se_near_pct": float(np.median(excess[near, 1])),
+            "worst_over_best": float(means.max() / means.min()),
+            "lowest": [grid[i] for i in np.argsort(means)[:sizes.starts]]}
+
+
+def descend(truth: Truth, starts: Iterable[Point], sizes: Sizes) -> Point:
+    """The optimum on the map's grid: from the lowest of `starts`, step to the lowest of the 8 grid neighbours,
+    every point on `truth_max` repeats, until no neighbour is lower; sets and returns truth.optimum."""
+    step = 1.0 / (sizes.grid - 1)
+    starts = [_key(p) for p in starts]
+    truth.ensure(starts, sizes.truth_max)
+    best = min(starts, key=truth.mean)
+    while True:
+        i, j = round(best[0] / step), round(best[1] / step)
+        near = [_key((a * step, b * step)) for a in range(i - 1, i + 2) for b in range(j - 1, j + 2)
+                if 0 <= a < sizes.grid and 0 <= b < sizes.grid]
+        truth.ensure(near, sizes.truth_max)
+        lowest = min(near, key=lambda p: truth.mean(p, sizes.truth_max))
+        if truth.mean(lowest, sizes.truth_max) >= truth.mean(best, sizes.truth_max):
+            break
+        best = lowest
+    truth.optimum = best
+    return best
+
+
+def describe_optimum(truth: Truth, sizes: Sizes) -> dict[str, Any]:
+    """The optimum, its cost and noise, the grid points not distinguishable from it, and the box centre."""
+    opt = truth.optimum
+    c_opt = truth.costs[_key(opt)][:sizes.truth_max]
+    full = [p for p, c in truth.costs.items() if c.size >= sizes.truth_max]
+    close = sorted((p for p in full if truth.excess(p)[0] < 1.0), key=lambda p: truth.excess(p)[0])
+    wins = _bootstrap_argmin(np.array([truth.costs[p][:sizes.truth_max] for p in close]))
+    c_e, c_se, _ = truth.excess(CENTRE)
+    return {"optimum": {"kp": opt[0], "kd": opt[1], "mean_cost": float(c_opt.mean()), "repeats": int(c_opt.size),
+                        "se_pct": float(c_opt.std(ddof=1) / math.sqrt(c_opt.size) / c_opt.mean() * 100),
+                        "single_flight_cv_pct": float(c_opt.std(ddof=1) / c_opt.mean() * 100)},
+            "close": [{"kp": p[0], "kd": p[1], "excess_pct": truth.excess(p)[0], "se_pct": truth.excess(p)[1],
+                       "argmin_share": float(w)} for p, w in zip(close, wins)],
+            "indistinguishable": [{"kp": p[0], "kd": p[1]} for p in close
+                                  if p == opt or truth.excess(p)[0] < 2 * truth.excess(p)[1]],
+            "centre": {"kp": CENTRE[0], "kd": CENTRE[1], "excess_pct": c_e, "se_pct": c_se}}
 
 
 def _bootstrap_argmin(costs: np.ndarray, n: int = 400) -> np.ndarray:
@@ -445,6 +469,12 @@ def _progress(msg: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
 
 
+def _cpu_s() -> float:
+    """CPU seconds (user + system) of this process and of its finished worker processes."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def _git_commit() -> str:
     try:
         return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True,
@@ -482,16 +512,14 @@ def run(sizes: Sizes, workers: int, progress: Callable[[str], None] = _progress)
     """The whole benchmark; returns the results document (see module docstring)."""
     from mavtune.sim import batch
 
-    started, wall0, cpu0 = datetime.now(timezone.utc), time.perf_counter(), time.process_time()
-    load0 = os.getloadavg()
+    started, wall0, cpu0, load0 = datetime.now(timezone.utc), time.perf_counter(), _cpu_s(), os.getloadavg()
     batch.fly(_scenario(), 10.0, 8.0, [0], 0)  # compile (or load the cache) once, before any worker starts
     pool = Pool(workers)
     truth = Truth(pool)
-    cpu_tasks = 0.0
     try:
-        progress(f"map {sizes.grid}x{sizes.grid} x {sizes.map_repeats} repeats, optimum candidates x {sizes.truth_max}")
-        surface = map_and_optimum(truth, sizes)
-        opt = truth.optimum
+        progress(f"map {sizes.grid}x{sizes.grid} x {sizes.map_repeats} repeats; optimum on {sizes.truth_max} repeats")
+        surface = fly_map(truth, sizes)
+        opt = descend(truth, [*surface.pop("lowest"), CENTRE], sizes)
         progress(f"optimum ({opt[0]:.5g}, {opt[1]:.5g}); tuning runs")
         configs = configurations()
         sweep = sweep_configurations(sizes)
@@ -502,11 +530,17 @@ def run(sizes: Sizes, workers: int, progress: Callable[[str], None] = _progress)
         bb_rows, skipped = _blackbox(pool, sizes.runs, budget)
         rows.update(bb_rows)
         progress("scoring the final gains")
-        truth.judge([(r["kp"], r["kd"]) for rs in rows.values() for r in rs], sizes.truth_repeats, sizes.truth_max)
+        finals = [(r["kp"], r["kd"]) for rs in rows.values() for r in rs]
+        truth.judge(finals, sizes.truth_repeats, sizes.truth_max)
+        lower = [p for p in finals if truth.excess(p)[0] < -2 * truth.excess(p)[1]]
+        if lower:  # a tuning found a point below the optimum: search on from there, then judge again
+            progress(f"{len(lower)} final points lie below the optimum; searching on")
+            opt = descend(truth, [opt, *lower], sizes)
+            truth.judge(finals, sizes.truth_repeats, sizes.truth_max)
+        surface |= describe_optimum(truth, sizes)
         for rs in rows.values():
             for r in rs:
                 r["excess_pct"], r["excess_se_pct"], r["truth_repeats"] = truth.excess((r["kp"], r["kd"]))
-                cpu_tasks += r["cpu_s"]
     finally:
         pool.close()
     labels = [c.label for c in configs] + list(bb_rows)
@@ -519,8 +553,7 @@ def run(sizes: Sizes, workers: int, progress: Callable[[str], None] = _progress)
                  "started_utc": started.isoformat(timespec="seconds"), "commit": _git_commit(),
                  "sizes": asdict(sizes), "workers": workers, "python": platform.python_version(),
                  "cpus": os.cpu_count(), "loadavg_start": load0, "loadavg_end": os.getloadavg(),
-                 "wall_s": time.perf_counter() - wall0,
-                 "cpu_s": time.process_time() - cpu0 + (truth.cpu_s + cpu_tasks if workers > 1 else 0.0),
+                 "wall_s": time.perf_counter() - wall0, "cpu_s": _cpu_s() - cpu0, "truth_cpu_s": truth.cpu_s,
                  "truth_flights": truth.flights, "seeds": {"map": MAP_SEED, "tune": TUNE_SEED, "stride": SEED_STRIDE}},
         "surface": surface,
         "default": default_label,
@@ -640,15 +673,17 @@ def markdown(doc: dict[str, Any], before: dict[str, Any] | None = None) -> str:
         "",
         "**Truth.** Mean cost over paired repeats (repeat r of every point: vehicle seed "
         f"{m['seeds']['map']} + r, round r). Map: {sz['grid']} × {sz['grid']} grid × {sz['map_repeats']} repeats "
-        f"(paired SE of the excess: median {sf['map_median_se_pct']:.2f} %, max {sf['map_max_se_pct']:.2f} %); its "
-        f"best {len(sf['candidates'])} points re-flown {sz['truth_max']} times. Optimum ({o['kp']:.4g}, {o['kd']:.4g}), "
-        f"mean cost {o['mean_cost']:.4g} ± {o['se_pct']:.2f} % (single-flight CV {o['single_flight_cv_pct']:.1f} %); "
-        f"worst/best grid mean {sf['worst_over_best']:.2f}. "
-        f"{len(sf['indistinguishable'])} grid points are within 2 SE of it: "
+        f"(paired SE of the excess over the map's lowest point, median over the points within 10 %: "
+        f"{sf['map_median_se_near_pct']:.2f} %; worst/best grid mean {sf['worst_over_best']:.3g}). The optimum: from "
+        f"the {sz['starts']} lowest map points and the box centre, descent to the lowest grid neighbour on "
+        f"{sz['truth_max']} repeats until none is lower: ({o['kp']:.4g}, {o['kd']:.4g}), mean cost "
+        f"{o['mean_cost']:.4g} ± {o['se_pct']:.2f} % (single-flight CV {o['single_flight_cv_pct']:.1f} %). "
+        f"Grid points not distinguishable from it (excess < 2 SE): "
         + ", ".join(f"({p['kp']:.4g}, {p['kd']:.4g})" for p in sf["indistinguishable"][:8])
         + (" …" if len(sf["indistinguishable"]) > 8 else "") + ". "
         f"Each final point is scored on {sz['truth_repeats']} paired repeats, doubled up to {sz['truth_max']} while "
-        "within 3 SE of the 2 % line; excess = paired mean of (cost − optimum's cost) / optimum's mean cost.",
+        "within 3 SE of the 2 % line; excess = paired mean of (cost − optimum's cost) / optimum's mean cost; "
+        f"median SE of a run's excess: {_pct(np.median([s['truth_se_median_pct'] for s in doc['configurations']]))} %.",
         "",
         f"**Tunings.** {sz['runs']} seeded runs per configuration (run i: vehicles {m['seeds']['tune']} + "
         f"{m['seeds']['stride']}·i + j in every configuration). Zero-flight baseline, the centre of the box "
