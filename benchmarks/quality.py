@@ -25,6 +25,7 @@ reported as skipped.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -78,17 +79,25 @@ class Sizes:
 
 @dataclass(frozen=True)
 class Configuration:
-    """A way to tune, as `mavtune tune` flags ({"tuning.field": value} over the defaults)."""
+    """A way to tune: `mavtune tune` flags ({"tuning.field": value} over the defaults), and engine settings
+    that the configuration file does not offer (yet)."""
 
     label: str
     overrides: dict[str, Any] = field(default_factory=dict)
+    engine: dict[str, Any] = field(default_factory=dict)
 
-    def key(self) -> str:
-        """Identical engine settings and fleet size give the same key, so a configuration listed twice runs once."""
+    def settings(self, extra: dict[str, Any] | None = None):
+        """(the engine's Settings, the scenario) of this configuration, with `extra` flags on top."""
         from mavtune.config import load_config
 
-        cfg = load_config(None, self.overrides)
-        return json.dumps([cfg.settings().fingerprint(), cfg.tuning.vehicles], sort_keys=True)
+        cfg = load_config(None, {**self.overrides, **(extra or {})})
+        settings = cfg.settings()
+        return (dataclasses.replace(settings, **self.engine) if self.engine else settings), cfg.scenario()
+
+    def key(self) -> str:
+        """Identical engine settings give the same key, so a configuration listed twice runs once."""
+        settings, _ = self.settings()
+        return json.dumps([settings.fingerprint(), settings.vehicles], sort_keys=True, default=str)
 
 
 PAPER = {"tuning.strategy": "avg", "tuning.vehicles": 2, "tuning.reuse": False, "tuning.method": "eql",
@@ -110,11 +119,15 @@ def configurations() -> list[Configuration]:
 
 
 def adaptive_configurations() -> list[Configuration]:
-    """Adaptive averaging, once the engine has it (strategy "adaptive" or an avg option); none before."""
-    from mavtune.strategy import STRATEGIES
+    """Adaptive averaging (the default's settings, 2 vehicles), once the engine has it; none before."""
+    from mavtune.config import Tuning
+    from mavtune.tuner import Settings
 
-    if "adaptive" in STRATEGIES:
-        return [Configuration("adaptive, 2 vehicles", {"tuning.strategy": "adaptive", "tuning.vehicles": 2})]
+    base = {"tuning.strategy": "avg", "tuning.vehicles": 2}
+    if "adaptive" in Tuning.model_fields:
+        return [Configuration("adaptive, avg, 2 vehicles", {**base, "tuning.adaptive": True})]
+    if "adaptive" in {f.name for f in dataclasses.fields(Settings)}:
+        return [Configuration("adaptive, avg, 2 vehicles", base, {"adaptive": True})]
     return []
 
 
@@ -162,16 +175,15 @@ def fly_repeats(points: list[Point], r0: int, r1: int) -> tuple[np.ndarray, floa
     return costs.reshape(len(points), reps.size), time.process_time() - cpu
 
 
-def tune_run(overrides: dict[str, Any], run: int) -> dict[str, Any]:
+def tune_run(config: Configuration, run: int) -> dict[str, Any]:
     """One tuning of a configuration on its own seeded fleet: final gains, rounds, flights, uncertainty."""
-    from mavtune.config import load_config
     from mavtune.sim import SimFleet
     from mavtune.tuner import run_tuning
 
     cpu = time.process_time()
-    cfg = load_config(None, {**overrides, "tuning.seed": run})
-    fleet = SimFleet(cfg.tuning.vehicles, cfg.scenario(), seed=tune_seed(run), trace_hz=0.0)
-    result = run_tuning(cfg.settings(), fleet)
+    settings, scenario = config.settings({"tuning.seed": run})
+    fleet = SimFleet(settings.vehicles, scenario, seed=tune_seed(run), trace_hz=0.0)
+    result = run_tuning(settings, fleet)
     return {"run": run, "seed": tune_seed(run), "kp": result.gains["kp"], "kd": result.gains["kd"],
             "rounds": len(result.rounds), "flights": result.flights,
             "uncertainty": getattr(result, "uncertainty", None), "cpu_s": time.process_time() - cpu}
@@ -486,10 +498,10 @@ def _git_commit() -> str:
 def _run_configs(pool: Pool, configs: list[Configuration], sizes: Sizes) -> dict[str, list[dict[str, Any]]]:
     """Tune each distinct configuration `sizes.runs` times (configurations with identical settings share runs)."""
     runs = sizes.runs
-    configs = [Configuration(c.label, {**c.overrides, **dict(sizes.tuning)}) for c in configs]
+    configs = [Configuration(c.label, {**c.overrides, **dict(sizes.tuning)}, c.engine) for c in configs]
     keys = {c.label: c.key() for c in configs}
     distinct = {keys[c.label]: c for c in configs}
-    tasks = [(c.overrides, i) for c in distinct.values() for i in range(runs)]
+    tasks = [(c, i) for c in distinct.values() for i in range(runs)]
     out = pool.map(tune_run, *zip(*tasks))
     by_key = {k: out[j * runs:(j + 1) * runs] for j, k in enumerate(distinct)}
     return {c.label: by_key[keys[c.label]] for c in configs}
@@ -558,7 +570,7 @@ def run(sizes: Sizes, workers: int, progress: Callable[[str], None] = _progress)
         "surface": surface,
         "default": default_label,
         "budget_flights": budget,
-        "configurations": [summaries[c.label] | {"overrides": c.overrides} for c in configs],
+        "configurations": [summaries[c.label] | {"overrides": c.overrides, "engine": c.engine} for c in configs],
         "baselines": [summaries[label] for label in bb_rows],
         "skipped": skipped,
         "sweep": {"rows": sweep_summary,
