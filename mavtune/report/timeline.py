@@ -201,11 +201,14 @@ def _cost_of(flight) -> float:
 
 
 def log_ticks(low: float, high: float, most: int = MAX_LOG_TICKS) -> list[float]:
-    """At most `most` round numbers (1, 2, 3, 5 × 10ⁿ, thinned as needed) spanning [low, high] on a log axis."""
+    """At most `most` round numbers (1, 2, 3, 5 × 10ⁿ, thinned as needed) spanning [low, high] on a log axis; the
+    ends themselves when fewer than two round numbers fall inside."""
     lo_dec, hi_dec = math.floor(math.log10(low)), math.ceil(math.log10(high))
     for subs in ((1, 2, 3, 4, 5, 6, 7, 8, 9), (1, 2, 3, 5), (1, 2, 5), (1, 3), (1,)):
         ticks = [s * 10.0 ** d for d in range(lo_dec, hi_dec + 1) for s in subs]
         ticks = [t for t in ticks if low * 0.999 <= t <= high * 1.001]
+        if len(ticks) < 2:
+            return [low, high] if high > low else [low]
         if len(ticks) <= most:
             return ticks
     step = math.ceil((hi_dec - lo_dec + 1) / most)
@@ -217,9 +220,6 @@ def log_axis(ax, low: float, high: float) -> None:
     ax.set_yscale("log")
     pad = (high / low) ** 0.05 if high > low else 1.5
     ax.set_ylim(low / pad, high * pad)
-    ticks = log_ticks(low / pad, high * pad)
-    if len(ticks) < 2:  # a range within one sub-decade: the ends themselves
-        ticks = [low, high] if high > low else [low]
-    ax.yaxis.set_major_locator(FixedLocator(ticks))
+    ax.yaxis.set_major_locator(FixedLocator(log_ticks(low / pad, high * pad)))
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
     ax.yaxis.set_minor_formatter(NullFormatter())

@@ -113,11 +113,11 @@ def _limits(gain: str, views, final, uncertainty, space) -> tuple[float, float]:
     xs = [s.point for v in views if v.gain == gain for s in v.points]
     xs += [x for v in views if v.gain == gain for br in v.brackets for x in br]
     xs += [final.get(gain, math.nan)] + [uncertainty.get(gain, {}).get(k, math.nan) for k in ("lo", "hi")]
-    xs = [x for x in xs if isinstance(x, float) and math.isfinite(x)]
+    xs = [x for x in xs if isinstance(x, float) and abs(x) < 1e12]  # finite and drawable
     if not xs:
         return 0.0, 1.0
     lo, hi = min(xs), max(xs)
-    pad = 0.05 * (hi - lo) if hi > lo else 0.5
+    pad = 0.05 * (hi - lo) if hi > lo else 0.5 + abs(lo) * 1e-3
     return lo - pad, hi + pad
 
 
