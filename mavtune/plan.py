@@ -13,7 +13,6 @@ import random
 from dataclasses import dataclass
 from typing import Callable
 
-from mavtune.search import make_search
 from mavtune.tuner import Settings
 
 MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal costs)
@@ -90,14 +89,14 @@ def clock(seconds: float) -> str:
 
 def _rounds_without_speculation(settings: Settings, lo: float, hi: float) -> int:
     """Rounds one line search takes if no speculative point is ever used: the guarantee."""
-    search = make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse, points=settings.points)
+    search = settings.search(lo, hi)
     slots = settings.strategy_rule.slots(settings.vehicles)
     return sum(math.ceil(n / slots) for n in search.needs() if n)
 
 
 def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float]) -> int:
     """Rounds one line search takes, speculation included, on the cost `cost`."""
-    search = make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse, points=settings.points)
+    search = settings.search(lo, hi)
     rounds = 0
     while not search.done:
         unique = sorted(set(settings.strategy_rule.assign(search, settings.vehicles)))
@@ -120,8 +119,7 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
     costs = [lambda x, m=m: abs(x - m) for m in minimisers] + [_noise(seed) for seed in range(NOISE_PROBES)]
     per_search = max(_rehearse(settings, lo, hi, cost) for cost in costs)
     per_search_max = max(per_search, _rounds_without_speculation(settings, lo, hi))
-    evaluations = make_search(settings.method, lo, hi, settings.epsilon, reuse=settings.reuse,
-                              points=settings.points).budget()
+    evaluations = settings.search(lo, hi).budget()
     searches = len(settings.space) * bootstraps
     return Plan(per_search * searches, per_search_max * searches, settings.vehicles, evaluations * searches,
                 bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None)

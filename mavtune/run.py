@@ -230,9 +230,31 @@ def plan_panel(config: Config, plan: Plan) -> str:
 
 
 def _result_table(result: TuningResult) -> Table:
-    table = Table()
-    table.add_column("gain")
-    table.add_column("value", justify="right")
+    """The tuned gains with their standard error and interval, and how many of the comparisons that set each
+    were sure (p ≥ 0.9 that the kept point was the best)."""
+    cv = result.noise.get("cv", math.nan)
+    caption = (f"noise: {cv:.0%} of the cost per flight ({result.noise.get('dof', 0):g} repeats)"
+               if math.isfinite(cv) else "noise unknown: no point was flown twice")
+    table = Table(caption=caption)
+    for column in ("gain", "value", "interval", "sure comparisons"):
+        table.add_column(column, justify="left" if column == "gain" else "right")
+    last = {s.gain: s for s in result.searches}
     for name, value in result.gains.items():
-        table.add_row(name, f"{value:.5g}")
+        u = result.uncertainty.get(name, {})
+        se, lo, hi = (u.get(k, math.nan) for k in ("se", "lo", "hi"))
+        interval = f"{u.get('level', 0.9):.0%}: {lo:.3g} – {hi:.3g}" if math.isfinite(lo) else "unknown"
+        search = last.get(name)
+        sure = (f"{sum(i.p_correct >= 0.9 for i in search.iterations)} of {len(search.iterations)}"
+                if search is not None else "")
+        table.add_row(name, plus_minus(value, se), interval, sure)
     return table
+
+
+def plus_minus(value: float, se: float) -> str:
+    """'0.41 ± 0.06': the value to the digit its standard error allows ('0.4062 ± ?' when it is unknown)."""
+    if not math.isfinite(se):
+        return f"{value:.4g} ± ?"
+    if se == 0:
+        return f"{value:.5g} ± 0"
+    digits = max(0, 1 - math.floor(math.log10(se)))
+    return f"{value:.{digits}f} ± {se:.{digits}f}"

@@ -6,13 +6,13 @@ Three strategies (paper, section "Tuning procedure"):
 - groups: r vehicles per point, N/r points per round — both at once.
 No vehicle idles: when the search asks for fewer points than a round has slots, the spare slots fly the
 points the search is most likely to ask for next (speculation, with reuse on: a right guess saves a whole
-round later) or, with reuse off, replicates of the asked points (their costs are averaged).
+round later) or, with reuse off, replicates of the asked points. Every flight is told to the search, which
+takes a point's cost as the mean of its flights.
 """
 
 from __future__ import annotations
 
 import math
-from collections import defaultdict
 from dataclasses import dataclass
 
 from mavtune.errors import MavtuneError
@@ -51,14 +51,19 @@ class Strategy:
             return 1
         return max(1, vehicles // self.replicates)
 
-    def assign(self, search: LineSearch, vehicles: int) -> list[float]:
-        """The point each of `vehicles` flies this round: asked points first, then speculation or replicates."""
+    def per_point(self, vehicles: int) -> int:
+        """How many vehicles fly each point of a full round."""
+        return max(1, vehicles // self.slots(vehicles))
+
+    def assign(self, search: LineSearch, vehicles: int, speculate: bool = True) -> list[float]:
+        """The point each of `vehicles` flies this round: asked points first, then speculation (with reuse,
+        unless `speculate` is off) or replicates."""
         asked = search.ask()
         if not asked:
             raise MavtuneError("assign called on a finished search")
         slots = self.slots(vehicles)
         points = asked[:slots]
-        if len(points) < slots:
+        if len(points) < slots and speculate:
             points += search.speculate(slots - len(points), exclude=points)
         per_point = vehicles // len(points) if self.name != "groups" else self.replicates
         flown = [p for p in points for _ in range(per_point)]
@@ -68,17 +73,9 @@ class Strategy:
         return flown
 
     @staticmethod
-    def reduce(search: LineSearch, points: list[float], flights: list[Flight]) -> tuple[list[float], list[float]]:
-        """One cost per point: the mean over the flights that measured it; non-finite counts as the worst.
-
-        Points whose every flight was lost are left out: the search asks for them again.
-        """
-        by_key: dict[int, list[float]] = defaultdict(list)
-        where: dict[int, float] = {}
-        for p, f in zip(points, flights):
-            k = search.key(p)
-            where.setdefault(k, p)
-            if f.measured:
-                by_key[k].append(f.cost if math.isfinite(f.cost) else math.inf)
-        keys = [k for k in where if by_key[k]]
-        return [where[k] for k in keys], [sum(by_key[k]) / len(by_key[k]) for k in keys]
+    def measured(points: list[float], flights: list[Flight]) -> tuple[list[float], list[float]]:
+        """The point and cost of every flight that measured one, for the search to pool per point (a point's
+        cost is the mean of its flights); non-finite counts as the worst. Lost flights are left out: a point
+        none of whose flights measured anything is asked for again."""
+        kept = [(p, f.cost if math.isfinite(f.cost) else math.inf) for p, f in zip(points, flights) if f.measured]
+        return [p for p, _ in kept], [c for _, c in kept]

@@ -2,10 +2,11 @@
 
     for each bootstrap, for each gain in order:
         search over the gain's full range, the other gains held at their latest values
-        each round: strategy.assign → fleet.fly (or the journal's record) → strategy.reduce → search.tell
+        each round: strategy.assign → fleet.fly (or the journal's record) → strategy.measured → search.tell
         → journal.append, durable before the next round
 
-The loop is deterministic given the costs, which is what makes resume-by-replay exact.
+The loop is deterministic given the costs, which is what makes resume-by-replay exact. At the end each gain
+gets an interval from its last line search's flights (`mavtune.search.interval`).
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from typing import Any, Callable, Mapping
 from mavtune.errors import MavtuneError
 from mavtune.fleet import CallableFleet, Evaluate, Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
-from mavtune.search import Iteration, make_search
+from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
+from mavtune.search.interval import DRAWS, resample
 from mavtune.strategy import Strategy
 
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
@@ -58,7 +60,8 @@ class Round:
 
 @dataclass
 class LineSearchRecord:
-    """One finished line search: which gain, in which bootstrap, its iterations and result."""
+    """One finished line search: which gain, in which bootstrap, its comparisons and result, every flight's
+    cost by point, its last bracket, and why it stopped narrowing early (None when it reached its tolerance)."""
 
     bootstrap: int
     gain: str
@@ -66,6 +69,21 @@ class LineSearchRecord:
     iterations: list[Iteration]
     result: float
     evaluations: int
+    samples: dict[float, list[float]] = field(default_factory=dict)
+    bracket: tuple[float, float] = (math.nan, math.nan)
+    stop_reason: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "bootstrap": self.bootstrap, "gain": self.gain, "held": self.held, "result": self.result,
+            "evaluations": self.evaluations, "brackets": [list(i.bracket) for i in self.iterations],
+            "stop_reason": self.stop_reason,
+            "comparisons": [
+                {"bracket": list(i.bracket), "points": list(i.points), "means": list(i.costs), "se": list(i.se),
+                 "n": list(i.n), "best": i.best, "p_correct": i.p_correct}
+                for i in self.iterations
+            ],
+        }
 
 
 @dataclass
@@ -78,6 +96,8 @@ class TuningResult:
     bootstraps: int
     stop_reason: str
     settings: dict[str, Any] = field(default_factory=dict)
+    uncertainty: dict[str, dict[str, float]] = field(default_factory=dict)  # gain -> Interval.to_dict()
+    noise: dict[str, float] = field(default_factory=dict)  # the pooled flight-to-flight noise: cv and its dof
 
     @property
     def flights(self) -> int:
@@ -92,12 +112,9 @@ class TuningResult:
             "bootstraps": self.bootstraps,
             "stop_reason": self.stop_reason,
             "settings": self.settings,
-            "searches": [
-                {"bootstrap": s.bootstrap, "gain": s.gain, "held": s.held, "result": s.result,
-                 "evaluations": s.evaluations,
-                 "brackets": [list(i.bracket) for i in s.iterations]}
-                for s in self.searches
-            ],
+            "uncertainty": self.uncertainty,
+            "noise": self.noise,
+            "searches": [s.to_dict() for s in self.searches],
         }
 
 
@@ -117,7 +134,11 @@ class Settings:
     points: int | None = None
     max_bootstraps: int = 10
     seed: int | None = None
+    adaptive: bool = False
+    confidence: float = 0.9
+    cap: int | None = None
     strategy_rule: Strategy = field(init=False)
+    adaptive_rule: Adaptive | None = field(init=False)
 
     def __post_init__(self) -> None:
         if not self.space:
@@ -147,7 +168,17 @@ class Settings:
         self.strategy_rule = Strategy.make(self.strategy, int(self.vehicles), self.replicates)
         if self.points is None:
             self.points = max(2, self.strategy_rule.slots(int(self.vehicles)))
-        make_search(self.method, 0.0, 1.0, self.epsilon, reuse=self.reuse, points=self.points)  # validates
+        if self.adaptive:
+            cap = self.cap if self.cap is not None else 4 * self.strategy_rule.per_point(int(self.vehicles))
+            self.adaptive_rule = Adaptive(float(self.confidence), int(cap))
+        else:
+            self.adaptive_rule = None
+        self.search(0.0, 1.0)  # validates
+
+    def search(self, lo: float, hi: float, pool: NoisePool | None = None) -> LineSearch:
+        """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool`."""
+        return make_search(self.method, lo, hi, self.epsilon, reuse=self.reuse, points=self.points,
+                           adaptive=self.adaptive_rule, pool=pool)
 
     def start_gains(self) -> Gains:
         """The gains before tuning: the given initial values, mid-range for the rest."""
@@ -166,6 +197,8 @@ class Settings:
             "reuse": bool(self.reuse),
             "initial": self.start_gains(),
             "max_bootstraps": self.max_bootstraps if self.bootstraps is None else None,
+            "adaptive": None if self.adaptive_rule is None else {"confidence": self.adaptive_rule.confidence,
+                                                                  "cap": self.adaptive_rule.cap},
         }
 
 
@@ -186,11 +219,13 @@ class Tuner:
     """
 
     def __init__(self, settings: Settings, fleet: Fleet, journal: Journal | None = None,
-                 on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None):
+                 on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None,
+                 draws: int = DRAWS):
         if stage_rounds is not None and (journal is None or stage_rounds < 1):
             raise MavtuneError("tuning in stages needs a journal and at least 1 round per stage")
         self.settings, self.fleet, self.journal, self.on_round = settings, fleet, journal, on_round
         self.stage_rounds = stage_rounds
+        self.draws = draws  # resampled searches behind each gain's interval (0: no interval)
         self.recorded = journal.rounds() if journal is not None else {}
         self.rounds: list[Round] = []
         self.searches: list[LineSearchRecord] = []
@@ -199,38 +234,77 @@ class Tuner:
         self.stop_reason = "not started"
         self._dry_rounds = 0
         self.flown = 0  # rounds flown (not replayed) by this process
+        self.pool = NoisePool()  # the run's flight-to-flight noise, pooled over every line search
+        self._uncertainty: tuple[int, dict[str, dict[str, float]]] = (-1, {})
 
     def snapshot(self) -> TuningResult:
         """The run so far: final once `run()` has returned."""
         return TuningResult(gains=dict(self.gains), rounds=list(self.rounds), searches=list(self.searches),
                             bootstraps=self.bootstrap, stop_reason=self.stop_reason,
-                            settings=self.settings.fingerprint())
+                            settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
+                            noise={"cv": self.pool.cv, "dof": self.pool.dof})
+
+    def uncertainty(self) -> dict[str, dict[str, float]]:
+        """Per tuned gain its interval, from the flights of the last line search that set it."""
+        done, cached = self._uncertainty
+        if done == len(self.searches):
+            return cached
+        s, rule = self.settings, self.settings.strategy_rule
+        last = {rec.gain: (i, rec) for i, rec in enumerate(self.searches)}
+        out = {}
+        for name, (i, rec) in last.items():
+            lo, hi = s.space[name]
+            interval = resample(lambda pool: s.search(lo, hi, pool),
+                                lambda search: rule.assign(search, int(s.vehicles), speculate=False),
+                                rec.samples, self.pool, self.gains[name], 0.5 * (rec.bracket[1] - rec.bracket[0]),
+                                draws=self.draws, seed=(s.seed or 0) * 1000 + i)
+            out[name] = interval.to_dict()
+        self._uncertainty = (len(self.searches), out)
+        return out
 
     def run(self) -> TuningResult:
         s = self.settings
         found: list[Gains] = []
         limit = s.bootstraps if s.bootstraps is not None else s.max_bootstraps
         for self.bootstrap in range(1, limit + 1):
+            undecided = []
             for name, (lo, hi) in s.space.items():
-                search = make_search(s.method, lo, hi, s.epsilon, reuse=s.reuse, points=s.points)
+                search = s.search(lo, hi, self.pool)
                 held = {n: v for n, v in self.gains.items() if n != name}
                 while not search.done:
                     lo_now, hi_now = search.bracket
                     self.stop_reason = (f"stopped in bootstrap {self.bootstrap} while tuning {name} in "
                                         f"[{lo_now:.4g}, {hi_now:.4g}]")
                     self._round(search, self.bootstrap, name, self.gains)
-                self.gains[name] = search.result
+                if search.history or search.stop_reason is None:
+                    self.gains[name] = search.result  # a search that decided nothing leaves the gain as it was
+                if search.stop_reason is not None:
+                    undecided.append(f"{name}: {search.stop_reason}")
                 self.searches.append(LineSearchRecord(self.bootstrap, name, held, list(search.history),
-                                                      search.result, search.evaluations))
+                                                      self.gains[name], search.evaluations, search.samples(),
+                                                      search.bracket, search.stop_reason))
             self.stop_reason = f"ran {limit} bootstraps"
+            if undecided:
+                self.stop_reason = f"bootstrap {self.bootstrap}: " + "; ".join(undecided)
+                if len(undecided) == len(s.space) and not any(r.iterations for r in self.searches[-len(s.space):]):
+                    self.stop_reason += " — no comparison of this bootstrap decided anything, so the run stopped"
+                    break
+                continue
             if s.bootstraps is None:
-                if any(all(math.isclose(self.gains[n], g[n], abs_tol=1e-12) for n in self.gains) for g in found):
-                    self.stop_reason = (f"bootstrap {self.bootstrap} found a point already found before "
-                                        "(paper's stop rule)")
+                if any(self._same_point(g) for g in found):
+                    self.stop_reason = (f"bootstrap {self.bootstrap} found a point already found before, within "
+                                        f"the search's tolerance ε = {s.epsilon:g} of each range (paper's stop rule)")
                     break
                 found.append(dict(self.gains))
                 self.stop_reason = f"reached the cap of {limit} bootstraps without a repeated point"
         return self.snapshot()
+
+    def _same_point(self, earlier: Gains) -> bool:
+        """True when the latest gains are within the search's tolerance ε·(hi − lo) of `earlier` in every gain:
+        under noise two searches for the same minimiser rarely end bit-equal, but both end within ε of it."""
+        s = self.settings
+        return all(abs(self.gains[n] - earlier[n]) <= s.epsilon * (hi - lo) * (1 + 1e-9)
+                   for n, (lo, hi) in s.space.items())
 
     def _round(self, search, bootstrap: int, name: str, gains: Gains) -> None:
         """Plan, fly (or replay) and account one round of the current line search."""
@@ -260,7 +334,7 @@ class Tuner:
                 self.journal.append(RoundRecord(index, bootstrap, name, assignments, flights, started, finished))
         rnd = Round(index, bootstrap, name, bracket, assignments, flights, started, finished, replayed)
         self.rounds.append(rnd)
-        told_points, costs = Strategy.reduce(search, points, flights)
+        told_points, costs = Strategy.measured(points, flights)
         search.tell(told_points, costs)
         self._dry_rounds = 0 if told_points else self._dry_rounds + 1
         if self.on_round is not None:
@@ -295,14 +369,20 @@ def tune(
     replicates: int | None = None,
     points: int | None = None,
     max_bootstraps: int = 10,
+    adaptive: bool = False,
+    confidence: float = 0.9,
+    cap: int | None = None,
     on_round: Callable[[Round], None] | None = None,
+    draws: int = DRAWS,
 ) -> TuningResult:
     """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
 
     `evaluate` is a function (one round: list of assignments → one cost per vehicle), a `Fleet`, or None
     for the built-in simulator (`vehicles` simulated vehicles, default scenario, `seed`). `replicates` is r
     of the groups strategy, `points` the points per iteration of nsection (default: one per slot),
-    `max_bootstraps` caps the paper's stop rule (`bootstraps=None`), `on_round` sees every round as it ends.
+    `max_bootstraps` caps the paper's stop rule (`bootstraps=None`), `adaptive` flies close comparisons again
+    until the kept point is right with probability `confidence` or each point has `cap` flights, `on_round`
+    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none).
     """
     space = dict(space if space is not None else {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
     if evaluate is None:
@@ -318,19 +398,20 @@ def tune(
     settings = Settings(space=space, method=method, epsilon=epsilon, bootstraps=bootstraps,
                         vehicles=vehicles if vehicles is not None else fleet.size, strategy=strategy, reuse=reuse,
                         initial=dict(initial or {}), replicates=replicates, points=points,
-                        max_bootstraps=max_bootstraps, seed=seed)
-    return run_tuning(settings, fleet, journal, on_round)
+                        max_bootstraps=max_bootstraps, seed=seed, adaptive=adaptive, confidence=confidence, cap=cap)
+    return run_tuning(settings, fleet, journal, on_round, draws=draws)
 
 
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,
-               on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None) -> TuningResult:
+               on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None,
+               draws: int = DRAWS) -> TuningResult:
     """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds); with
     `stage_rounds`, StageDone ends the call after that many newly flown rounds."""
     book = Journal(journal) if journal is not None else None
     try:
         if book is not None:
             book.bind(settings.fingerprint())
-        return Tuner(settings, fleet, book, on_round, stage_rounds).run()
+        return Tuner(settings, fleet, book, on_round, stage_rounds, draws).run()
     finally:
         if book is not None:
             book.close()

@@ -42,16 +42,19 @@ def test_assign_uses_every_vehicle_and_flies_the_asked_points_first(name, half, 
         assert set(points) <= set(asked)  # no speculation without reuse: spare vehicles replicate
 
 
-def test_reduce_averages_measured_flights_and_drops_points_never_measured():
+def test_measured_keeps_every_measured_flight_and_the_search_averages_them():
     search = make_search("eql", 0.0, 1.0, 0.125)
     points = [0.125, 0.125, 0.875, 0.875]
     flights = [Flight("a", {}, 1.0), Flight("b", {}, 3.0, Status.OK),
                Flight("c", {}, math.nan, Status.LOST), Flight("d", {}, math.nan, Status.LOST)]
-    told, costs = Strategy.reduce(search, points, flights)
-    assert told == [0.125] and costs == [2.0]
+    told, costs = Strategy.measured(points, flights)
+    assert told == [0.125, 0.125] and costs == [1.0, 3.0]
+    search.tell(told, costs)
+    assert search.ask() == [0.875]  # never measured: asked again
+    assert search.stats(0.125).mean == 2.0 and search.stats(0.125).n == 2
     flights[3] = Flight("d", {}, math.inf, Status.FAILED)
-    told, costs = Strategy.reduce(search, points, flights)
-    assert told == [0.125, 0.875] and costs == [2.0, math.inf]
+    told, costs = Strategy.measured(points, flights)
+    assert told == [0.125, 0.125, 0.875] and costs == [1.0, 3.0, math.inf]
 
 
 @pytest.mark.parametrize("name, vehicles, r, message", [

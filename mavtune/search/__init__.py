@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from mavtune.errors import MavtuneError
-from mavtune.search.base import Iteration, LineSearch
+from mavtune.search.base import Adaptive, Iteration, LineSearch
+from mavtune.search.evidence import NoisePool
 from mavtune.search.dichotomy import Dichotomy
 from mavtune.search.eql import EQL
 from mavtune.search.fibonacci import Fibonacci
@@ -13,14 +14,18 @@ from mavtune.search.nsection import NSection
 METHODS: dict[str, type[LineSearch]] = {cls.name: cls for cls in (EQL, Fibonacci, Golden, Dichotomy, NSection)}
 
 
-def make_search(method: str, lo: float, hi: float, epsilon: float, *, reuse: bool = True, points: int = 3) -> LineSearch:
-    """Build the named line search; `points` is the number of points per iteration of nsection."""
+def make_search(method: str, lo: float, hi: float, epsilon: float, *, reuse: bool = True, points: int = 3,
+                adaptive: Adaptive | None = None, pool: NoisePool | None = None) -> LineSearch:
+    """Build the named line search; `points` is the number of points per iteration of nsection, `adaptive`
+    the rule for flying close comparisons again, `pool` the run's shared noise estimate."""
     cls = METHODS.get(method)
     if cls is None:
         raise MavtuneError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    options = dict(reuse=reuse, adaptive=adaptive, pool=pool)
     if cls is NSection:
-        return NSection(lo, hi, epsilon, reuse=reuse, points=points)
-    return cls(lo, hi, epsilon, reuse=reuse)
+        return NSection(lo, hi, epsilon, points=points, **options)
+    return cls(lo, hi, epsilon, **options)
 
 
-__all__ = ["METHODS", "Dichotomy", "EQL", "Fibonacci", "Golden", "Iteration", "LineSearch", "NSection", "make_search"]
+__all__ = ["METHODS", "Adaptive", "Dichotomy", "EQL", "Fibonacci", "Golden", "Iteration", "LineSearch", "NSection",
+           "NoisePool", "make_search"]

@@ -15,40 +15,76 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Hashable, Sequence
 
 from mavtune.errors import MavtuneError
+from mavtune.search.evidence import NoisePool, PointStats, p_best, point_stats
 
 State = Hashable
 
 
 @dataclass(frozen=True)
 class Iteration:
-    """One finished comparison: the bracket it started from, its points and their costs, the index kept."""
+    """One finished comparison: its bracket, its points, their mean costs, standard errors and flights, the
+    index kept and the probability that it was truly the best (NaN where the noise is unknown)."""
 
     bracket: tuple[float, float]
     points: tuple[float, ...]
     costs: tuple[float, ...]
     best: int
+    se: tuple[float, ...] = ()
+    n: tuple[int, ...] = ()
+    p_correct: float = math.nan
+
+
+@dataclass(frozen=True)
+class Adaptive:
+    """Fly more replicates of a comparison's points until the kept point is the best with probability
+    `confidence`, or every point has `cap` flights; a clear comparison moves on at once."""
+
+    confidence: float = 0.9
+    cap: int = 8
+
+    def __post_init__(self) -> None:
+        if not 0.5 < self.confidence < 1.0:
+            raise MavtuneError(f"adaptive confidence {self.confidence} is outside (0.5, 1)")
+        if self.cap < 1:
+            raise MavtuneError(f"adaptive cap {self.cap} must be at least 1 flight per point")
+
+
+FAILED_RETRIES = 2  # times a comparison whose every point failed is flown again before the search stops
 
 
 class LineSearch(ABC):
-    """Minimise a cost over [lo, hi] by comparisons; `ask()` what to fly, `tell()` what it cost."""
+    """Minimise a cost over [lo, hi] by comparisons; `ask()` what to fly, `tell()` what it cost.
+
+    Every flight told is kept: a point's cost is the mean of its flights, with a standard error (see
+    `evidence`). With `adaptive`, a comparison too close to call asks for more flights of its points; a
+    comparison in which every point failed decides nothing: it is flown again, and after `FAILED_RETRIES`
+    the search stops narrowing (`stop_reason`).
+    """
 
     name: ClassVar[str]
 
-    def __init__(self, lo: float, hi: float, epsilon: float, *, reuse: bool = True):
+    def __init__(self, lo: float, hi: float, epsilon: float, *, reuse: bool = True,
+                 adaptive: Adaptive | None = None, pool: NoisePool | None = None):
         lo, hi, epsilon = float(lo), float(hi), float(epsilon)
         if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
             raise MavtuneError(f"search interval [{lo}, {hi}] is empty: lo must be below hi")
         if not 0.0 < epsilon < 0.5:
             raise MavtuneError(f"epsilon {epsilon} is outside (0, 0.5)")
         self.lo, self.hi, self.epsilon, self.reuse = lo, hi, epsilon, reuse
+        self.adaptive = adaptive
+        self.pool = pool if pool is not None else NoisePool()
+        self._owner = object()  # this search's points are its own groups in a pool shared by a run
         self.width0 = hi - lo
         self._registry: dict[int, list[tuple[float, int]]] = {}
+        self._where: dict[int, float] = {}
         self._next_key = 0
         self._state = self._initial()
-        self._costs: dict[int, float] = {}  # key -> cost of the points usable now
+        self._samples: dict[int, list[float]] = {}  # key -> every flight's cost usable now
         self.history: list[Iteration] = []
         self.evaluations = 0  # points the finished iterations needed flown (as counted by budget())
         self._used: set[int] = set()
+        self._failed_tries = 0
+        self.stop_reason: str | None = None  # why the search stopped narrowing before its tolerance
         self._settle()
 
     # ----- what each method defines -------------------------------------------------------------
@@ -95,11 +131,12 @@ class LineSearch(ABC):
         k = self._next_key
         self._next_key += 1
         self._registry.setdefault(bucket, []).append((scaled, k))
+        self._where[k] = float(x)
         return k
 
     @property
     def done(self) -> bool:
-        return self._points(self._state) is None
+        return self.stop_reason is not None or self._points(self._state) is None
 
     @property
     def result(self) -> float:
@@ -111,15 +148,30 @@ class LineSearch(ABC):
     def bracket(self) -> tuple[float, float]:
         return self._bracket(self._state)
 
+    def stats(self, x: float) -> PointStats:
+        """What the flights usable now say about point x."""
+        return point_stats(self._samples.get(self.key(x), ()), self.pool)
+
+    def samples(self) -> dict[float, list[float]]:
+        """Every point with flights usable now, and their costs."""
+        return {self._where[k]: list(v) for k, v in self._samples.items() if v}
+
     def ask(self) -> list[float]:
-        """The points of the current iteration whose cost is not known yet (all of them without reuse)."""
-        points = self._points(self._state)
-        if points is None:
+        """The points of the current iteration that need flights: those without any (all of them without
+        reuse), else — the comparison undecided — its points below the cap, fewest flights and lowest mean first."""
+        if self.done:
             return []
-        return [p for p in points if self.key(p) not in self._costs]
+        points = self._points(self._state)
+        unknown = [p for p in points if not self._samples.get(self.key(p))]
+        if unknown:
+            return unknown
+        cap = self.adaptive.cap if self.adaptive is not None else 0
+        more = [(len(self._samples[self.key(p)]), self.stats(p).mean, p) for p in points]
+        return [p for n, _, p in sorted(more) if n < cap]
 
     def tell(self, points: Sequence[float], costs: Sequence[float]) -> None:
-        """Record costs (NaN or infinite count as the worst); points of later iterations are kept for reuse."""
+        """Record one flight's cost per entry (points may repeat: replicates are pooled); NaN or infinite
+        count as the worst; points of later iterations are kept for reuse."""
         if len(points) != len(costs):
             raise MavtuneError(f"told {len(costs)} costs for {len(points)} points")
         current = {self.key(p) for p in (self._points(self._state) or ())}
@@ -128,25 +180,55 @@ class LineSearch(ABC):
             if not self.reuse and k not in current:
                 continue  # without reuse only the current iteration's points count
             c = float(c)
-            self._costs[k] = c if not math.isnan(c) else math.inf
+            c = c if not math.isnan(c) else math.inf
+            self._samples.setdefault(k, []).append(c)
+            self.pool.add((self._owner, k), c)
         self._settle()
 
+    def _decide(self, keys: Sequence[int]) -> tuple[int, float, list[PointStats]]:
+        """The kept index (lowest mean, ties to the left), the probability it is right, and the points' stats."""
+        stats = [point_stats(self._samples[k], self.pool) for k in keys]
+        best = min(range(len(stats)), key=lambda i: stats[i].mean)
+        return best, p_best([s.mean for s in stats], [s.se for s in stats], best), stats
+
+    def _decided(self, keys: Sequence[int], p: float) -> bool:
+        """True when the comparison may move on: not adaptive, confident enough, or every point at the cap."""
+        a = self.adaptive
+        return a is None or p >= a.confidence or all(len(self._samples[k]) >= a.cap for k in keys)
+
     def _settle(self) -> None:
-        """Advance through every iteration whose points are all known."""
-        while (points := self._points(self._state)) is not None:
+        """Advance through every iteration whose points are all known and whose comparison is decided."""
+        while self.stop_reason is None and (points := self._points(self._state)) is not None:
             keys = [self.key(p) for p in points]
-            if any(k not in self._costs for k in keys):
+            if any(not self._samples.get(k) for k in keys):
                 return
-            costs = tuple(self._costs[k] for k in keys)
-            best = min(range(len(costs)), key=lambda i: costs[i])  # ties keep the leftmost
+            best, p, stats = self._decide(keys)
+            if all(s.mean == math.inf for s in stats):
+                self._all_failed(points, keys)
+                return
+            if not self._decided(keys, p):
+                return
             for k in keys:
                 if not self.reuse or k not in self._used:
                     self.evaluations += 1
                     self._used.add(k)
-            self.history.append(Iteration(self._bracket(self._state), tuple(points), costs, best))
+            self.history.append(Iteration(self._bracket(self._state), tuple(points), tuple(s.mean for s in stats),
+                                          best, tuple(s.se for s in stats), tuple(s.n for s in stats), p))
             self._state = self._advance(self._state, best)
+            self._failed_tries = 0
             if not self.reuse:
-                self._costs.clear()
+                self._samples.clear()
+
+    def _all_failed(self, points: Sequence[float], keys: Sequence[int]) -> None:
+        """Every point of the comparison failed: it decides nothing. Fly it again, or stop narrowing."""
+        if self._failed_tries < FAILED_RETRIES:
+            self._failed_tries += 1
+            for k in keys:
+                self._samples.pop(k, None)  # set aside (the flights stay in the run's record): ask again
+            return
+        shown = ", ".join(f"{p:.4g}" for p in points)
+        self.stop_reason = (f"every flight at {shown} failed, {FAILED_RETRIES + 1} times: a comparison of failed "
+                            "points decides nothing, so the search stopped narrowing")
 
     # ----- planning -----------------------------------------------------------------------------
 
@@ -169,7 +251,7 @@ class LineSearch(ABC):
         """Up to `n` unknown points most likely to be needed by later iterations, most likely first.
 
         Walks the tree of comparison outcomes from the current state, most probable first, for at most
-        `max_nodes` (default 64·n) states; an outcome whose costs are all known is followed for certain, otherwise
+        `max_nodes` (default 64·n) states; a comparison already decided by its flights is followed for certain, otherwise
         each outcome gets an equal share of its parent's probability. A point's score is the probability that
         the search will ask for it. Only meaningful with reuse.
         """
@@ -191,15 +273,15 @@ class LineSearch(ABC):
                 continue
             keys = [self.key(p) for p in points]
             for p, k in zip(points, keys):
-                if k not in self._costs and k not in flown:
+                if not self._samples.get(k) and k not in flown:
                     score[k] = score.get(k, 0.0) + prob
                     where[k] = p
                     depth_of[k] = min(depth_of.get(k, depth), depth)
-            if all(k in self._costs for k in keys):
-                costs = [self._costs[k] for k in keys]
-                outcomes = [min(range(len(costs)), key=lambda i: costs[i])]
-            else:
-                outcomes = list(range(len(points)))
+            outcomes = list(range(len(points)))
+            if all(self._samples.get(k) for k in keys):
+                best, p_right, _ = self._decide(keys)
+                if self._decided(keys, p_right):
+                    outcomes = [best]
             now_flown = flown | frozenset(keys)
             for best in outcomes:
                 child = self._advance(state, best)

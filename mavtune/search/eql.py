@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 from mavtune.search.base import LineSearch
 
@@ -23,7 +24,7 @@ class EQL(LineSearch):
         # (iterations done, cuts from the left, cuts from the right), cuts in half-steps h = s/2
         return (0, 0, 0)
 
-    @property
+    @cached_property
     def full_iterations(self) -> int:
         """Iterations with the full step: the count n of cuts that leave the bracket wider than 2s before it."""
         return max(0, math.ceil(1.0 / self.epsilon - 2.0 - 1e-9))

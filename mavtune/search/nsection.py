@@ -15,11 +15,11 @@ class NSection(LineSearch):
 
     name = "nsection"
 
-    def __init__(self, lo: float, hi: float, epsilon: float, *, reuse: bool = True, points: int = 3):
+    def __init__(self, lo: float, hi: float, epsilon: float, *, points: int = 3, **options):
         if int(points) < 2:
             raise MavtuneError(f"nsection needs at least 2 points per iteration, got {points}")
         self.n = int(points)
-        super().__init__(lo, hi, epsilon, reuse=reuse)
+        super().__init__(lo, hi, epsilon, **options)
 
     def _initial(self):
         return (self.lo, self.hi)

@@ -1,0 +1,125 @@
+"""What the flights say about a comparison: each point's mean and standard error, the run's pooled noise, and
+the probability that the point kept was truly the best.
+
+Flights of one point are replicates: the same gains on (possibly) different vehicles, in different wind. A
+point's standard error uses its own spread, moderated by the noise of the whole run (flight-to-flight
+variation pooled over every point flown more than once, on the relative scale, sd = cv·|mean|); a point with
+one flight takes the pooled value alone, and where nothing has been flown twice the error is unknown (NaN).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Hashable, Sequence
+
+import numpy as np
+from numpy.polynomial.hermite_e import hermegauss
+from scipy.special import ndtr
+
+PRIOR_DOF = 4.0  # how many degrees of freedom the run's pooled noise counts for in a point's own variance
+_NODES, _WEIGHTS = hermegauss(48)
+_WEIGHTS = _WEIGHTS / _WEIGHTS.sum()  # expectation over a standard normal
+
+
+@dataclass(frozen=True)
+class PointStats:
+    """A point's cost as measured: mean over its flights, standard error of that mean, number of flights."""
+
+    mean: float
+    se: float
+    n: int
+
+
+class NoisePool:
+    """The run's flight-to-flight noise: the coefficient of variation pooled over every point flown twice or more.
+
+    Groups are keyed by who flew what (a line search and its point), so the same gains flown in two rounds
+    are replicates; failed (infinite) flights carry no information about the noise and are left out.
+    """
+
+    def __init__(self) -> None:
+        self._groups: dict[Hashable, list[float]] = {}
+        self._cached: tuple[float, float] | None = None
+        self._prior = (0.0, 0.0)  # (sum of squares, dof) known before any flight
+
+    @classmethod
+    def prior(cls, cv: float, dof: float) -> "NoisePool":
+        """A pool that already knows a noise of `cv` from `dof` degrees of freedom (a resampled run's)."""
+        pool = cls()
+        if math.isfinite(cv) and dof > 0:
+            pool._prior = (cv * cv * dof, float(dof))
+        return pool
+
+    def add(self, group: Hashable, cost: float) -> None:
+        if math.isfinite(cost):
+            self._groups.setdefault(group, []).append(float(cost))
+            self._cached = None
+
+    def _pooled(self) -> tuple[float, float]:
+        if self._cached is None:
+            ss, dof = self._prior
+            for costs in self._groups.values():
+                mean = math.fsum(costs) / len(costs)
+                if len(costs) < 2 or mean == 0.0:
+                    continue
+                ss += math.fsum((c / mean - 1.0) ** 2 for c in costs)
+                dof += len(costs) - 1
+            self._cached = (math.sqrt(ss / dof) if dof else math.nan, dof)
+        return self._cached
+
+    @property
+    def cv(self) -> float:
+        """Pooled relative standard deviation of one flight's cost; NaN until some point was flown twice."""
+        return self._pooled()[0]
+
+    @property
+    def dof(self) -> float:
+        """Degrees of freedom behind `cv` (flights beyond the first of each point)."""
+        return self._pooled()[1]
+
+
+def point_stats(costs: Sequence[float], pool: NoisePool | None = None) -> PointStats:
+    """Mean and standard error of one point's flights; a failed flight makes the mean infinite (the worst)."""
+    n = len(costs)
+    if n == 0:
+        return PointStats(math.nan, math.nan, 0)
+    if not all(math.isfinite(c) for c in costs):
+        return PointStats(math.inf, 0.0, n)
+    mean = math.fsum(costs) / n
+    cv = pool.cv if pool is not None else math.nan
+    prior = (cv * mean) ** 2 if math.isfinite(cv) else math.nan
+    if n >= 2:
+        own = math.fsum((c - mean) ** 2 for c in costs) / (n - 1)
+        var = own if math.isnan(prior) else (PRIOR_DOF * prior + (n - 1) * own) / (PRIOR_DOF + n - 1)
+    else:
+        var = prior
+    return PointStats(mean, math.sqrt(var / n) if not math.isnan(var) else math.nan, n)
+
+
+def p_best(means: Sequence[float], se: Sequence[float], best: int) -> float:
+    """Probability that point `best` truly has the lowest mean cost, the true means being independent
+    normals around the measured ones (sd = se); NaN when every point failed or an error is unknown.
+
+    Infinite means lose to any finite one for certain; exact ties with zero error split the probability.
+    """
+    m = np.asarray(means, dtype=float)
+    s = np.asarray(se, dtype=float)
+    if not np.isfinite(m[best]):
+        return math.nan
+    rivals = [j for j in range(len(m)) if j != best and np.isfinite(m[j])]
+    if not rivals:
+        return 1.0
+    if np.isnan(s[best]) or any(np.isnan(s[j]) for j in rivals):
+        return math.nan
+    if len(rivals) == 1 and s[best] + s[rivals[0]] > 0:  # two points: the difference is normal
+        j = rivals[0]
+        return 0.5 * math.erfc(-(m[j] - m[best]) / math.hypot(s[best], s[j]) / math.sqrt(2.0))
+    x = m[best] + s[best] * _NODES  # quadrature over the best point's true mean
+    prob = np.ones_like(x)
+    for j in rivals:
+        if s[j] > 0:
+            prob *= ndtr((m[j] - x) / s[j])
+        else:
+            prob *= np.where(x < m[j], 1.0, np.where(x == m[j], 0.5, 0.0))
+    return float(np.clip(np.dot(_WEIGHTS, prob), 0.0, 1.0))

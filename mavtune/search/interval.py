@@ -1,0 +1,110 @@
+"""How far a line search's result could have landed: the same search re-run on costs resampled from its flights.
+
+A resampled world draws a cost curve through the flown points — each point's mean moved by its standard error,
+joined by straight lines, held flat beyond the outermost points; points whose flights failed stay failed, and
+so does whatever lies nearer to them than to a measured point — then flies the same deterministic search on
+it, each flight with fresh noise of the run's pooled size (sd = cv·|cost|), as many flights per point as the
+run's strategy gives, and keeps where it ends. The spread of those ends is the result's standard error; the
+interval is their central `level` quantiles, widened on each side by half the real search's final bracket:
+no search knows the minimiser better than the bracket it ended with.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from mavtune.search.base import LineSearch
+from mavtune.search.evidence import NoisePool, point_stats
+
+LEVEL = 0.9
+DRAWS = 200
+MAX_ROUNDS = 1000  # a resampled search that has not ended by then is abandoned (cannot happen with a cap)
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A tuned value with its standard error and the interval at `level` (NaN where unknown)."""
+
+    value: float
+    se: float
+    lo: float
+    hi: float
+    level: float = LEVEL
+
+    def to_dict(self) -> dict[str, float]:
+        return {"value": self.value, "se": self.se, "lo": self.lo, "hi": self.hi, "level": self.level}
+
+    @classmethod
+    def unknown(cls, value: float, level: float = LEVEL) -> "Interval":
+        return cls(value, math.nan, math.nan, math.nan, level)
+
+
+class _Curve:
+    """A cost curve through points: linear between measured ones, infinite nearest to failed ones."""
+
+    def __init__(self, xs: list[float], ys: list[float]):
+        order = sorted(range(len(xs)), key=lambda i: xs[i])
+        self.xs = [xs[i] for i in order]
+        self.ys = [ys[i] for i in order]
+        self.fx = [x for x, y in zip(self.xs, self.ys) if math.isfinite(y)]
+        self.fy = [y for y in self.ys if math.isfinite(y)]
+        self._seen: dict[float, float] = {}
+
+    def __call__(self, x: float) -> float:
+        if x in self._seen:
+            return self._seen[x]
+        self._seen[x] = y = self._at(x)
+        return y
+
+    def _at(self, x: float) -> float:
+        i = bisect.bisect_left(self.xs, x)
+        near = min((j for j in (i - 1, i) if 0 <= j < len(self.xs)), key=lambda j: abs(self.xs[j] - x))
+        if not math.isfinite(self.ys[near]):
+            return math.inf
+        return float(np.interp(x, self.fx, self.fy))
+
+
+def resample(make: Callable[[NoisePool], LineSearch], assign: Callable[[LineSearch], list[float]],
+             samples: dict[float, list[float]], pool: NoisePool, value: float, resolution: float,
+             level: float = LEVEL, draws: int = DRAWS, seed: int = 0) -> Interval:
+    """The interval of a line search's result `value` from its flights `samples` (point → costs).
+
+    `make(pool)` builds a fresh search like the real one, `assign(search)` the points one round flies
+    (with replicates, as the run's strategy does), `pool` is the run's noise and `resolution` half the real
+    search's final bracket. Unknown (NaN) when the noise was never measured or fewer than two points were.
+    """
+    cv = pool.cv
+    points = sorted(samples)
+    stats = [point_stats(samples[p], pool) for p in points]
+    finite = [s for s in stats if math.isfinite(s.mean)]
+    if draws < 1 or not math.isfinite(cv) or len(finite) < 2 or any(math.isnan(s.se) for s in finite):
+        return Interval.unknown(value, level)
+    rng = np.random.default_rng(seed)
+    ends = []
+    search = make(NoisePool())
+    if cv == 0.0 and all(s.se == 0.0 for s in finite):
+        draws = 1  # noise-free: every resampled world is the same
+    for _ in range(draws):
+        moved = [s.mean + s.se * rng.standard_normal() if math.isfinite(s.mean) else math.inf for s in stats]
+        curve = _Curve(points, moved)
+        search = make(NoisePool.prior(cv, pool.dof))
+        for _ in range(MAX_ROUNDS):
+            if search.done:
+                break
+            flown = assign(search)
+            truth = [curve(p) for p in flown]
+            search.tell(flown, [t + cv * abs(t) * rng.standard_normal() if math.isfinite(t) else t for t in truth])
+        if search.done:
+            ends.append(search.result if search.history or search.stop_reason is None else value)
+    if not ends:
+        return Interval.unknown(value, level)
+    ends_a = np.asarray(ends)
+    tail = 0.5 * (1.0 - level)
+    lo, hi = np.quantile(ends_a, [tail, 1.0 - tail])
+    return Interval(value, float(ends_a.std(ddof=1)) if len(ends) > 1 else math.nan,
+                    max(float(lo) - resolution, search.lo), min(float(hi) + resolution, search.hi), level)
