@@ -24,7 +24,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Status
 from mavtune.plan import clock
 from mavtune.report import markdown as md
-from mavtune.report.searches import SearchView, search_views, uncertainty
+from mavtune.report.searches import SearchView, noise, search_views, uncertainty
 from mavtune.report.timeline import has_traces, plot_timeline, vehicle_order
 
 REPORT = "report.md"
@@ -108,7 +108,7 @@ def _settings(rep: Report) -> list[str]:
 def _final_gains(rep: Report) -> list[str]:
     from mavtune.report.tuning_section import final_gains_section
 
-    return final_gains_section(rep.gains, rep.uncertainty, rep.searches)
+    return final_gains_section(rep.gains, rep.uncertainty, rep.searches, noise(rep.result))
 
 
 def _plan_vs_actual(rep: Report) -> list[str]:

@@ -80,6 +80,8 @@ class SearchView:
     comparisons: list[Comparison] = field(default_factory=list)
     result: float = NAN
     brackets: list[tuple[float, float]] = field(default_factory=list)  # of each round when it was planned
+    final_bracket: tuple[float, float] = (NAN, NAN)  # the bracket the search ended with, if recorded
+    stop_reason: str | None = None  # why the search stopped narrowing before its tolerance, if it did
 
     @property
     def finished(self) -> bool:
@@ -155,6 +157,11 @@ def search_views(result) -> list[SearchView]:
         if j is not None:
             used.add(j)
             view.result = as_float(records[j].result)
+            end = getattr(records[j], "bracket", None)
+            if isinstance(end, (tuple, list)) and len(end) == 2:
+                view.final_bracket = (as_float(end[0]), as_float(end[1]))
+            reason = getattr(records[j], "stop_reason", None)
+            view.stop_reason = str(reason) if reason else None
             given = contract[j].get("comparisons") if j < len(contract) else None
             iterations = list(getattr(records[j], "iterations", None) or [])
             view.comparisons = (_from_contract(given) if isinstance(given, list)
@@ -217,6 +224,12 @@ def _from_iterations(iterations: Sequence, points: list[PointStats], width: floa
 
 
 UNCERTAINTY_KEYS = ("value", "se", "lo", "hi", "level")
+
+
+def noise(result) -> dict[str, float]:
+    """The run's pooled flight-to-flight noise from the tuner (`cv`, its `dof`), {} when the result has none."""
+    given = getattr(result, "noise", None)
+    return {str(k): as_float(v) for k, v in given.items()} if isinstance(given, dict) else {}
 
 
 def uncertainty(result) -> dict[str, dict[str, float]]:

@@ -22,7 +22,7 @@ from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter  # noqa
 
 from mavtune.fleet import Status  # noqa: E402
 from mavtune.report.searches import flown_point, search_rounds  # noqa: E402
-from mavtune.report.traces import clean_trace, tracking_error  # noqa: E402
+from mavtune.report.traces import clean_trace, drawable, to_draw, tracking_error  # noqa: E402
 
 VEHICLE_OFFSET_M = 1.0  # the paper lowers the second vehicle's curves by 1 m
 MAX_LOG_TICKS = 6  # labelled ticks on a log axis; more collide on a panel 1.8 in high
@@ -158,8 +158,8 @@ def _gain(ax, rounds: Sequence, vehicles: list[str], gain: str, round_s: float, 
     for j, name in enumerate(vehicles):
         xs, ys = [], []
         for k, rnd in enumerate(rounds):
-            value = next((flown_point(rnd, i, gain) for i, f in enumerate(rnd.flights) if str(f.vehicle) == name),
-                         math.nan)
+            value = next((to_draw(flown_point(rnd, i, gain)) for i, f in enumerate(rnd.flights)
+                          if str(f.vehicle) == name), math.nan)
             xs.append(k * round_s)
             ys.append(value)
         if not xs:
@@ -178,7 +178,7 @@ def _cost(ax, rounds: Sequence, vehicles: list[str], round_s: float, colours) ->
         for k, rnd in enumerate(rounds):
             for f in rnd.flights:
                 cost = _cost_of(f)
-                if str(f.vehicle) != name or f.status is Status.LOST or not math.isfinite(cost) or cost <= 0:
+                if str(f.vehicle) != name or f.status is Status.LOST or not drawable(cost) or cost <= 0:
                     continue
                 x = (k + 0.5) * round_s
                 (bad_x if f.status is Status.FAILED else ok_x).append(x)

@@ -1,12 +1,26 @@
-"""Flight traces made safe to draw: equal-length float arrays, non-finite samples as gaps, in time order.
+"""Flight data made safe to draw: equal-length float arrays with gaps where a sample is not drawable.
 
 A trace comes from a simulator, an agent over the network or a MAVLink vehicle; the report must draw whatever
-arrives (arrays of unequal length, NaN or infinite samples, strings) without failing.
+arrives (arrays of unequal length, NaN, infinite or absurdly large samples, strings) without failing.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+DRAWABLE = 1e12  # beyond this magnitude a value is no time, altitude, gain or cost a figure can place
+
+
+def drawable(x) -> bool:
+    """True for a number a figure can place: finite and within ±DRAWABLE."""
+    return isinstance(x, (int, float)) and math.isfinite(x) and abs(x) <= DRAWABLE
+
+
+def to_draw(x) -> float:
+    """`x` where drawable, else NaN (a gap)."""
+    return float(x) if drawable(x) else math.nan
 
 
 def _floats(values) -> np.ndarray:
@@ -15,7 +29,8 @@ def _floats(values) -> np.ndarray:
         a = np.asarray(values, dtype=float).ravel()
     except (TypeError, ValueError):
         a = np.array([_one(v) for v in values], dtype=float) if hasattr(values, "__iter__") else np.array([])
-    return np.where(np.isfinite(a), a, np.nan)
+    with np.errstate(invalid="ignore"):
+        return np.where(np.abs(a) <= DRAWABLE, a, np.nan)
 
 
 def _field(trace, name: str) -> list:

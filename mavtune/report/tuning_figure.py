@@ -1,9 +1,10 @@
 """The tuning itself in one figure: cost against gain for each line search and the final gains with their interval.
 
 One column per gain, one row per bootstrap. Each line search gets two panels sharing the gain axis:
-- cost against gain: every flight as a dot (its vehicle's colour; red × at the top = failed or non-finite), the
-  per-point mean ± standard error as a black bar, the search's result as a red line;
-- the comparisons, top to bottom: the bracket each started from (grey), its points (ticks), the point kept (green).
+- cost against gain: every flight as a dot (its vehicle's colour; red × at the top = a cost that is not finite or
+  off the scale), the per-point mean ± standard error as a black bar, the search's result as a red line;
+- the comparisons, top to bottom: the bracket each started from (grey), its points (ticks), the point kept (green),
+  and last the bracket the search ended with.
 A last row shows per gain every bootstrap's result and the final value with its interval (when the tuner gives one).
 """
 
@@ -22,11 +23,12 @@ from matplotlib.transforms import blended_transform_factory  # noqa: E402
 
 from mavtune.report.searches import SearchView  # noqa: E402
 from mavtune.report.timeline import log_axis, text  # noqa: E402
+from mavtune.report.traces import drawable, to_draw  # noqa: E402
 
 MAX_ROWS = 12  # bootstraps drawn; a longer run shows its last ones (the report's tables have them all)
 LOG_RATIO = 20.0  # costs spanning more than this factor get a log axis
 INTERVAL_COLOUR = "#d62728"
-JITTER = 0.006  # vehicles' dots at one point are spread by this share of the axis so the mean bar hides none
+JITTER = 0.025  # the vehicles' dots at one point spread over this share of the axis, beside the mean bar
 
 
 def gain_columns(views: Sequence[SearchView], gains: Sequence[str]) -> list[str]:
@@ -105,7 +107,7 @@ def _limits(gain: str, views, final, uncertainty, space) -> tuple[float, float]:
     """The gain axis: the gain's range in the settings, else what the data span."""
     try:
         lo, hi = (float(b) for b in space[gain])
-        if math.isfinite(lo) and math.isfinite(hi) and hi > lo:
+        if drawable(lo) and drawable(hi) and hi > lo:
             pad = 0.03 * (hi - lo)
             return lo - pad, hi + pad
     except (KeyError, TypeError, ValueError):
@@ -113,7 +115,7 @@ def _limits(gain: str, views, final, uncertainty, space) -> tuple[float, float]:
     xs = [s.point for v in views if v.gain == gain for s in v.points]
     xs += [x for v in views if v.gain == gain for br in v.brackets for x in br]
     xs += [final.get(gain, math.nan)] + [uncertainty.get(gain, {}).get(k, math.nan) for k in ("lo", "hi")]
-    xs = [x for x in xs if isinstance(x, float) and abs(x) < 1e12]  # finite and drawable
+    xs = [x for x in xs if drawable(x)]
     if not xs:
         return 0.0, 1.0
     lo, hi = min(xs), max(xs)
@@ -131,13 +133,16 @@ def _cost_panel(ax, view: SearchView | None, colour: dict, bootstrap: int, gain:
         return
     top = blended_transform_factory(ax.transData, ax.transAxes)
     x0, x1 = ax.get_xlim()
-    shift = {v: (j - (len(colour) - 1) / 2) * JITTER * (x1 - x0) for j, v in enumerate(colour)}
+    spread = len(colour) - 1 or 1
+    shift = {v: (j / spread - 0.5) * JITTER * (x1 - x0) for j, v in enumerate(colour)}
     dots: dict[str, tuple[list[float], list[float]]] = {}
     failed: list[float] = []
     finite = []
     for s in view.points:
+        if not drawable(s.point):
+            continue
         for cost, vehicle in zip(s.costs, s.vehicles):
-            if math.isfinite(cost):
+            if drawable(cost):
                 xs, ys = dots.setdefault(vehicle, ([], []))
                 xs.append(s.point + shift.get(vehicle, 0.0))
                 ys.append(cost)
@@ -145,15 +150,15 @@ def _cost_panel(ax, view: SearchView | None, colour: dict, bootstrap: int, gain:
             else:
                 failed.append(s.point)
     for vehicle, (xs, ys) in dots.items():
-        ax.plot(xs, ys, "o", ms=3, color=colour.get(vehicle, "0.5"), alpha=0.8, zorder=2)
+        ax.plot(xs, ys, "o", ms=3, color=colour.get(vehicle, "0.5"), alpha=0.9, zorder=5)
     if failed:
         ax.plot(failed, [0.97] * len(failed), "x", ms=5, color="red", transform=top, clip_on=False, zorder=3)
-    measured = [s for s in view.points if s.n]
+    measured = [s for s in view.points if drawable(s.point) and drawable(s.mean)]
     if measured:
         ax.errorbar([s.point for s in measured], [s.mean for s in measured],
-                    yerr=[0.0 if math.isnan(s.se) else s.se for s in measured], fmt="_", ms=9, mew=1.6,
+                    yerr=[s.se if drawable(s.se) else 0.0 for s in measured], fmt="_", ms=9, mew=1.6,
                     color="black", capsize=3, lw=1.2, zorder=4)
-    if view.finished:
+    if drawable(view.result):
         ax.axvline(view.result, color=INTERVAL_COLOUR, lw=1.0, zorder=1)
     positive = [c for c in finite if c > 0]
     if positive and max(positive) / min(positive) > LOG_RATIO and len(positive) == len(finite):
@@ -165,12 +170,15 @@ def _cost_panel(ax, view: SearchView | None, colour: dict, bootstrap: int, gain:
 
 
 def _ladder_panel(ax, view: SearchView | None) -> None:
-    """The comparisons top to bottom: bracket (grey), points (ticks) and the point kept (green)."""
+    """The comparisons top to bottom: bracket (grey), points (ticks) and the point kept (green); then the bracket
+    the search ended with."""
     ax.tick_params(labelsize=7)
     ax.set_yticks([])
     if view is None:
         return
     rows = [(c.bracket, c.points, c.best) for c in view.comparisons]
+    if rows and all(drawable(b) for b in view.final_bracket):
+        rows.append((view.final_bracket, [], -1))  # where the last comparison left the bracket
     if not rows:  # an unfinished or unrecorded search: the brackets its rounds were planned in
         seen: list[tuple[float, float]] = []
         for br in view.brackets:
@@ -179,17 +187,17 @@ def _ladder_panel(ax, view: SearchView | None) -> None:
         rows = [(br, [], -1) for br in seen]
     bars_x, bars_y, ticks_x, ticks_y, kept_x, kept_y = [], [], [], [], [], []
     for i, (bracket, points, best) in enumerate(rows):
-        bars_x += [*bracket, math.nan]
+        bars_x += [to_draw(bracket[0]), to_draw(bracket[1]), math.nan]
         bars_y += [-i, -i, math.nan]
-        ticks_x += points
+        ticks_x += [to_draw(p) for p in points]
         ticks_y += [-i] * len(points)
         if 0 <= best < len(points):
-            kept_x.append(points[best])
+            kept_x.append(to_draw(points[best]))
             kept_y.append(-i)
     ax.plot(bars_x, bars_y, color="0.55", lw=3, solid_capstyle="butt", zorder=1)
     ax.plot(ticks_x, ticks_y, "|", ms=7, color="black", zorder=2)
     ax.plot(kept_x, kept_y, "o", ms=4.5, color="#2ca02c", zorder=3)
-    if view.finished:
+    if drawable(view.result):
         ax.axvline(view.result, color=INTERVAL_COLOUR, lw=1.0, zorder=0)
     ax.set_ylim(-len(rows) + 0.4, 0.6)
 
@@ -197,7 +205,7 @@ def _ladder_panel(ax, view: SearchView | None) -> None:
 def _interval(ax, u: dict[str, float]) -> None:
     """The final gain's interval as a light band (nothing when the tuner could not give one)."""
     lo, hi = u.get("lo", math.nan), u.get("hi", math.nan)
-    if math.isfinite(lo) and math.isfinite(hi) and hi >= lo:
+    if drawable(lo) and drawable(hi) and hi >= lo:
         ax.axvspan(lo, hi, color=INTERVAL_COLOUR, alpha=0.12, lw=0, zorder=0)
 
 
@@ -207,12 +215,12 @@ def _final_panel(ax, gain: str, views: Sequence[SearchView], rows: list[int], va
     ax.tick_params(labelsize=7)
     results = [(v.bootstrap, v.result) for v in views if v.gain == gain and v.finished and v.bootstrap in rows]
     for b, x in results:
-        ax.plot(x, -rows.index(b), "o", ms=4, color="0.45")
+        ax.plot(to_draw(x), -rows.index(b), "o", ms=4, color="0.45")
     y_final = -len(rows)
     u = u or {}
     lo, hi, se, level = (u.get(k, math.nan) for k in ("lo", "hi", "se", "level"))
-    if math.isfinite(value):
-        if math.isfinite(lo) and math.isfinite(hi):
+    if drawable(value):
+        if drawable(lo) and drawable(hi):
             ax.errorbar(value, y_final, xerr=[[max(value - lo, 0.0)], [max(hi - value, 0.0)]], fmt="D", ms=5,
                         color=INTERVAL_COLOUR, capsize=4, lw=1.5)
         else:

@@ -28,16 +28,25 @@ def gains_table(final: dict[str, float], uncertainty: dict[str, dict[str, float]
 
 
 def comparisons_table(view: SearchView) -> str:
-    """One row per comparison of a line search."""
+    """One row per comparison of a line search; a 'compared' column when the search decided on other costs than
+    the means shown (e.g. without reuse, on the latest flights only)."""
+    compared = any(c.compared and not _same(c.compared, c.means) for c in view.comparisons)
     rows = []
     for i, c in enumerate(view.comparisons, 1):
         rows.append([i, f"[{md.num(c.bracket[0], 4)}, {md.num(c.bracket[1], 4)}]",
                      ", ".join(md.num(p, 4) for p in c.points), ", ".join(_mean_se(c, k) for k in range(len(c.points))),
-                     ", ".join(md.num(x, 4) for x in c.compared) or "—",
+                     *([", ".join(md.num(x, 4) for x in c.compared) or "—"] if compared else []),
                      md.num(c.points[c.best], 4) if 0 <= c.best < len(c.points) else "—",
                      md.num(c.p_correct, 2) if _known(c.p_correct) else "—"])
-    return md.table(["#", "bracket", "points", "mean ± se (n) per point", "compared", "kept", "P(right)"], rows,
-                    ["r", "l", "l", "l", "l", "r", "r"])
+    header = ["#", "bracket", "points", "mean ± se (n) per point", *(["compared"] if compared else []), "kept",
+              "P(right)"]
+    return md.table(header, rows, ["r", "l", "l", "l", *(["l"] if compared else []), "r", "r"])
+
+
+def _same(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Equal lists of costs (NaN equal to NaN)."""
+    return len(a) == len(b) and all(x == y or (math.isnan(x) and math.isnan(y)) or math.isclose(x, y)
+                                    for x, y in zip(a, b))
 
 
 def points_table(view: SearchView) -> str:
@@ -47,11 +56,15 @@ def points_table(view: SearchView) -> str:
 
 
 def final_gains_section(final: dict[str, float], uncertainty: dict[str, dict[str, float]],
-                        views: Sequence[SearchView]) -> list[str]:
-    """The final gains with their uncertainty, and where it comes from."""
+                        views: Sequence[SearchView], noise: dict[str, float] | None = None) -> list[str]:
+    """The final gains with their uncertainty, where it comes from, and the run's flight-to-flight noise."""
     note = ("± se and the interval are the tuner's, computed from the recorded flights." if uncertainty else
             "This result carries no uncertainty of the final gains (a tuner that computes one writes `uncertainty` "
             "into the result); the spread of the bootstraps' results is the only hint of it here.")
+    cv, dof = (noise or {}).get("cv", math.nan), (noise or {}).get("dof", math.nan)
+    if _known(cv):
+        note += (f" Flight-to-flight noise of the cost, pooled over the run: {100 * cv:.1f} % of the cost (one "
+                 "standard deviation" + (f", {dof:.0f} degrees of freedom)." if _known(dof) else ")."))
     return ["## Final gains", "", gains_table(final, uncertainty, views), "", note, ""]
 
 
@@ -61,25 +74,28 @@ def tuning_section(views: Sequence[SearchView], figure: str | None, figure_note:
     if figure:
         parts += [md.image(figure, "the tuning"), "",
                   "Per line search (rows: bootstraps, columns: gains): every flight's cost at its point (dot, vehicle "
-                  "colour; red × at the top = failed or non-finite cost), per point the mean ± standard error (black), "
-                  "the comparisons top to bottom (grey: the bracket it started from, ticks: its points, green: the "
-                  "point kept) and the search's result (red line); the shaded band is the final interval. The last "
-                  "row: each bootstrap's result and the final gain." + figure_note, ""]
+                  "colour; red × at the top = a cost not finite or off the scale), per point the mean ± standard "
+                  "error (black), the comparisons top to bottom (grey: the bracket it started from, ticks: its "
+                  "points, green: the point kept; last: the bracket it ended with) and the search's result (red "
+                  "line); the shaded band is the final interval. The last row: each bootstrap's result and the "
+                  "final gain." + figure_note, ""]
     elif figure_note:
         parts += [figure_note.strip(), ""]
     if not views:
         return parts + ["No line search was flown.", ""]
-    computed = any(_known(c.p_correct) for v in views for c in v.comparisons)
+    given = any(_known(c.p_correct) for v in views for c in v.comparisons)
     parts += ["### Comparisons", "",
-              "Mean ± se (n) per point over the finite costs of its flights " +
-              ("as the tuner gives them; P(right) is the tuner's probability that the comparison kept the better point."
-               if computed else "in that line search (computed for this report; the tuner gave no comparison "
-               "statistics, so P(right) is unknown).") +
-              " 'compared' is the cost of each point the search decided on (a failed flight counts as infinite; "
-              "without reuse only the flights of that comparison count).", ""]
+              ("Mean ± se (n) per point as the tuner computed them; P(right) is the tuner's probability that the "
+               "comparison kept the truly better point." if given else
+               "Mean ± se (n) per point over the finite costs of its flights in that line search, computed for this "
+               "report (the tuner gave no comparison statistics, so P(right) is unknown); where the search decided "
+               "on other costs (without reuse: the latest flights only; a failed flight counts as infinite), "
+               "'compared' shows them."), ""]
     for v in views:
         head = f"**Bootstrap {v.bootstrap} · {v.gain}**" + (f" → {md.num(v.result, 4)}" if v.finished else
                                                             " (not finished)")
+        if v.stop_reason:
+            head += f" — stopped narrowing early: {v.stop_reason}"
         if v.comparisons:
             parts += [head, "", comparisons_table(v), ""]
         elif v.points:

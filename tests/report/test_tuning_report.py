@@ -42,11 +42,33 @@ def _rows(text: str) -> list[list[str]]:
     lines = text.splitlines()
     start = next(i for i, ln in enumerate(lines) if ln.startswith("|"))
     end = next((i for i in range(start, len(lines)) if not lines[i].startswith("|")), len(lines))
-    return [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in lines[start + 2:end]]
+    return [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in lines[start:end] if "---" not in ln][1:]
 
 
-def test_comparisons_mean_se_and_n_are_those_of_the_flights(tmp_path):
-    result = mavtune.tune(_noisy(), vehicles=3, strategy="avg")
+def _records(text: str) -> list[dict[str, str]]:
+    """Rows of the first Markdown table in `text` as dicts by column header."""
+    lines = [ln for ln in text.splitlines() if ln.startswith("|")]
+    header = [c.strip() for c in lines[0].strip().strip("|").split("|")]
+    return [dict(zip(header, row)) for row in _rows(text)]
+
+
+class _WithoutStatistics(TuningResult):
+    """A result as a tuner without statistics writes it: no comparisons, no uncertainty, no noise."""
+
+    def to_dict(self):
+        d = super().to_dict()
+        for s in d["searches"]:
+            s.pop("comparisons", None)
+        return d
+
+
+def _plain(result: TuningResult, cls=_WithoutStatistics) -> TuningResult:
+    """`result` as an instance of `cls`, without the tuner's uncertainty."""
+    return cls(result.gains, result.rounds, result.searches, result.bootstraps, result.stop_reason, result.settings)
+
+
+def test_without_tuner_statistics_mean_se_and_n_are_computed_from_the_flights(tmp_path):
+    result = _plain(mavtune.tune(_noisy(), vehicles=3, strategy="avg"))
     text = write_run_report(tmp_path, result).read_text()
     views = search_views(result)
     assert [(v.bootstrap, v.gain) for v in views] == [(s.bootstrap, s.gain) for s in result.searches]
@@ -58,13 +80,14 @@ def test_comparisons_mean_se_and_n_are_those_of_the_flights(tmp_path):
         assert n == len(costs) == 3
         assert mean == pytest.approx(statistics.mean(costs))
         assert se == pytest.approx(statistics.stdev(costs) / math.sqrt(3))
-    table = _rows(_section(text, "## The tuning").split("**Bootstrap 1 · kp**", 1)[1])
+    table = _records(_section(text, "## The tuning").split("**Bootstrap 1 · kp**", 1)[1])
     assert len(table) == len(result.searches[0].iterations)
     row = table[0]
-    assert row[2] == ", ".join(f"{p:.4g}" for p in c.points)
-    assert row[3] == ", ".join(f"{m:.4g} ± {s:.2g} (3)" for m, s in zip(c.means, c.se))
-    assert float(row[5]) == pytest.approx(c.points[c.best], rel=1e-3)
-    assert row[6] == "—"  # no P(right) without the tuner's statistics
+    assert row["points"] == ", ".join(f"{p:.4g}" for p in c.points)
+    assert row["mean ± se (n) per point"] == ", ".join(f"{m:.4g} ± {s:.2g} (3)" for m, s in zip(c.means, c.se))
+    assert float(row["kept"]) == pytest.approx(c.points[c.best], rel=1e-3)
+    assert row["P(right)"] == "—"  # no P(right) without the tuner's statistics
+    assert "compared" not in row  # with reuse the search compared exactly these means
     assert "no uncertainty of the final gains" in text
 
 
@@ -80,9 +103,8 @@ class _WithStatistics(TuningResult):
 
 
 def test_interval_and_tuner_statistics_appear_in_report(tmp_path):
-    plain = mavtune.tune(_noisy(), vehicles=2)
-    result = _WithStatistics(plain.gains, plain.rounds, plain.searches, plain.bootstraps, plain.stop_reason,
-                             plain.settings)
+    result = _plain(mavtune.tune(_noisy(), vehicles=2), _WithStatistics)
+    plain = result
     result.uncertainty = {"kp": {"value": plain.gains["kp"], "se": 0.061, "lo": 0.2125, "hi": 0.4375, "level": 0.9},
                           "kd": {"value": plain.gains["kd"], "se": math.nan, "lo": math.nan, "hi": math.nan,
                                  "level": 0.9}}
@@ -91,9 +113,10 @@ def test_interval_and_tuner_statistics_appear_in_report(tmp_path):
     assert gains["kp"][2] == "0.061" and gains["kp"][3] == "[0.2125, 0.4375] (90 %)"
     assert gains["kd"][2] == "—" and gains["kd"][3] == "—"  # unknown stays unknown, not 'nan'
     assert "± se and the interval are the tuner's" in text
-    comparisons = _rows(_section(text, "## The tuning").split("**Bootstrap 1 · kp**", 1)[1])
-    assert comparisons[0][3] == "2.5 ± 0.25 (4), 1.25 ± 0.12 (4)"
-    assert comparisons[0][5] == "0.875" and comparisons[0][6] == "0.93"
+    first = _records(_section(text, "## The tuning").split("**Bootstrap 1 · kp**", 1)[1])[0]
+    assert first["mean ± se (n) per point"] == "2.5 ± 0.25 (4), 1.25 ± 0.12 (4)"
+    assert first["kept"] == "0.875" and first["P(right)"] == "0.93"
+    assert "P(right) is the tuner's probability" in text
     assert "could not be written" not in text
 
 
@@ -224,14 +247,18 @@ def _odd_result(draw):
         from mavtune.search import Iteration
         from mavtune.tuner import LineSearchRecord
 
-        its = [Iteration((0.0, 1.0), (p, q), (draw(_any_float), draw(_any_float)), draw(st.integers(0, 1)))
+        its = [Iteration((0.0, 1.0), (p, q), (draw(_any_float), draw(_any_float)), draw(st.integers(0, 1)),
+                         (draw(_any_float),), (draw(st.integers(0, 3)),) * draw(st.integers(0, 3)), draw(_any_float))
                for p, q in draw(st.lists(st.tuples(_points, _points), max_size=3))]
-        searches.append(LineSearchRecord(rounds[0].bootstrap, rounds[0].gain, {}, its, draw(_any_float), len(its)))
+        searches.append(LineSearchRecord(rounds[0].bootstrap, rounds[0].gain, {}, its, draw(_any_float), len(its),
+                                         bracket=(draw(_any_float), draw(_any_float)),
+                                         stop_reason=draw(st.sampled_from([None, "a | b"]))))
     gains = draw(st.dictionaries(st.sampled_from(_GAINS), _any_float, max_size=3))
-    result = TuningResult(gains, rounds, searches, 1, "generated",
-                          draw(st.sampled_from([{}, {"space": {"kp": [0, 1], "kd": [0, 2]}}, {"space": {"kd": [1, 1]}}])))
+    space = draw(st.sampled_from([{}, {"space": {"kp": [0, 1], "kd": [0, 2]}}, {"space": {"kd": [1, 1]}}]))
+    result = draw(st.sampled_from([TuningResult, _WithoutStatistics]))(gains, rounds, searches, 1, "generated", space)
     result.uncertainty = draw(st.dictionaries(st.sampled_from(_GAINS), st.dictionaries(
         st.sampled_from(["value", "se", "lo", "hi", "level"]), _any_float), max_size=2))
+    result.noise = draw(st.dictionaries(st.sampled_from(["cv", "dof"]), _any_float))
     return result
 
 
