@@ -87,6 +87,16 @@ class SearchView:
     def finished(self) -> bool:
         return math.isfinite(self.result)
 
+    def summary(self) -> list[tuple[float, float, float]]:
+        """(point, mean, se) of every point flown: as its latest comparison states them (the tuner's figures where
+        it gave them), else from the point's flights."""
+        out = []
+        for s in self.points:
+            stated = [(c.means[k], c.se[k]) for c in self.comparisons for k, p in enumerate(c.points)
+                      if same_point(p, s.point) and k < min(len(c.means), len(c.se)) and math.isfinite(c.se[k])]
+            out.append((s.point, *(stated[-1] if stated else (s.mean, s.se))))
+        return out
+
 
 def as_float(x: Any) -> float:
     """A number from odd data: NaN for None, strings that are no number and the like."""

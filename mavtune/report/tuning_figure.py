@@ -153,10 +153,10 @@ def _cost_panel(ax, view: SearchView | None, colour: dict, bootstrap: int, gain:
         ax.plot(xs, ys, "o", ms=3, color=colour.get(vehicle, "0.5"), alpha=0.9, zorder=5)
     if failed:
         ax.plot(failed, [0.97] * len(failed), "x", ms=5, color="red", transform=top, clip_on=False, zorder=3)
-    measured = [s for s in view.points if drawable(s.point) and drawable(s.mean)]
+    measured = [(p, m, se) for p, m, se in view.summary() if drawable(p) and drawable(m)]
     if measured:
-        ax.errorbar([s.point for s in measured], [s.mean for s in measured],
-                    yerr=[s.se if drawable(s.se) else 0.0 for s in measured], fmt="_", ms=9, mew=1.6,
+        ax.errorbar([p for p, _, _ in measured], [m for _, m, _ in measured],
+                    yerr=[se if drawable(se) else 0.0 for _, _, se in measured], fmt="_", ms=9, mew=1.6,
                     color="black", capsize=3, lw=1.2, zorder=4)
     if drawable(view.result):
         ax.axvline(view.result, color=INTERVAL_COLOUR, lw=1.0, zorder=1)
