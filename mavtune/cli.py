@@ -12,8 +12,8 @@ import typer
 
 from mavtune.errors import MavtuneError
 from mavtune.options import (
-    BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt, StrategyOpt, VehiclesOpt,
-    config_from_flags,
+    AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt, StrategyOpt,
+    VehiclesOpt, config_from_flags,
 )
 
 app = typer.Typer(
@@ -31,12 +31,14 @@ def plan_command(
     replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
     epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
+    adaptive: Optional[bool] = AdaptiveOpt,
 ) -> None:
     """Print, before anything flies, the rounds, flights, flight time and batteries a run needs."""
     from mavtune.run import plan_of, plan_panel
     from rich.console import Console
 
-    cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s)
+    cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
+                            tuning__adaptive=adaptive)
     Console().print(plan_panel(cfg, plan_of(cfg)))
 
 
@@ -46,6 +48,7 @@ def tune_command(
     replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
     epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
+    adaptive: Optional[bool] = AdaptiveOpt,
     seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the simulated vehicles (vehicle j: seed + j)."),
     payload: Optional[float] = typer.Option(None, "--payload", help="sim: payload mass, kg (paper: 0.9)."),
     fleet: Optional[str] = typer.Option(None, "--fleet", help="sim (built in) | zenoh (swarm agents) | mavlink."),
@@ -70,7 +73,7 @@ def tune_command(
     base = saved_config(out) if out is not None and config is None else None  # resume a folder as it was run
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base,
                   tuning__seed=seed, sim__payload_kg=payload, fleet__kind=fleet, swarm__listen=listen,
-                  mavlink__urls=mavlink or None, mavlink__keep_tuned=keep_tuned)
+                  mavlink__urls=mavlink or None, mavlink__keep_tuned=keep_tuned, tuning__adaptive=adaptive)
     if out is None:
         if resume:
             raise MavtuneError("--resume needs --out naming the run folder to continue")

@@ -1,6 +1,7 @@
 """The run configuration: pydantic models read from TOML and overridden by command-line flags.
 
-    [tuning]   what to tune and how (space, method, epsilon, bootstraps, vehicles, strategy, reuse, initial)
+    [tuning]   what to tune and how (space, method, epsilon, bootstraps, vehicles, strategy, reuse, initial,
+               adaptive averaging: adaptive, confidence, cap)
     [flight]   the primitive and its timing, the battery time for the plan
     [sim]      the simulated scenario (payload, wind, noise, spread, cost) — mavtune.sim.Scenario
     [fleet]    which vehicles fly: "sim" (built in), "zenoh" (swarm agents), "mavlink" (PX4 / ArduPilot)
@@ -42,6 +43,9 @@ class Tuning(_Section):
     reuse: bool = True
     initial: dict[str, float] = Field(default_factory=lambda: {"kd": 0.2})
     seed: int = 0
+    adaptive: bool = False
+    confidence: float = Field(0.9, gt=0.5, lt=1.0, description="adaptive: p_correct a comparison needs to move on")
+    cap: int | None = Field(None, ge=1, description="adaptive: most flights of one point (default 4 rounds' worth)")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":
@@ -95,7 +99,8 @@ class Config(_Section):
         return Settings(space=dict(t.space), method=t.method, epsilon=t.epsilon,
                         bootstraps=None if t.bootstraps == "auto" else t.bootstraps, vehicles=t.vehicles,
                         strategy=t.strategy, reuse=t.reuse, initial=dict(t.initial), replicates=t.replicates,
-                        points=t.points, max_bootstraps=t.max_bootstraps, seed=t.seed)
+                        points=t.points, max_bootstraps=t.max_bootstraps, seed=t.seed, adaptive=t.adaptive,
+                        confidence=t.confidence, cap=t.cap)
 
     def scenario(self):
         """The simulated scenario: the [sim] section with the primitive and timing of [flight]."""

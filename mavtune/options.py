@@ -18,6 +18,8 @@ EpsilonOpt = typer.Option(None, "--epsilon", help="Tolerance as a fraction of ea
 BootstrapsOpt = typer.Option(None, "--bootstraps", help="Passes over the gains, or 'auto' for the paper's stop rule.")
 ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twice in one line search.")
 BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
+AdaptiveOpt = typer.Option(None, "--adaptive/--no-adaptive", help="Fly close comparisons again (up to a cap) until "
+                           "the kept point is the best with probability [tuning] confidence.")
 
 
 def bootstraps_flag(value: Optional[str]) -> int | str | None:

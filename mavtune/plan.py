@@ -3,7 +3,9 @@
 Two round counts: `rounds` is the most the run took in rehearsals of every line search — on unimodal costs
 with the minimiser at 64 places and on 32 costs of pure noise — speculation included; `rounds_max` is the
 guarantee whatever the costs (as if no speculative point were ever used). Without speculation (avg, or reuse
-off) the two are equal.
+off) the two are equal. With adaptive averaging `rounds` is the expected case (the mean over rehearsals on
+bowls with 20 % flight-to-flight noise) and `rounds_max` the worst: every comparison too close to call until
+each of its points has the cap of flights.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from mavtune.tuner import Settings
 
 MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal costs)
 NOISE_PROBES = 32  # costs of pure noise rehearsed per line search (seeded: the plan is reproducible)
+EXPECTED_PROBES = 16  # noisy bowls rehearsed for the expected rounds of adaptive averaging
+EXPECTED_NOISE = 0.2  # their flight-to-flight noise, relative (the simulator's is 10–35 %)
 
 
 @dataclass(frozen=True)
@@ -32,6 +36,7 @@ class Plan:
     settle_s: float
     battery_s: float
     stop_rule: bool = False  # bootstraps end early when a point repeats (paper's rule)
+    adaptive: bool = False  # rounds is the expected case, rounds_max the cap in every comparison
 
     @property
     def flights(self) -> int:
@@ -68,8 +73,10 @@ class Plan:
         lines = [
             f"bootstraps    {self.bootstraps}" + (" at most (the paper's stop rule may end the run sooner)"
                                                    if self.stop_rule else ""),
-            f"rounds        {self.rounds}" + (f" (guaranteed at most {self.rounds_max}, if no speculative point "
-                                              "is ever used)" if self.rounds_max != self.rounds else ""),
+            f"rounds        {self.rounds}" + (
+                f" expected (at most {self.rounds_max}, if every comparison is too close to call until the cap)"
+                if self.adaptive else f" (guaranteed at most {self.rounds_max}, if no speculative point is ever used)"
+                if self.rounds_max != self.rounds else ""),
             f"flights       {self.flights} ({self.vehicles} vehicles × {self.rounds} rounds; "
             f"{self.evaluations} points searched)",
             f"flight time   {clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
@@ -94,13 +101,13 @@ def _rounds_without_speculation(settings: Settings, lo: float, hi: float) -> int
     return sum(math.ceil(n / slots) for n in search.needs() if n)
 
 
-def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float]) -> int:
-    """Rounds one line search takes, speculation included, on the cost `cost`."""
+def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float], speculate: bool = True) -> int:
+    """Rounds one line search takes, speculation included (unless told not to), on the cost `cost`."""
     search = settings.search(lo, hi)
     rounds = 0
     while not search.done:
-        unique = sorted(set(settings.strategy_rule.assign(search, settings.vehicles)))
-        search.tell(unique, [cost(p) for p in unique])
+        flown = settings.strategy_rule.assign(search, settings.vehicles, speculate)
+        search.tell(flown, [cost(p) for p in flown])
         rounds += 1
     return rounds
 
@@ -110,16 +117,36 @@ def _noise(seed: int) -> Callable[[float], float]:
     return lambda _: draw.random()
 
 
+def _noisy_bowl(minimum: float, seed: int) -> Callable[[float], float]:
+    draw = random.Random(seed)
+    return lambda x: (1.0 + (x - minimum) ** 2) * (1.0 + EXPECTED_NOISE * draw.gauss(0.0, 1.0))
+
+
+def _adaptive_rounds(settings: Settings, lo: float, hi: float) -> tuple[int, int]:
+    """Expected and worst rounds of one adaptive line search: the mean over noisy bowls, and the most over a
+    flat cost (no comparison ever decided before the cap), a pure-noise cost and no speculation."""
+    expected = [_rehearse(settings, lo, hi, _noisy_bowl((i + 0.5) / EXPECTED_PROBES, i))
+                for i in range(EXPECTED_PROBES)]
+    flat = lambda _: 1.0  # noqa: E731
+    worst = max(_rehearse(settings, lo, hi, flat), _rehearse(settings, lo, hi, flat, speculate=False),
+                *(_rehearse(settings, lo, hi, _noise(seed)) for seed in range(2)))
+    return math.ceil(sum(expected) / len(expected)), max(worst, *expected)
+
+
 def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.0, battery_s: float = 600.0) -> Plan:
     """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps."""
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
     # every gain's line search has the same shape relative to its range: rehearse one, count it per gain
     lo, hi = 0.0, 1.0
     minimisers = [(i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]
-    costs = [lambda x, m=m: abs(x - m) for m in minimisers] + [_noise(seed) for seed in range(NOISE_PROBES)]
-    per_search = max(_rehearse(settings, lo, hi, cost) for cost in costs)
-    per_search_max = max(per_search, _rounds_without_speculation(settings, lo, hi))
+    if settings.adaptive_rule is not None:
+        per_search, per_search_max = _adaptive_rounds(settings, lo, hi)
+    else:
+        costs = [lambda x, m=m: abs(x - m) for m in minimisers] + [_noise(seed) for seed in range(NOISE_PROBES)]
+        per_search = max(_rehearse(settings, lo, hi, cost) for cost in costs)
+        per_search_max = max(per_search, _rounds_without_speculation(settings, lo, hi))
     evaluations = settings.search(lo, hi).budget()
     searches = len(settings.space) * bootstraps
     return Plan(per_search * searches, per_search_max * searches, settings.vehicles, evaluations * searches,
-                bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None)
+                bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None,
+                adaptive=settings.adaptive_rule is not None)

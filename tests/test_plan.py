@@ -37,9 +37,9 @@ def test_batteries_count_whole_rounds_per_pack():
 
 @given(st.sampled_from(["eql", "fibonacci", "golden", "dichotomy", "nsection"]),
        st.sampled_from(["avg", "split", "groups"]), st.integers(1, 4), st.booleans(),
-       st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.05, 0.45), st.integers(0, 3))
+       st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.05, 0.45), st.integers(0, 3), st.booleans())
 @settings(max_examples=40, deadline=None)
-def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsilon, noise_seed):
+def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsilon, noise_seed, adaptive):
     vehicles = 2 * half
     import random
 
@@ -48,7 +48,8 @@ def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsi
     def evaluate(assignments):  # a bowl with 20 % multiplicative noise
         return [((g["kp"] - kp0) ** 2 + (g["kd"] - kd0) ** 2 + 0.01) * (1 + 0.2 * draw.random()) for g in assignments]
 
-    kwargs = dict(space=SPACE, method=method, epsilon=epsilon, strategy=strategy, vehicles=vehicles, reuse=reuse)
+    kwargs = dict(space=SPACE, method=method, epsilon=epsilon, strategy=strategy, vehicles=vehicles, reuse=reuse,
+                  adaptive=adaptive)
     plan = make_plan(Settings(**kwargs, bootstraps=2))
     result = mavtune.tune(evaluate, bootstraps=2, draws=0, **kwargs)  # no interval: only the rounds count here
     assert len(result.rounds) <= plan.rounds_max
@@ -61,3 +62,11 @@ def test_plan_command_prints_the_numbers():
     text = " ".join(out.output.split())
     assert "rounds 8 (guaranteed at most 28" in text
     assert "flights 64" in text and "1 min 12 s" in text and "batteries 2 per vehicle" in text
+
+
+def test_adaptive_plan_says_the_expected_and_the_worst_case():
+    plain = make_plan(Settings(space=SPACE, initial={"kd": 0.2}))
+    adaptive = make_plan(Settings(space=SPACE, initial={"kd": 0.2}, adaptive=True, cap=4))
+    assert plain.rounds <= adaptive.rounds < adaptive.rounds_max
+    assert adaptive.rounds_max == 2 * 2 * 9 * 2  # every point of every search flown to the cap: 2 rounds of 2
+    assert "expected (at most" in adaptive.describe()

@@ -5,10 +5,11 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import example, given, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from mavtune.errors import MavtuneError
-from mavtune.search import EQL, METHODS, make_search
+from mavtune.search import EQL, METHODS, Adaptive, make_search
+from mavtune.search.base import FAILED_RETRIES
 
 
 def run(search, cost):
@@ -130,3 +131,55 @@ def test_eql_half_integer_epsilon_reuses_the_half_step_point():
     s = EQL(0.0, 1.0, 0.4)
     assert s.budget(reuse=True) == 3
     assert len(run(s, lambda x: abs(x - 0.05))) == 3
+
+
+def test_a_comparison_of_failed_points_decides_nothing():
+    s = EQL(0.0, 1.0, 0.125)
+    for attempt in range(FAILED_RETRIES + 1):
+        assert s.ask() == [0.125, 0.875] and s.bracket == (0.0, 1.0)  # flown again, never narrowed
+        s.tell([0.125, 0.875], [math.inf, math.nan])
+    assert s.done and not s.history and s.bracket == (0.0, 1.0)
+    assert "failed" in s.stop_reason and "decides nothing" in s.stop_reason
+
+
+def test_a_failed_comparison_flown_again_goes_on_with_the_new_flights():
+    s = EQL(0.0, 1.0, 0.125)
+    s.tell([0.125, 0.875], [math.inf, math.inf])
+    s.tell([0.125, 0.875], [2.0, 1.0])
+    assert s.bracket == (0.125, 1.0) and s.history[0].costs == (2.0, 1.0)
+    assert s.samples() == {0.125: [math.inf, 2.0], 0.875: [math.inf, 1.0]}  # every flight stays on record
+
+
+costs_any = st.one_of(st.floats(0, 100), st.just(math.inf), st.just(math.nan))
+
+
+@given(st.sampled_from(sorted(METHODS)), st.integers(1, 6), st.floats(0.55, 0.99), st.booleans(),
+       st.lists(costs_any, min_size=1, max_size=50), st.integers(1, 3))
+@settings(max_examples=60, deadline=None)
+def test_adaptive_averaging_never_exceeds_its_cap(method, cap, confidence, reuse, costs, per_round):
+    s = make_search(method, 0.0, 1.0, 0.2, reuse=reuse, points=3, adaptive=Adaptive(confidence, cap))
+    draw = iter(costs * 1000)
+    rounds = 0
+    while not s.done:
+        asked = s.ask()
+        assert asked, "an unfinished search must ask for something"
+        for p in asked:
+            assert s.stats(p).n < cap or s.stats(p).n == 0
+        flown = [p for p in asked[:1] for _ in range(min(per_round, cap - s.stats(p).n))] + asked[1:]
+        s.tell(flown, [next(draw) for _ in flown])
+        rounds += 1
+        assert rounds < 2000
+    assert all(max(i.n) <= cap for i in s.history)
+    assert all(i.p_correct >= confidence or all(n == cap for n in i.n) or math.isinf(max(i.costs))
+               for i in s.history if not math.isnan(i.p_correct))
+
+
+def test_adaptive_flies_a_close_comparison_again_and_moves_on_from_a_clear_one():
+    s = EQL(0.0, 1.0, 0.125, adaptive=Adaptive(0.9, 6))
+    s.tell([0.125, 0.125, 0.875, 0.875], [10.0, 10.2, 1.0, 1.1])  # clear: decided after one round
+    assert len(s.history) == 1 and s.history[0].p_correct > 0.99
+    s.tell([0.25, 0.25], [1.08, 1.12])  # 0.25 vs the carried 0.875: too close to call
+    assert len(s.history) == 1
+    assert s.ask() == [0.875, 0.25]  # the carried point is flown again first (fewest flights, then lowest mean)
+    s.tell([0.875, 0.875], [1.3, 1.2])
+    assert s.stats(0.875).n == 4  # pooled with its earlier flights

@@ -124,3 +124,64 @@ def test_bad_input_is_one_line_naming_the_problem(kwargs, message):
 def test_wrong_number_of_costs_is_named():
     with pytest.raises(MavtuneError, match="returned 1 costs for 2 assignments"):
         mavtune.tune(lambda gs: [0.0], vehicles=2, strategy="split")
+
+
+def noisy(seed, cv=0.1, kp0=0.4, kd0=0.6):
+    import random
+
+    draw = random.Random(seed)
+
+    def evaluate(assignments):
+        return [((g["kp"] - kp0) ** 2 + (g["kd"] - kd0) ** 2 + 0.1) * (1 + cv * draw.gauss(0, 1)) for g in assignments]
+    return evaluate
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_paper_stop_rule_fires_on_a_noisy_cost(seed):
+    result = mavtune.tune(noisy(seed), vehicles=2, bootstraps=None, draws=0,
+                          **{k: v for k, v in PAPER.items() if k != "bootstraps"})
+    assert "already found" in result.stop_reason and result.bootstraps < 10
+    ends = {(s.bootstrap, s.gain): s.result for s in result.searches}
+    assert any(all(abs(ends[(result.bootstraps, g)] - ends[(b, g)]) <= 0.125 for g in ("kp", "kd"))
+               for b in range(1, result.bootstraps))
+
+
+def test_adaptive_keeps_the_noise_free_final_gains():
+    for strategy, vehicles in (("avg", 2), ("split", 2), ("groups", 4)):
+        plain = mavtune.tune(bowl(), vehicles=vehicles, strategy=strategy, **PAPER)
+        adaptive = mavtune.tune(bowl(), vehicles=vehicles, strategy=strategy, adaptive=True, **PAPER)
+        assert adaptive.gains == plain.gains
+        # one flight per point (split) says nothing of the noise: adaptive flies a point twice to learn it
+        assert len(adaptive.rounds) <= len(plain.rounds) + (2 if strategy == "split" else 0)
+
+
+def test_a_run_whose_every_flight_fails_narrows_nothing_and_says_so():
+    result = mavtune.tune(lambda gs: [math.inf] * len(gs), vehicles=2, **PAPER)
+    assert result.gains == {"kp": 0.5, "kd": 0.2}  # as they were: nothing was measured
+    assert all(not s.iterations and "decides nothing" in s.stop_reason for s in result.searches)
+    assert result.bootstraps == 1 and "run stopped" in result.stop_reason
+    assert len(result.rounds) == 2 * 3 * 2  # per gain: the first comparison (2 rounds with avg) flown three times
+
+
+def test_adaptive_run_replays_from_its_journal_to_the_same_rounds(tmp_path):
+    journal = tmp_path / "run.sqlite"
+    kwargs = dict(vehicles=2, adaptive=True, journal=journal, draws=20, **PAPER)
+    first = mavtune.tune(noisy(3, cv=0.3), **kwargs)
+    assert len(first.rounds) > 36  # close comparisons were flown again
+
+    def never(assignments):
+        raise AssertionError("a replayed round was flown")
+
+    again = mavtune.tune(never, **kwargs)
+    assert [r.assignments for r in again.rounds] == [r.assignments for r in first.rounds]
+    assert again.gains == first.gains and again.uncertainty == first.uncertainty
+
+
+def test_result_dict_carries_uncertainty_and_every_comparison():
+    d = mavtune.tune(noisy(1), vehicles=2, **PAPER).to_dict()
+    assert set(d["uncertainty"]) == {"kp", "kd"}
+    for search in d["searches"]:
+        assert {"bootstrap", "gain", "held", "result", "evaluations", "brackets", "comparisons"} <= set(search)
+        for c in search["comparisons"]:
+            assert set(c) == {"bracket", "points", "means", "se", "n", "best", "p_correct"}
+            assert len(c["points"]) == len(c["means"]) == len(c["se"]) == len(c["n"]) and 0 <= c["p_correct"] <= 1

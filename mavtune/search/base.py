@@ -80,6 +80,7 @@ class LineSearch(ABC):
         self._next_key = 0
         self._state = self._initial()
         self._samples: dict[int, list[float]] = {}  # key -> every flight's cost usable now
+        self._flown: dict[int, list[float]] = {}  # key -> every flight's cost told, usable or not
         self.history: list[Iteration] = []
         self.evaluations = 0  # points the finished iterations needed flown (as counted by budget())
         self._used: set[int] = set()
@@ -153,8 +154,8 @@ class LineSearch(ABC):
         return point_stats(self._samples.get(self.key(x), ()), self.pool)
 
     def samples(self) -> dict[float, list[float]]:
-        """Every point with flights usable now, and their costs."""
-        return {self._where[k]: list(v) for k, v in self._samples.items() if v}
+        """Every point flown in this search and the costs of its flights (without reuse, of every iteration)."""
+        return {self._where[k]: list(v) for k, v in self._flown.items()}
 
     def ask(self) -> list[float]:
         """The points of the current iteration that need flights: those without any (all of them without
@@ -182,6 +183,7 @@ class LineSearch(ABC):
             c = float(c)
             c = c if not math.isnan(c) else math.inf
             self._samples.setdefault(k, []).append(c)
+            self._flown.setdefault(k, []).append(c)
             self.pool.add((self._owner, k), c)
         self._settle()
 

@@ -14,12 +14,10 @@ from dataclasses import dataclass
 from typing import Hashable, Sequence
 
 import numpy as np
-from numpy.polynomial.hermite_e import hermegauss
 from scipy.special import ndtr
 
 PRIOR_DOF = 4.0  # how many degrees of freedom the run's pooled noise counts for in a point's own variance
-_NODES, _WEIGHTS = hermegauss(48)
-_WEIGHTS = _WEIGHTS / _WEIGHTS.sum()  # expectation over a standard normal
+_GRID = np.linspace(-8.0, 8.0, 4001)  # standard-normal abscissae for comparisons of three points or more
 
 
 @dataclass(frozen=True)
@@ -115,11 +113,15 @@ def p_best(means: Sequence[float], se: Sequence[float], best: int) -> float:
     if len(rivals) == 1 and s[best] + s[rivals[0]] > 0:  # two points: the difference is normal
         j = rivals[0]
         return 0.5 * math.erfc(-(m[j] - m[best]) / math.hypot(s[best], s[j]) / math.sqrt(2.0))
-    x = m[best] + s[best] * _NODES  # quadrature over the best point's true mean
+    if s[best] > 0:  # integrate over the best point's true mean, on a grid fine against every error
+        x = m[best] + s[best] * _GRID
+        weight = np.exp(-0.5 * _GRID**2)
+    else:
+        x, weight = np.array([m[best]]), np.array([1.0])
     prob = np.ones_like(x)
     for j in rivals:
         if s[j] > 0:
             prob *= ndtr((m[j] - x) / s[j])
         else:
             prob *= np.where(x < m[j], 1.0, np.where(x == m[j], 0.5, 0.0))
-    return float(np.clip(np.dot(_WEIGHTS, prob), 0.0, 1.0))
+    return float(np.clip(np.dot(weight, prob) / weight.sum(), 0.0, 1.0))

@@ -23,6 +23,8 @@ from mavtune.search.evidence import NoisePool, point_stats
 
 LEVEL = 0.9
 DRAWS = 200
+MIN_DRAWS = 50  # long searches (small ε) stop drawing at this many once WORK_ROUNDS resampled rounds are spent
+WORK_ROUNDS = 8000
 MAX_ROUNDS = 1000  # a resampled search that has not ended by then is abandoned (cannot happen with a cap)
 
 
@@ -89,7 +91,10 @@ def resample(make: Callable[[NoisePool], LineSearch], assign: Callable[[LineSear
     search = make(NoisePool())
     if cv == 0.0 and all(s.se == 0.0 for s in finite):
         draws = 1  # noise-free: every resampled world is the same
-    for _ in range(draws):
+    work = 0
+    for draw in range(draws):
+        if draw >= MIN_DRAWS and work >= WORK_ROUNDS:
+            break
         moved = [s.mean + s.se * rng.standard_normal() if math.isfinite(s.mean) else math.inf for s in stats]
         curve = _Curve(points, moved)
         search = make(NoisePool.prior(cv, pool.dof))
@@ -97,6 +102,7 @@ def resample(make: Callable[[NoisePool], LineSearch], assign: Callable[[LineSear
             if search.done:
                 break
             flown = assign(search)
+            work += 1
             truth = [curve(p) for p in flown]
             search.tell(flown, [t + cv * abs(t) * rng.standard_normal() if math.isfinite(t) else t for t in truth])
         if search.done:
@@ -106,5 +112,5 @@ def resample(make: Callable[[NoisePool], LineSearch], assign: Callable[[LineSear
     ends_a = np.asarray(ends)
     tail = 0.5 * (1.0 - level)
     lo, hi = np.quantile(ends_a, [tail, 1.0 - tail])
-    return Interval(value, float(ends_a.std(ddof=1)) if len(ends) > 1 else math.nan,
+    return Interval(value, float(ends_a.std(ddof=1)) if len(ends) > 1 else 0.0,
                     max(float(lo) - resolution, search.lo), min(float(hi) + resolution, search.hi), level)

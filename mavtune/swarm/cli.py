@@ -11,8 +11,8 @@ import typer
 
 from mavtune.errors import MavtuneError
 from mavtune.options import (
-    BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt, StrategyOpt, VehiclesOpt,
-    config_from_flags,
+    AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt, StrategyOpt,
+    VehiclesOpt, config_from_flags,
 )
 from mavtune.swarm.config import load_swarm_config
 
@@ -85,6 +85,7 @@ def coordinator_command(
     replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
     epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
+    adaptive: Optional[bool] = AdaptiveOpt,
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
     token: Optional[str] = typer.Option(None, "--token", help="Shared token (overrides the config)."),
     settle_s: Optional[float] = typer.Option(None, "--settle-s", help="Wait between acknowledgements and start."),
@@ -101,6 +102,7 @@ def coordinator_command(
         raise MavtuneError(f"--resume: there is no journal at {out / JOURNAL}")
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
                             base=saved_config(out) if config is None else None, fleet__kind="zenoh",
+                            tuning__adaptive=adaptive,
                             swarm__listen=listen, swarm__session=session, swarm__token=token,
                             swarm__settle_s=settle_s, swarm__result_timeout_s=result_timeout_s,
                             swarm__ack_timeout_s=ack_timeout_s, swarm__presence_timeout_s=presence_timeout_s)

@@ -1,0 +1,76 @@
+"""What the flights say: per-point errors, the probability a comparison went right, and the final gains' interval."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import mavtune
+from mavtune.search.evidence import NoisePool, p_best, point_stats
+
+
+def test_point_error_from_its_own_replicates_then_from_the_pooled_noise():
+    assert tuple(vars(point_stats([4.0, 6.0])).values()) == pytest.approx((5.0, 1.0, 2))  # sd √2, se = sd/√2
+    pool = NoisePool()
+    assert math.isnan(point_stats([5.0], pool).se)  # nothing flown twice yet: unknown, said as NaN
+    for c in (9.0, 11.0):
+        pool.add("a", c)  # cv = √2/10
+    single = point_stats([20.0], pool)
+    assert single.se == pytest.approx(20.0 * math.sqrt(2) / 10)
+    assert tuple(vars(point_stats([1.0, math.inf], pool)).values()) == (math.inf, 0.0, 2)  # a failed flight makes the point the worst
+
+
+@given(st.lists(st.tuples(st.floats(-5, 5), st.floats(0.01, 3)), min_size=2, max_size=5, unique_by=lambda t: t[0]))
+@settings(max_examples=60)
+def test_the_probabilities_that_each_point_is_best_add_up_to_one(points):
+    means, se = [m for m, _ in points], [s for _, s in points]
+    total = sum(p_best(means, se, i) for i in range(len(points)))
+    assert total == pytest.approx(1.0, abs=2e-3)
+
+
+def test_p_correct_of_clear_close_and_undecidable_comparisons():
+    assert p_best([1.0, 10.0], [0.1, 0.1], 0) > 0.999
+    assert p_best([1.0, 1.0], [0.5, 0.5], 0) == pytest.approx(0.5)
+    assert p_best([1.0, 1.2], [0.5, 0.5], 0) == pytest.approx(0.611, abs=1e-3)  # Φ(0.2/√0.5)
+    assert p_best([1.0, math.inf], [math.nan, 0.0], 0) == 1.0  # a failed rival loses for certain
+    assert math.isnan(p_best([1.0, 2.0], [math.nan, math.nan], 0))  # noise unknown
+
+
+def noisy_bowl(seed, cv=0.2):
+    draw = random.Random(seed)
+
+    def evaluate(assignments):
+        return [((g["kp"] - 0.4) ** 2 + (g["kd"] - 0.6) ** 2 + 0.2) * (1 + cv * draw.gauss(0, 1)) for g in assignments]
+    return evaluate
+
+
+def spread(result, key):
+    return sum(u["hi"] - u["lo"] if key == "width" else u[key] for u in result.uncertainty.values())
+
+
+def test_intervals_shrink_with_replicates():
+    few = [mavtune.tune(noisy_bowl(s), vehicles=2, strategy="avg", bootstraps=1, seed=s) for s in range(4)]
+    many = [mavtune.tune(noisy_bowl(s), vehicles=32, strategy="avg", bootstraps=1, seed=s) for s in range(4)]
+    assert all(math.isfinite(spread(r, "width")) for r in few + many)
+    assert sum(spread(r, "se") for r in many) < 0.6 * sum(spread(r, "se") for r in few)
+    assert sum(spread(r, "width") for r in many) < 0.8 * sum(spread(r, "width") for r in few)
+
+
+def test_interval_holds_the_value_and_stays_in_the_range():
+    result = mavtune.tune(noisy_bowl(1), vehicles=2, seed=1)
+    for name, u in result.uncertainty.items():
+        assert set(u) == {"value", "se", "lo", "hi", "level"} and u["level"] == 0.9
+        assert 0.0 <= u["lo"] <= u["hi"] <= 1.0 and u["value"] == result.gains[name] and u["se"] > 0
+
+
+def test_noise_free_interval_is_the_search_resolution_and_unknown_without_repeats():
+    result = mavtune.tune(lambda gs: [(g["kp"] - 0.3) ** 2 for g in gs], space={"kp": (0.0, 1.0)}, vehicles=2,
+                          bootstraps=1)
+    u = result.uncertainty["kp"]
+    assert u["se"] == 0.0 and u["lo"] < u["value"] < u["hi"] and u["hi"] - u["lo"] <= 2 * 0.125
+    single = mavtune.tune(noisy_bowl(0), method="dichotomy", vehicles=1, bootstraps=1)  # no point flown twice
+    assert all(math.isnan(u["se"]) and math.isnan(u["lo"]) for u in single.uncertainty.values())
+    assert math.isnan(single.noise["cv"])
