@@ -1,28 +1,68 @@
 """The report of one tuning run: `report.md` with its figures, written into the run folder.
 
-Contents: the final gains; plan vs actual (rounds, flights, flight time); the timeline figure (altitude of
-every vehicle, gain profiles, cost per flight — the paper's Figs. 6–7); the final gains on the cost surface
-when one exists (`surface.csv` in the run folder, or one passed in); the table of rounds; fleet events
-(drop-outs, rejoins, aborts) when `result.json` records them.
+Contents, one section each (`SECTIONS`, in order): the settings; the final gains with their uncertainty; plan vs
+actual (rounds, flights, flight time); the tuning (cost against gain in every line search, the comparisons, the
+final gains' interval); the timeline (altitude and tracking error of every vehicle, gain profiles, cost per flight —
+the paper's Figs. 6–7); the final gains on the cost surface when one exists (`surface.csv` in the run folder, or one
+passed in); the table of rounds; fleet events (drop-outs, rejoins, aborts) when `result.json` records them.
+
+A section is a function of the `Report` returning Markdown lines; add one by adding it to `SECTIONS`. Whatever the
+data (odd results from a network, a run stopped after one round), the report is written: a section that cannot be
+drawn says so in its place.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Status
 from mavtune.plan import clock
 from mavtune.report import markdown as md
+from mavtune.report.searches import SearchView, noise, search_views, uncertainty
 from mavtune.report.timeline import has_traces, plot_timeline, vehicle_order
 
 REPORT = "report.md"
 TIMELINE_PNG = "timeline.png"
+TUNING_PNG = "tuning.png"
 SURFACE_PNG = "gains_on_surface.png"
 SURFACE_CSV = "surface.csv"
+
+
+@dataclass
+class Report:
+    """What every section reads: the run folder, the result, its config and result.json, the flight timing."""
+
+    out: Path
+    result: Any  # a TuningResult
+    config: Any = None  # a Config, optional
+    surface: Any = None  # a Surface, a surface.csv path, or None for out/surface.csv
+    summary: dict[str, Any] = field(default_factory=dict)  # result.json as written by the run
+
+    @cached_property
+    def round_s(self) -> float:
+        return round_seconds(self.config)
+
+    @cached_property
+    def rounds(self) -> list:
+        return list(getattr(self.result, "rounds", None) or [])
+
+    @cached_property
+    def gains(self) -> dict[str, float]:
+        return dict(getattr(self.result, "gains", None) or {})
+
+    @cached_property
+    def searches(self) -> list[SearchView]:
+        return search_views(self.result)
+
+    @cached_property
+    def uncertainty(self) -> dict[str, dict[str, float]]:
+        return uncertainty(self.result)
 
 
 def write_run_report(out_dir: str | Path, result, config=None, surface: Any = None,
@@ -40,43 +80,92 @@ def write_run_report(out_dir: str | Path, result, config=None, surface: Any = No
 def _write(out: Path, result, config, surface: Any, title: str) -> Path:
     """`write_run_report` without the translation of file-system errors."""
     out.mkdir(parents=True, exist_ok=True)
-    summary = _read_json(out / "result.json")
-    round_s = round_seconds(config)
-    gains = list(result.gains)
-    rounds = list(result.rounds)
-
+    rep = Report(out, result, config, surface, _read_json(out / "result.json"))
     parts = [f"# {title}", ""]
-    parts += _settings_section(result, config, summary)
-    parts += ["## Final gains", "", md.table(["gain", "value"], [[g, md.num(v, 6)] for g, v in result.gains.items()],
-                                            ["l", "r"]), ""]
-    parts += _plan_section(result, config, summary, round_s)
-
-    parts += ["## Timeline", ""]
-    if rounds:
-        plot_timeline(rounds, gains, round_s, out / TIMELINE_PNG)
-        what = ("altitude reference (dashed) and measurement of each vehicle, " if has_traces(rounds)
-                else "no altitude traces were recorded (e.g. a callable fleet); ")
-        parts += [md.image(TIMELINE_PNG, "tuning timeline"), "",
-                  f"Like the paper's Figs. 6–7: {what}the gain each vehicle flew in each round, and the cost of "
-                  f"each flight (log scale; red × = failed flight). Shaded bands separate the line searches.", ""]
-    else:
-        parts += ["No round was flown.", ""]
-
-    grid, source = _surface(out, surface)
-    if grid is not None and {"kp", "kd"} <= set(result.gains):
-        _plot_gains_on_surface(grid, (result.gains["kp"], result.gains["kd"]), out / SURFACE_PNG, source)
-        kp0, kd0 = grid.argmin()
-        parts += ["## Final gains on the cost surface", "", md.image(SURFACE_PNG, "final gains on the cost surface"),
-                  "", f"Surface: `{source}` (log10 of the mean cost; red dot = final gains). Grid minimum at "
-                  f"kp = {kp0:.4g}, kd = {kd0:.4g} (mean cost {float(grid.mean.min()):.4g}).", ""]
-
-    parts += ["## Rounds", "", _rounds_table(rounds), ""]
-    events = summary.get("events") or []
-    if events:
-        parts += ["## Fleet events", "", _events_table(events), ""]
+    for section in SECTIONS:
+        parts += _guarded(section, rep)
     path = out / REPORT
     path.write_text("\n".join(parts))
     return path
+
+
+def _guarded(section: Callable[[Report], list[str]], rep: Report) -> list[str]:
+    """A section's lines; one that fails on data it did not foresee is replaced by a line saying so, so the rest of
+    the report is still written (the error is a bug to fix; the tests check no section fails)."""
+    try:
+        return section(rep)
+    except (MavtuneError, OSError):  # the caller's mistakes (a missing surface) and a full disk stay errors
+        raise
+    except Exception as exc:  # noqa: BLE001 - the report of a finished run must not be lost to a drawing bug
+        name = section.__name__.strip("_").replace("_", " ")
+        return [f"_The {name} could not be written: {type(exc).__name__}: {exc}._", ""]
+
+
+def _settings(rep: Report) -> list[str]:
+    return _settings_section(rep.result, rep.config, rep.summary)
+
+
+def _final_gains(rep: Report) -> list[str]:
+    from mavtune.report.tuning_section import final_gains_section
+
+    return final_gains_section(rep.gains, rep.uncertainty, rep.searches, noise(rep.result))
+
+
+def _plan_vs_actual(rep: Report) -> list[str]:
+    return _plan_section(rep.result, rep.config, rep.summary, rep.round_s)
+
+
+def _tuning(rep: Report) -> list[str]:
+    from mavtune.report.tuning_section import tuning_section
+
+    if not rep.searches:
+        return tuning_section([], None)
+    from mavtune.report.tuning_figure import MAX_ROWS, drawn_bootstraps, plot_tuning
+
+    space = (getattr(rep.result, "settings", None) or {}).get("space") or {}
+    plot_tuning(rep.searches, rep.gains, rep.uncertainty, space, vehicle_order(rep.rounds), rep.out / TUNING_PNG)
+    shown = drawn_bootstraps(rep.searches)
+    bootstraps = sorted({v.bootstrap for v in rep.searches})
+    note = (f" The figure shows the last {MAX_ROWS} of {len(bootstraps)} bootstraps (from {shown[0]}); the tables "
+            "below have them all." if len(shown) < len(bootstraps) else "")
+    return tuning_section(rep.searches, TUNING_PNG, note)
+
+
+def _timeline(rep: Report) -> list[str]:
+    parts = ["## Timeline", ""]
+    if not rep.rounds:
+        return parts + ["No round was flown.", ""]
+    plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG)
+    what = ("altitude reference (dashed) and measurement of each vehicle, its tracking error |z − z_ref| (thin) "
+            "with the mean over each flight (bar), " if has_traces(rep.rounds)
+            else "no altitude traces were recorded (e.g. a callable fleet); ")
+    return parts + [md.image(TIMELINE_PNG, "tuning timeline"), "",
+                    f"Like the paper's Figs. 6–7: {what}the gain each vehicle flew in each round, and the cost of "
+                    f"each flight (log scale; red × = failed flight). Shaded bands separate the line searches.", ""]
+
+
+def _cost_surface(rep: Report) -> list[str]:
+    grid, source = _surface(rep.out, rep.surface)
+    if grid is None or not {"kp", "kd"} <= set(rep.gains):
+        return []
+    _plot_gains_on_surface(grid, (rep.gains["kp"], rep.gains["kd"]), rep.out / SURFACE_PNG, source)
+    kp0, kd0 = grid.argmin()
+    return ["## Final gains on the cost surface", "", md.image(SURFACE_PNG, "final gains on the cost surface"),
+            "", f"Surface: `{source}` (log10 of the mean cost; red dot = final gains). Grid minimum at "
+            f"kp = {kp0:.4g}, kd = {kd0:.4g} (mean cost {float(grid.mean.min()):.4g}).", ""]
+
+
+def _rounds(rep: Report) -> list[str]:
+    return ["## Rounds", "", _rounds_table(rep.rounds), ""]
+
+
+def _fleet_events(rep: Report) -> list[str]:
+    events = rep.summary.get("events") or []
+    return ["## Fleet events", "", _events_table(events), ""] if events else []
+
+
+SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _plan_vs_actual, _tuning, _timeline,
+                                                  _cost_surface, _rounds, _fleet_events]
 
 
 def _read_json(path: Path) -> dict[str, Any]:

@@ -7,7 +7,6 @@ import io
 import json
 import math
 import re
-import time
 
 import pytest
 from rich.console import Console
@@ -57,20 +56,20 @@ def test_callable_fleet_without_traces_three_gains_three_vehicles(tmp_path):
     assert "gains_on_surface.png" not in text
 
 
-def test_simfleet_run_report_has_timeline_plan_and_is_fast(tmp_path):
+def test_simfleet_run_report_has_timeline_plan_and_tuning(tmp_path):
+    """The report of the paper's 56 rounds (its time is measured in benchmarks/report_time.py)."""
     cfg = load_config(None, {"tuning.reuse": False})  # the paper's 56 rounds
     result = run(cfg, tmp_path, console=Console(file=io.StringIO()), report=False)
     assert len(result.rounds) == 56
-    t0 = time.perf_counter()
     write_run_report(tmp_path, result, cfg)
-    elapsed = time.perf_counter() - t0
     text = (tmp_path / "report.md").read_text()
     assert "altitude reference (dashed) and measurement" in text
     assert (tmp_path / "timeline.png").stat().st_size > 20000
     plan = {r[0]: r[1:] for r in _table_rows(text, "## Plan vs actual")}
     assert plan["rounds"] == ["56", "56"] and plan["flights"] == ["112", "112"]
     assert len(_table_rows(text, "## Rounds")) == 56
-    assert elapsed < 4.0, f"report took {elapsed:.2f} s (budget 2 s on an idle machine)"
+    assert (tmp_path / "tuning.png").stat().st_size > 20000
+    assert text.count("**Bootstrap ") == 4 and "could not be written" not in text
 
 
 def test_surface_in_run_folder_gets_final_gains(tmp_path):

@@ -1,0 +1,120 @@
+"""The report's section on the tuning: per gain the final value ± its uncertainty and interval, and per line search
+a table of its comparisons (points, mean ± se and n per point, the point kept, the probability it was right)."""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+from mavtune.report import markdown as md
+from mavtune.report.searches import Comparison, SearchView, as_float
+
+
+def gains_table(final: dict[str, float], uncertainty: dict[str, dict[str, float]],
+                views: Sequence[SearchView]) -> str:
+    """One row per gain: final value, ± se, interval with its level, and each bootstrap's result."""
+    rows = []
+    for name, value in final.items():
+        u = uncertainty.get(name, {})
+        lo, hi, level = u.get("lo", math.nan), u.get("hi", math.nan), u.get("level", math.nan)
+        interval = (f"[{md.num(lo, 4)}, {md.num(hi, 4)}]" + (f" ({100 * level:.0f} %)" if math.isfinite(level) else "")
+                    if math.isfinite(lo) and math.isfinite(hi) else "—")
+        per_bootstrap = ", ".join(f"b{v.bootstrap}: {md.num(v.result, 4)}" for v in views
+                                  if v.gain == name and v.finished)
+        rows.append([name, md.num(as_float(value), 6), md.num(u.get("se"), 2) if _known(u.get("se")) else "—",
+                     interval, per_bootstrap or "—"])
+    return md.table(["gain", "value", "± se", "interval", "each bootstrap's result"], rows,
+                    ["l", "r", "r", "l", "l"])
+
+
+def comparisons_table(view: SearchView) -> str:
+    """One row per comparison of a line search; a 'compared' column when the search decided on other costs than
+    the means shown (e.g. without reuse, on the latest flights only)."""
+    compared = any(c.compared and not _same(c.compared, c.means) for c in view.comparisons)
+    rows = []
+    for i, c in enumerate(view.comparisons, 1):
+        rows.append([i, f"[{md.num(c.bracket[0], 4)}, {md.num(c.bracket[1], 4)}]",
+                     ", ".join(md.num(p, 4) for p in c.points), ", ".join(_mean_se(c, k) for k in range(len(c.points))),
+                     *([", ".join(md.num(x, 4) for x in c.compared) or "—"] if compared else []),
+                     md.num(c.points[c.best], 4) if 0 <= c.best < len(c.points) else "—",
+                     md.num(c.p_correct, 2) if _known(c.p_correct) else "—"])
+    header = ["#", "bracket", "points", "mean ± se (n) per point", *(["compared"] if compared else []), "kept",
+              "P(right)"]
+    return md.table(header, rows, ["r", "l", "l", "l", *(["l"] if compared else []), "r", "r"])
+
+
+def _same(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Equal lists of costs (NaN equal to NaN)."""
+    return len(a) == len(b) and all(x == y or (math.isnan(x) and math.isnan(y)) or math.isclose(x, y)
+                                    for x, y in zip(a, b))
+
+
+def points_table(view: SearchView) -> str:
+    """The points a line search flew with mean ± se (n): for a search without a record of its comparisons."""
+    rows = [[md.num(s.point, 4), _pm(s.mean, s.se), s.n, s.nonfinite] for s in view.points]
+    return md.table(["point", "mean ± se", "n", "non-finite"], rows, ["r", "l", "r", "r"])
+
+
+def final_gains_section(final: dict[str, float], uncertainty: dict[str, dict[str, float]],
+                        views: Sequence[SearchView], noise: dict[str, float] | None = None) -> list[str]:
+    """The final gains with their uncertainty, where it comes from, and the run's flight-to-flight noise."""
+    note = ("± se and the interval are the tuner's, computed from the recorded flights." if uncertainty else
+            "This result carries no uncertainty of the final gains (a tuner that computes one writes `uncertainty` "
+            "into the result); the spread of the bootstraps' results is the only hint of it here.")
+    cv, dof = (noise or {}).get("cv", math.nan), (noise or {}).get("dof", math.nan)
+    if _known(cv):
+        note += (f" Flight-to-flight noise of the cost, pooled over the run: {100 * cv:.1f} % of the cost (one "
+                 "standard deviation" + (f", {dof:.0f} degrees of freedom)." if _known(dof) else ")."))
+    return ["## Final gains", "", gains_table(final, uncertainty, views), "", note, ""]
+
+
+def tuning_section(views: Sequence[SearchView], figure: str | None, figure_note: str = "") -> list[str]:
+    """The figure of the line searches and a table of comparisons per search, as Markdown lines."""
+    parts = ["## The tuning", ""]
+    if figure:
+        parts += [md.image(figure, "the tuning"), "",
+                  "Per line search (rows: bootstraps, columns: gains): every flight's cost at its point (dot, vehicle "
+                  "colour; red × at the top = a cost not finite or off the scale), per point the mean ± standard "
+                  "error (black), the comparisons top to bottom (grey: the bracket it started from, ticks: its "
+                  "points, green: the point kept; last: the bracket it ended with) and the search's result (red "
+                  "line); the shaded band is the final interval. The last row: each bootstrap's result and the "
+                  "final gain." + figure_note, ""]
+    elif figure_note:
+        parts += [figure_note.strip(), ""]
+    if not views:
+        return parts + ["No line search was flown.", ""]
+    given = any(_known(c.p_correct) for v in views for c in v.comparisons)
+    parts += ["### Comparisons", "",
+              ("Mean ± se (n) per point as the tuner computed them; P(right) is the tuner's probability that the "
+               "comparison kept the truly better point." if given else
+               "Mean ± se (n) per point over the finite costs of its flights in that line search, computed for this "
+               "report (the tuner gave no comparison statistics, so P(right) is unknown); where the search decided "
+               "on other costs (without reuse: the latest flights only; a failed flight counts as infinite), "
+               "'compared' shows them."), ""]
+    for v in views:
+        head = f"**Bootstrap {v.bootstrap} · {v.gain}**" + (f" → {md.num(v.result, 4)}" if v.finished else
+                                                            " (not finished)")
+        if v.stop_reason:
+            head += f" — stopped narrowing early: {v.stop_reason}"
+        if v.comparisons:
+            parts += [head, "", comparisons_table(v), ""]
+        elif v.points:
+            parts += [head + ": no record of its comparisons; the points it flew:", "", points_table(v), ""]
+        else:
+            parts += [head + ": no flight measured a cost.", ""]
+    return parts
+
+
+def _mean_se(c: Comparison, k: int) -> str:
+    n = c.n[k] if k < len(c.n) else 0
+    return f"{_pm(c.means[k], c.se[k])} ({n})"
+
+
+def _pm(mean: float, se: float) -> str:
+    if not _known(mean):
+        return md.num(mean, 4) if mean is not None else "—"
+    return md.num(mean, 4) + (f" ± {md.num(se, 2)}" if _known(se) else "")
+
+
+def _known(x) -> bool:
+    return isinstance(x, (int, float)) and math.isfinite(x)
