@@ -18,6 +18,8 @@ EpsilonOpt = typer.Option(None, "--epsilon", help="Tolerance as a fraction of ea
 BootstrapsOpt = typer.Option(None, "--bootstraps", help="Passes over the gains, or 'auto' for the paper's stop rule.")
 ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twice in one line search.")
 BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
+MaxRoundsOpt = typer.Option(None, "--max-rounds", help="Refuse a plan of more rounds than this [2000]; raise it "
+                            "to fly a longer plan anyway.")
 
 
 def bootstraps_flag(value: Optional[str]) -> int | str | None:
