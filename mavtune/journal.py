@@ -10,6 +10,7 @@ unreadable round is refused in one line naming the file (and the round), and the
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import sqlite3
@@ -24,7 +25,9 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains
 
 SCHEMA_VERSION = 1
-TABLES = {"meta": ["key", "value"], "rounds": ["idx", "bootstrap", "gain", "started", "finished", "record"]}
+ROUND_COLUMNS = ["idx", "bootstrap", "gain", "started", "finished", "record"]
+TABLES = {"meta": ["key", "value"], "rounds": [*ROUND_COLUMNS, "digest"]}
+OLD_TABLES = {"meta": ["key", "value"], "rounds": ROUND_COLUMNS}  # before rounds carried a digest: still read
 
 
 @dataclass
@@ -59,8 +62,9 @@ class Journal:
             self._db.execute("CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)")
             self._db.execute(
                 "CREATE TABLE IF NOT EXISTS rounds (idx INTEGER PRIMARY KEY, bootstrap INTEGER NOT NULL, "
-                "gain TEXT NOT NULL, started REAL NOT NULL, finished REAL NOT NULL, record TEXT NOT NULL)"
+                "gain TEXT NOT NULL, started REAL NOT NULL, finished REAL NOT NULL, record TEXT NOT NULL, digest TEXT)"
             )
+            self._digests = "digest" in [c[1] for c in self._db.execute("PRAGMA table_info(rounds)")]
         version = self.get("schema_version")
         if version is None:
             self.put("schema_version", SCHEMA_VERSION)
@@ -86,7 +90,7 @@ class Journal:
         if damage != "ok":
             raise MavtuneError(f"journal {self.path} is damaged ({damage}); it was left as it is")
         found = {name: [c[1] for c in self._db.execute(f"PRAGMA table_info({name})")] for name in TABLES}
-        if found != TABLES:
+        if found not in (TABLES, OLD_TABLES):
             raise MavtuneError(f"{self.path} is an SQLite file but not a mavtune journal (tables "
                                f"{sorted(n for n, cols in found.items() if cols) or 'none'}); it was left as it is")
 
@@ -136,25 +140,32 @@ class Journal:
     def append(self, record: RoundRecord) -> None:
         """Commit one round durably; a round index is written once."""
         body = json.dumps({"assignments": record.assignments, "flights": [f.to_dict() for f in record.flights]})
+        row = (record.index, record.bootstrap, record.gain, record.started_s, record.finished_s, body)
         with self._sqlite():
             try:
-                self._db.execute(
-                    "INSERT INTO rounds (idx, bootstrap, gain, started, finished, record) VALUES (?, ?, ?, ?, ?, ?)",
-                    (record.index, record.bootstrap, record.gain, record.started_s, record.finished_s, body),
-                )
+                if self._digests:
+                    self._db.execute("INSERT INTO rounds (idx, bootstrap, gain, started, finished, record, digest) "
+                                     "VALUES (?, ?, ?, ?, ?, ?, ?)", (*row, _digest(row)))
+                else:
+                    self._db.execute("INSERT INTO rounds (idx, bootstrap, gain, started, finished, record) "
+                                     "VALUES (?, ?, ?, ?, ?, ?)", row)
             except sqlite3.IntegrityError:
                 raise MavtuneError(f"journal {self.path} already holds round {record.index}") from None
 
     def rounds(self) -> dict[int, RoundRecord]:
         """Every recorded round by index (0, 1, 2, ... without gaps); an unreadable round is named."""
+        digest = "digest" if self._digests else "NULL"
         with self._sqlite():
-            rows = self._db.execute(
-                "SELECT idx, bootstrap, gain, started, finished, record FROM rounds ORDER BY idx").fetchall()
+            rows = self._db.execute(f"SELECT {', '.join(ROUND_COLUMNS)}, {digest} FROM rounds ORDER BY idx").fetchall()
         out = {}
-        for expected, (idx, bootstrap, gain, started, finished, body) in enumerate(rows):
+        for expected, (*row, stored) in enumerate(rows):
+            idx, bootstrap, gain, started, finished, body = row
             if idx != expected:
                 raise MavtuneError(f"journal {self.path} has no round {expected} but holds round {idx}: it was "
                                    "edited or damaged; it was left as it is")
+            if self._digests and stored != _digest(tuple(row)):
+                raise MavtuneError(f"journal {self.path}: round {idx} does not match its checksum (the file was "
+                                   "damaged or edited); it was left as it is")
             try:
                 out[idx] = _round_record(idx, bootstrap, gain, started, finished, body)
             except (ValueError, TypeError, KeyError, AttributeError, json.JSONDecodeError) as exc:
@@ -172,6 +183,11 @@ class Journal:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _digest(row: tuple) -> str:
+    """A checksum of one stored round, so a flipped digit in a cost is found, not replayed."""
+    return hashlib.sha256(repr(row).encode()).hexdigest()[:32]
 
 
 def _round_record(idx: int, bootstrap: Any, gain: Any, started: Any, finished: Any, body: Any) -> RoundRecord:
