@@ -267,7 +267,7 @@ def run_app(args: list[str] | None = None) -> int:
     click = importlib.import_module(typer.BadParameter.__module__.rsplit(".", 1)[0])  # the click typer runs on
 
     try:
-        code = app(args=args, standalone_mode=False)
+        code = app(args=args, prog_name="mavtune", standalone_mode=False)
     except Interrupted as exc:
         return _say(str(exc), "yellow", 130)
     except MavtuneError as exc:

@@ -57,7 +57,8 @@ class Journal:
             self._db = sqlite3.connect(self.path, isolation_level=None)
             if not fresh:
                 self._check_tables()  # never add tables to somebody else's database
-            self._db.execute("PRAGMA journal_mode=WAL")
+            else:
+                self._db.execute("PRAGMA journal_mode=WAL")  # an existing journal keeps its mode: nothing rewritten
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.execute("CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)")
             self._db.execute(
@@ -80,7 +81,7 @@ class Journal:
         except (sqlite3.DatabaseError, OSError) as exc:
             if self._db is not None:
                 self._db.close()
-            reason = str(exc) or type(exc).__name__
+            reason = " ".join(str(exc).split()) or type(exc).__name__
             if "readonly" in reason or "read-only" in reason:
                 what = "is read-only"
             raise MavtuneError(f"journal {self.path} {what} ({reason}); it was left as it is") from None
@@ -88,7 +89,8 @@ class Journal:
     def _check_tables(self) -> None:
         damage = self._db.execute("PRAGMA quick_check").fetchone()[0]
         if damage != "ok":
-            raise MavtuneError(f"journal {self.path} is damaged ({damage}); it was left as it is")
+            raise MavtuneError(f"journal {self.path} is damaged ({' '.join(str(damage).split())[:160]}); it was left "
+                               "as it is")
         found = {name: [c[1] for c in self._db.execute(f"PRAGMA table_info({name})")] for name in TABLES}
         if found not in (TABLES, OLD_TABLES):
             raise MavtuneError(f"{self.path} is an SQLite file but not a mavtune journal (tables "
