@@ -20,7 +20,6 @@ from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from mavtune import interrupts
@@ -136,6 +135,8 @@ class RoundView:
     """Live progress: a bar over the planned rounds and one line per round (gain, bracket, points, costs)."""
 
     def __init__(self, console: Console, plan: Plan, quiet: bool = False):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
         self.plan, self.quiet = plan, quiet
         self.progress = Progress(
             TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),

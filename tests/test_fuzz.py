@@ -140,23 +140,24 @@ def plan_flags(draw):
     return args
 
 
-@QUICK
-@given(args=plan_flags())
-def test_flags_give_one_line_or_a_plan(args):
+def check_flags(args: list[str]) -> None:
     code, out, err = cli("plan", *args)
     if "--help" in args and code == 0:
         return
     assert_one_line_or_success(code, out, err)
+
+
+@QUICK
+@given(args=plan_flags())
+def test_flags_give_one_line_or_a_plan(args):
+    check_flags(args)
 
 
 @pytest.mark.slow
 @THOROUGH
 @given(args=plan_flags())
 def test_flags_thoroughly(args):
-    code, out, err = cli("plan", *args)
-    if "--help" in args and code == 0:
-        return
-    assert_one_line_or_success(code, out, err)
+    check_flags(args)
 
 
 # ----- the journal on disk -----------------------------------------------------------------------------------

@@ -196,26 +196,28 @@ def refused_untouched(path, match, **changes):
     assert path.read_bytes() == before
 
 
-def test_a_garbage_round_record_is_named(tmp_path):
+@pytest.mark.parametrize("damage, match", [
+    ("UPDATE rounds SET record = 'not json{' WHERE idx = 3", "round 3 does not match its checksum"),
+    ("UPDATE rounds SET record = replace(record, '\"cost\": 0.', '\"cost\": 1.') WHERE idx = 5",
+     "round 5 does not match its checksum"),  # a changed digit is found, not replayed
+    ("DELETE FROM rounds WHERE idx = 2", "no round 2 but holds round 3"),
+])
+def test_a_damaged_round_is_named(tmp_path, damage, match):
     path = finished_journal(tmp_path)
     with sqlite3.connect(path) as db:
-        db.execute("UPDATE rounds SET record = 'not json{' WHERE idx = 3")
-    refused_untouched(path, "round 3 does not match its checksum")
+        db.execute(damage)
+    refused_untouched(path, match)
 
 
-def test_a_changed_cost_is_found_by_the_checksum(tmp_path):
+def test_a_garbage_round_with_a_right_checksum_is_named(tmp_path):
+    from mavtune.journal import _digest
+
     path = finished_journal(tmp_path)
     with sqlite3.connect(path) as db:
-        body = db.execute("SELECT record FROM rounds WHERE idx = 5").fetchone()[0]
-        db.execute("UPDATE rounds SET record = ? WHERE idx = 5", (body.replace('"cost": 0.', '"cost": 1.', 1),))
-    refused_untouched(path, "round 5 does not match its checksum")
-
-
-def test_a_missing_round_is_named(tmp_path):
-    path = finished_journal(tmp_path)
-    with sqlite3.connect(path) as db:
-        db.execute("DELETE FROM rounds WHERE idx = 2")
-    refused_untouched(path, "no round 2 but holds round 3")
+        row = (4, 1, "kd", 0.0, 1.0, '{"assignments": [{"kd": "high"}], "flights": []}')
+        db.execute("UPDATE rounds SET idx = ?, bootstrap = ?, gain = ?, started = ?, finished = ?, record = ?, "
+                   "digest = ? WHERE idx = 4", (*row, _digest(row)))
+    refused_untouched(path, "round 4 is unreadable")
 
 
 def test_another_programs_database_is_not_touched(tmp_path):
