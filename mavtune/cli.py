@@ -48,8 +48,8 @@ class LazyGroup(TyperGroup):
     def get_command(self, ctx, name: str):
         if name in self.commands or name not in LAZY:
             return self.commands.get(name)
-        module, _, summary = LAZY[name]
-        return typer.core.TyperCommand(name, help=summary, short_help=summary, callback=None)
+        _, _, summary = LAZY[name]
+        return typer.core.TyperCommand(name, help=summary, callback=None)
 
     def resolve_command(self, ctx, args):
         if args and args[0] in LAZY and args[0] not in self.commands:
@@ -87,7 +87,7 @@ def _version(value: bool) -> None:
 @app.callback()
 def _options(version: bool = typer.Option(False, "--version", is_eager=True, callback=_version,
                                           help="Print the version and exit.")) -> None:
-    """Tune the controller gains of a swarm of drones in flight: model-free, in a time known before take-off."""
+    """The options of `mavtune` itself (the help text is the app's)."""
 
 
 @app.command("plan")

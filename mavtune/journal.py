@@ -154,6 +154,11 @@ class Journal:
             except sqlite3.IntegrityError:
                 raise MavtuneError(f"journal {self.path} already holds round {record.index}") from None
 
+    def __len__(self) -> int:
+        """Rounds recorded (without reading them)."""
+        with self._sqlite():
+            return self._db.execute("SELECT COUNT(*) FROM rounds").fetchone()[0]
+
     def rounds(self) -> dict[int, RoundRecord]:
         """Every recorded round by index (0, 1, 2, ... without gaps); an unreadable round is named."""
         digest = "digest" if self._digests else "NULL"

@@ -205,12 +205,12 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     with Journal(out_dir / JOURNAL) as book:
         book.bind(config.fingerprint())
         book.check_writable()
-        if recorded := len(book.rounds()):
+        if recorded := len(book):
             console.print(f"resuming {out_dir / JOURNAL}: {counted(recorded, 'round')} recorded will not be flown "
                           "again")
         ignored = warn(console, config)
         console.print(plan_panel(config, plan))
-        (out_dir / "config.json").write_text(json.dumps(config.model_dump(mode="json"), indent=2))
+        _write_json(out_dir / "config.json", config.model_dump(mode="json"))
         fleet: Fleet | None = None
         tuner: Tuner | None = None
         started, status, error = time.time(), "error", None
@@ -239,12 +239,14 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                         fleet.close()  # real vehicles get their original gains back here, whatever happened
                 finally:
                     result = tuner.snapshot() if tuner is not None else None
+                    if result is not None and len(book) > len(result.rounds):  # Ctrl-C just after a commit
+                        result = _journal_snapshot(settings, book)
                     summary = _summary(config, plan, result, fleet, status, error, time.time() - started, ignored)
                     (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
                     _write_json(out_dir / "result.json", summary)
             if report and result is not None:
                 _report(console, out_dir, result, config, surface, status, summary)
-        recorded = len(book.rounds())  # the journal is the truth: a round can be recorded as Ctrl-C arrives
+        recorded = len(book)
     if status == "interrupted":
         raise Interrupted(f"interrupted: the journal keeps {counted(recorded, 'round')}; `mavtune tune --out "
                           f"{out_dir}` resumes")
@@ -258,6 +260,34 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console.print(_result_table(result))
     console.print(f"run folder: {out_dir}")
     return result
+
+
+class _EndOfJournal(Exception):
+    """The replay of a journal reached its first unrecorded round."""
+
+
+class _ReplayOnly:
+    """A fleet that flies nothing: replaying a journal with it rebuilds exactly the rounds recorded."""
+
+    def __init__(self, size: int):
+        self.size = size
+
+    def fly(self, assignments, round_id):
+        raise _EndOfJournal
+
+    def close(self) -> None:
+        pass
+
+
+def _journal_snapshot(settings, book: Journal) -> TuningResult:
+    """The run as the journal records it (the journal is the truth when Ctrl-C lands between a round's commit
+    and its accounting)."""
+    tuner = Tuner(settings, _ReplayOnly(settings.vehicles), book)
+    try:
+        tuner.run()
+    except _EndOfJournal:
+        pass
+    return tuner.snapshot()
 
 
 def _report(console: Console, out_dir: Path, result: TuningResult, config: Config, surface: Path | None,
