@@ -167,16 +167,19 @@ def validated(model: type[BaseModel], data: dict[str, Any], prefix: str = "") ->
         raise MavtuneError(f"config {where}: {reason}{got}") from None
 
 
-def _all_finite(value: Any, where: str) -> None:
-    """No NaN or infinity anywhere in a configuration: each is named (`battery_s = inf` plans nothing sane)."""
-    if isinstance(value, dict):
-        for key, item in value.items():
-            _all_finite(item, f"{where}.{key}" if where != "config" else f"config {key}")
-    elif isinstance(value, (list, tuple)):
-        for item in value:
-            _all_finite(item, where)
-    elif isinstance(value, float) and not math.isfinite(value):
-        raise MavtuneError(f"{where}: must be a finite number (got {value})")
+def _plain_numbers(given: Any, used: Any, where: str) -> None:
+    """Every number used is a finite number given as one: no NaN or infinity (`battery_s = inf` plans nothing
+    sane) and no true/false taken for 1/0 (`primitive_s = true` is not a 1 s primitive). Each is named."""
+    if isinstance(used, dict) and isinstance(given, dict):
+        for key, item in used.items():
+            _plain_numbers(given.get(key), item, f"{where}.{key}" if where != "config" else f"config {key}")
+    elif isinstance(used, (list, tuple)) and isinstance(given, (list, tuple)):
+        for item_given, item_used in zip(given, used):
+            _plain_numbers(item_given, item_used, where)
+    elif isinstance(used, float) and not math.isfinite(used):
+        raise MavtuneError(f"{where}: must be a finite number (got {used})")
+    elif isinstance(given, bool) and not isinstance(used, bool):
+        raise MavtuneError(f"{where}: must be a number, not {str(given).lower()}")
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -215,10 +218,10 @@ def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None
             raise MavtuneError(f"config tuning.vehicles is {given} but {len(urls)} MAVLink URLs are given")
         data["tuning"] = {**tuning, "vehicles": len(urls)}  # one vehicle per URL
     config = validated(Config, data)
-    _all_finite(config.model_dump(), "config")
+    _plain_numbers(data, config.model_dump(), "config")
     config.settings()  # cross-field checks (initial inside its range, groups dividing the vehicles, …)
     if config.fleet.kind == "sim":
-        _all_finite(config.scenario().model_dump(), "config sim")  # a bad [sim] value is named before anything
+        _plain_numbers(config.sim, config.scenario().model_dump(), "config sim")  # named before anything is written
         from mavtune.sim.gains import GAIN_NAMES
 
         for name, (lo, hi) in config.tuning.space.items():
