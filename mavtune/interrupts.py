@@ -11,6 +11,7 @@ import signal
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _received: list[int] = []
@@ -42,21 +43,38 @@ def _main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
+class Hold:
+    """SIGINT/SIGTERM held from `start()` to `release()`, which delivers the first one that came to the handler
+    of before (KeyboardInterrupt, or only counted when one is already being handled). Main thread only."""
+
+    def __init__(self) -> None:
+        self.held: list[int] = []
+        self._before: dict[int, Any] | None = None
+
+    def start(self) -> None:
+        if self._before is None and _main_thread():
+            self._before = {s: signal.signal(s, lambda signum, frame: self.held.append(signum)) for s in SIGNALS}
+
+    def release(self) -> None:
+        if self._before is None:
+            return
+        for s, handler in self._before.items():
+            signal.signal(s, handler)
+        self._before = None
+        if self.held:
+            first, self.held = self.held[0], []
+            signal.raise_signal(first)
+
+
 @contextmanager
 def deferred() -> Iterator[None]:
     """Hold SIGINT/SIGTERM for the block (files being written stay whole); one that came is raised at its end."""
-    if not _main_thread():
-        yield
-        return
-    held: list[int] = []
-    before = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in SIGNALS}
+    hold = Hold()
+    hold.start()
     try:
         yield
     finally:
-        for s, handler in before.items():
-            signal.signal(s, handler)
-    if held:
-        signal.raise_signal(held[0])  # to the handler of before the block: KeyboardInterrupt, or counted
+        hold.release()
 
 
 @contextmanager

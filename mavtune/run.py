@@ -217,9 +217,10 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
         try:
             console.print(_fleet_line(config))
             fleet = build_fleet(config, out_dir)
-            tuner = Tuner(settings, fleet, book, stage_rounds=stage_rounds)
+            commits = _CountedCommits(book)
+            tuner = Tuner(settings, fleet, commits, stage_rounds=stage_rounds)
             with RoundView(console, plan, quiet) as view:
-                tuner.on_round = view
+                tuner.on_round = commits.counted(view)
                 tuner.run()
             status = "finished"
             if hasattr(fleet, "tuned"):
@@ -234,13 +235,13 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                 raise
         finally:
             with interrupts.deferred():  # the vehicles are released and result.json written whole, come what may
+                if tuner is not None:
+                    commits.hold.release()  # into this block's hold: taken as the interrupt it is, at its end
                 try:
                     if fleet is not None:
                         fleet.close()  # real vehicles get their original gains back here, whatever happened
                 finally:
                     result = tuner.snapshot() if tuner is not None else None
-                    if result is not None and len(book) > len(result.rounds):  # Ctrl-C just after a commit
-                        result = _journal_snapshot(settings, book)
                     summary = _summary(config, plan, result, fleet, status, error, time.time() - started, ignored)
                     (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
                     _write_json(out_dir / "result.json", summary)
@@ -262,32 +263,26 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     return result
 
 
-class _EndOfJournal(Exception):
-    """The replay of a journal reached its first unrecorded round."""
+class _CountedCommits:
+    """The journal as the tuner sees it: Ctrl-C landing as a round is committed takes effect once the tuner has
+    counted that round (its on_round), so result.json never holds fewer rounds than the journal."""
 
+    def __init__(self, book: Journal):
+        self.book, self.hold = book, interrupts.Hold()
 
-class _ReplayOnly:
-    """A fleet that flies nothing: replaying a journal with it rebuilds exactly the rounds recorded."""
+    def append(self, record) -> None:
+        self.hold.start()
+        self.book.append(record)
 
-    def __init__(self, size: int):
-        self.size = size
+    def counted(self, view):
+        """`view` as the tuner's on_round, releasing a held interrupt once the round is counted."""
+        def on_round(rnd: Round) -> None:
+            self.hold.release()
+            view(rnd)
+        return on_round
 
-    def fly(self, assignments, round_id):
-        raise _EndOfJournal
-
-    def close(self) -> None:
-        pass
-
-
-def _journal_snapshot(settings, book: Journal) -> TuningResult:
-    """The run as the journal records it (the journal is the truth when Ctrl-C lands between a round's commit
-    and its accounting)."""
-    tuner = Tuner(settings, _ReplayOnly(settings.vehicles), book)
-    try:
-        tuner.run()
-    except _EndOfJournal:
-        pass
-    return tuner.snapshot()
+    def __getattr__(self, name: str):
+        return getattr(self.book, name)
 
 
 def _report(console: Console, out_dir: Path, result: TuningResult, config: Config, surface: Path | None,
