@@ -234,9 +234,12 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                 error = str(exc) or type(exc).__name__
                 raise
         finally:
+            if tuner is not None:
+                try:
+                    commits.hold.release()  # never left installed, whatever ended the run
+                except KeyboardInterrupt:
+                    status = "interrupted"
             with interrupts.deferred():  # the vehicles are released and result.json written whole, come what may
-                if tuner is not None:
-                    commits.hold.release()  # into this block's hold: taken as the interrupt it is, at its end
                 try:
                     if fleet is not None:
                         fleet.close()  # real vehicles get their original gains back here, whatever happened
