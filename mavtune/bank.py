@@ -16,6 +16,19 @@ from typing import Any
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Gains
 
+MASS_DECIMALS = 6  # masses are kept to the milligram: 2.3 + 0.9 is stored as 3.2, not 3.1999999999999997
+
+
+def _mass(mass_kg: float) -> float:
+    """A vehicle mass, kg: a positive finite number, rounded to MASS_DECIMALS."""
+    try:
+        mass = float(mass_kg)
+    except (TypeError, ValueError):
+        raise MavtuneError(f"a mass must be a number of kg, got {mass_kg!r}") from None
+    if not math.isfinite(mass) or mass <= 0:
+        raise MavtuneError(f"a mass must be a positive number of kg, got {mass_kg}")
+    return round(mass, MASS_DECIMALS)
+
 
 @dataclass(frozen=True)
 class BankEntry:
@@ -43,14 +56,12 @@ class GainBank:
 
     def add(self, mass_kg: float, gains: Gains, source: str = "") -> None:
         """Add (or replace) the gains tuned at `mass_kg`."""
-        mass_kg = float(mass_kg)
-        if not math.isfinite(mass_kg) or mass_kg <= 0:
-            raise MavtuneError(f"bank mass must be a positive number of kg, got {mass_kg}")
-        if not gains or not all(math.isfinite(float(v)) for v in gains.values()):
+        mass_kg = _mass(mass_kg)
+        if not isinstance(gains, dict) or not gains or not all(math.isfinite(float(v)) for v in gains.values()):
             raise MavtuneError(f"bank gains at {mass_kg:g} kg must be finite numbers, got {gains}")
         if self.entries and set(gains) != set(self.entries[0].gains):
             raise MavtuneError(f"bank holds gains {sorted(self.entries[0].gains)}, not {sorted(gains)}")
-        kept = [e for e in self.entries if not math.isclose(e.mass_kg, mass_kg)]
+        kept = [e for e in self.entries if e.mass_kg != mass_kg]
         self.entries = sorted(kept + [BankEntry(mass_kg, {k: float(v) for k, v in gains.items()}, source)],
                               key=lambda e: e.mass_kg)
 
@@ -58,14 +69,14 @@ class GainBank:
         """Gains for `mass_kg`: linear between the nearest tuned masses, the end values outside them."""
         if not self.entries:
             raise MavtuneError("the gain bank is empty: add tuned gains first")
-        if not math.isfinite(mass_kg):
-            raise MavtuneError(f"mass {mass_kg} is not a number")
+        mass_kg = _mass(mass_kg)
         first, last = self.entries[0], self.entries[-1]
-        if mass_kg <= first.mass_kg or mass_kg >= last.mass_kg:
-            end = first if mass_kg <= first.mass_kg else last
-            inside = math.isclose(mass_kg, end.mass_kg)
-            return Lookup(dict(end.gains), inside, (end.mass_kg, end.mass_kg))
-        upper = next(i for i, e in enumerate(self.entries) if e.mass_kg >= mass_kg)
+        if exact := next((e for e in self.entries if e.mass_kg == mass_kg), None):
+            return Lookup(dict(exact.gains), True, (exact.mass_kg, exact.mass_kg))
+        if mass_kg < first.mass_kg or mass_kg > last.mass_kg:
+            end = first if mass_kg < first.mass_kg else last
+            return Lookup(dict(end.gains), False, (end.mass_kg, end.mass_kg))
+        upper = next(i for i, e in enumerate(self.entries) if e.mass_kg > mass_kg)
         a, b = self.entries[upper - 1], self.entries[upper]
         w = (mass_kg - a.mass_kg) / (b.mass_kg - a.mass_kg)
         return Lookup({k: (1 - w) * a.gains[k] + w * b.gains[k] for k in a.gains}, True, (a.mass_kg, b.mass_kg))
@@ -86,6 +97,6 @@ class GainBank:
             bank = cls()
             for e in data["entries"]:
                 bank.add(e["mass_kg"], e["gains"], e.get("source", ""))
-        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise MavtuneError(f"gain bank {path} is not a mavtune bank file ({exc})") from None
         return bank

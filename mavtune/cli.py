@@ -1,28 +1,94 @@
-"""The `mavtune` command: tune, plan, surface, reproduce, bench, coordinator/agent, mavsim."""
+"""The `mavtune` command: tune, plan, bank, and the commands of other modules, loaded only when run.
+
+`mavtune --help` and `mavtune plan` import neither the simulator nor Zenoh nor MAVLink: the commands defined
+elsewhere are listed from `LAZY` and imported when invoked. Every ending is one line: `error: ...` (status 2),
+`interrupted ...` (130), or the command's own output.
+"""
 
 from __future__ import annotations
 
-import signal
-import sys
+import importlib
 import time
 from pathlib import Path
 from typing import List, Optional
 
 import typer
+from typer.core import TyperGroup
 
-from mavtune.errors import MavtuneError
+from mavtune import interrupts
+from mavtune.errors import Interrupted, MavtuneError
 from mavtune.options import (
-    AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt, StrategyOpt,
+    AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MaxRoundsOpt, MethodOpt, ReplicatesOpt, ReuseOpt,
+    StrategyOpt,
     VehiclesOpt, config_from_flags,
 )
+
+# name: (module, function, the first line of its docstring — tests/test_cli_text.py keeps them equal)
+LAZY = {
+    "surface": ("mavtune.sim.commands", "surface",
+                "Map the cost over the normalised (kp, kd) square with the simulator (the paper's Fig. 2)."),
+    "reproduce": ("mavtune.experiments.reproduce", "reproduce_command",
+                  "Regenerate the paper's experiments in the simulator, beside the paper's numbers and claims."),
+    "bench": ("mavtune.sim.commands", "bench",
+              "Print the simulator's throughput (vehicle-steps per second) for a few batch sizes, cold and warm."),
+    "coordinator": ("mavtune.swarm.cli", "coordinator_command",
+                    "Coordinate a swarm over Zenoh — `mavtune tune --fleet zenoh` with the swarm's settings as flags."),
+    "agent": ("mavtune.swarm.cli", "agent_command",
+              "Run one vehicle's agent: wait for assignments from the coordinator, fly them, report the costs."),
+    "mavsim": ("mavtune.vehicles.mavlink.mavsim.cli", "mavsim_command",
+               "Serve the simulator as a PX4 or ArduPilot vehicle over MAVLink on UDP loopback (like SITL)."),
+}
+
+
+class LazyGroup(TyperGroup):
+    """A command group that lists the LAZY commands by name and imports one only when it is invoked."""
+
+    def list_commands(self, ctx) -> list[str]:
+        return [*self.commands, *(name for name in LAZY if name not in self.commands)]
+
+    def get_command(self, ctx, name: str):
+        if name in self.commands or name not in LAZY:
+            return self.commands.get(name)
+        _, _, summary = LAZY[name]
+        return typer.core.TyperCommand(name, help=summary, callback=None)
+
+    def resolve_command(self, ctx, args):
+        if args and args[0] in LAZY and args[0] not in self.commands:
+            self.commands[args[0]] = load_command(args[0])
+        return super().resolve_command(ctx, args)
+
+
+def load_command(name: str):
+    """The click command of a LAZY command (imports its module)."""
+    module, function, _ = LAZY[name]
+    one = typer.Typer(rich_markup_mode=None, add_completion=False, pretty_exceptions_enable=False)
+    one.command(name)(getattr(importlib.import_module(module), function))
+    return typer.main.get_command(one)
+
 
 app = typer.Typer(
     name="mavtune",
     help="Tune the controller gains of a swarm of drones in flight: model-free, in a time known before take-off.",
+    cls=LazyGroup,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # help text is plain: "[tuning]" stays "[tuning]"
 )
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import version
+
+        typer.echo(f"mavtune {version('mavtune')}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(version: bool = typer.Option(False, "--version", is_eager=True, callback=_version,
+                                          help="Print the version and exit.")) -> None:
+    """The options of `mavtune` itself (the help text is the app's)."""
 
 
 @app.command("plan")
@@ -32,14 +98,21 @@ def plan_command(
     epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
     adaptive: Optional[bool] = AdaptiveOpt,
+    max_rounds: Optional[int] = MaxRoundsOpt,
 ) -> None:
     """Print, before anything flies, the rounds, flights, flight time and batteries a run needs."""
-    from mavtune.run import plan_of, plan_panel
+    from mavtune.run import plan_of, plan_panel, warn
     from rich.console import Console
 
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
-                            tuning__adaptive=adaptive)
-    Console().print(plan_panel(cfg, plan_of(cfg)))
+                            flight__max_rounds=max_rounds, tuning__adaptive=adaptive)
+    console = Console()
+    warn(console, cfg)
+    console.print(plan_panel(cfg, plan_of(cfg)))
+
+
+# A flag that only one kind of fleet uses: given with another kind it is an error, never silently dropped.
+FLEET_FLAGS = {"--payload": "sim", "--listen": "zenoh", "--mavlink": "mavlink", "--keep-tuned": "mavlink"}
 
 
 @app.command("tune")
@@ -49,13 +122,14 @@ def tune_command(
     epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
     adaptive: Optional[bool] = AdaptiveOpt,
+    max_rounds: Optional[int] = MaxRoundsOpt,
     seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the simulated vehicles (vehicle j: seed + j)."),
     payload: Optional[float] = typer.Option(None, "--payload", help="sim: payload mass, kg (paper: 0.9)."),
     fleet: Optional[str] = typer.Option(None, "--fleet", help="sim (built in) | zenoh (swarm agents) | mavlink."),
     listen: Optional[str] = typer.Option(None, "--listen", help="zenoh: endpoint to listen on, e.g. tcp/0.0.0.0:7447."),
     mavlink: Optional[List[str]] = typer.Option(None, "--mavlink", help="mavlink: a vehicle URL (repeat for more)."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder (default runs/tune-<time>); "
-                                       "a folder holding a journal is resumed."),
+    out: Optional[str] = typer.Option(None, "--out", "-o", help="Run folder (default runs/tune-<time>); "
+                                      "a folder holding a journal is resumed."),
     resume: bool = typer.Option(False, "--resume", help="Require --out to hold a journal and continue it."),
     stage: bool = typer.Option(False, "--stage", help="Fly one battery pack's worth of rounds (battery_s), then stop; "
                                "run again with --out to fly the next stage."),
@@ -70,16 +144,27 @@ def tune_command(
     """Tune the gains: the paper's setting on 2 simulated vehicles unless told otherwise."""
     from mavtune.run import JOURNAL, run, saved_config
 
-    base = saved_config(out) if out is not None and config is None else None  # resume a folder as it was run
+    if out is not None and not out.strip():
+        raise MavtuneError("--out is empty: name the run folder (or leave --out out for runs/tune-<time>)")
+    if stage_rounds is not None and stage_rounds < 1:
+        raise MavtuneError(f"--stage-rounds must be at least 1, got {stage_rounds}")
+    folder = Path(out) if out is not None else None
+    base = saved_config(folder) if folder is not None and config is None else None  # resume a folder as it was run
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base,
-                  tuning__seed=seed, sim__payload_kg=payload, fleet__kind=fleet, swarm__listen=listen,
-                  mavlink__urls=mavlink or None, mavlink__keep_tuned=keep_tuned, tuning__adaptive=adaptive)
-    if out is None:
+                            flight__max_rounds=max_rounds, tuning__seed=seed, sim__payload_kg=payload,
+                            fleet__kind=fleet, swarm__listen=listen, mavlink__urls=mavlink or None,
+                            mavlink__keep_tuned=keep_tuned, tuning__adaptive=adaptive)
+    given = {"--payload": payload, "--listen": listen, "--mavlink": mavlink, "--keep-tuned": keep_tuned}
+    for flag, value in given.items():
+        if value is not None and FLEET_FLAGS[flag] != cfg.fleet.kind:
+            raise MavtuneError(f"{flag} applies to --fleet {FLEET_FLAGS[flag]} only; this run's fleet is "
+                               f"{cfg.fleet.kind}")
+    if folder is None:
         if resume:
             raise MavtuneError("--resume needs --out naming the run folder to continue")
-        out = Path("runs") / time.strftime("tune-%Y%m%d-%H%M%S")
-    if resume and not (out / JOURNAL).exists():
-        raise MavtuneError(f"--resume: {out / JOURNAL} does not exist")
+        folder = Path("runs") / time.strftime("tune-%Y%m%d-%H%M%S")
+    if resume and not (folder / JOURNAL).is_file():
+        raise MavtuneError(f"--resume: {folder / JOURNAL} does not exist")
     if surface is not None:
         from mavtune.sim.surface import read_csv
 
@@ -88,7 +173,7 @@ def tune_command(
         from mavtune.run import plan_of
 
         stage_rounds = plan_of(cfg).rounds_per_battery
-    run(cfg, out, quiet=quiet, surface=surface, stage_rounds=stage_rounds)
+    run(cfg, folder, quiet=quiet, surface=surface, stage_rounds=stage_rounds)
 
 
 bank_app = typer.Typer(help="A bank of tuned gains by vehicle mass, looked up by the mass estimator's reading.",
@@ -180,43 +265,40 @@ def _print_bank(console, bank) -> None:
     console.print(table)
 
 
-# Other commands are registered below, one line each: app.command("name")(function).
-from mavtune.swarm.cli import agent_command, coordinator_command  # noqa: E402
+def run_app(args: list[str] | None = None) -> int:
+    """Run the CLI and return its exit status; every failure is one line on stderr (see the module docstring)."""
+    click = importlib.import_module(typer.BadParameter.__module__.rsplit(".", 1)[0])  # the click typer runs on
 
-app.command("agent")(agent_command)
-app.command("coordinator")(coordinator_command)
-from mavtune.vehicles.mavlink.mavsim.cli import mavsim_command  # noqa: E402
+    try:
+        code = app(args=args, prog_name="mavtune", standalone_mode=False)
+    except Interrupted as exc:
+        return _say(str(exc), "yellow", 130)
+    except MavtuneError as exc:
+        return _say(f"error: {exc}", "red", 2)
+    except click.exceptions.ClickException as exc:
+        if type(exc).__name__ == "NoArgsIsHelpError":  # bare `mavtune` or `mavtune bank`: the help, status 2
+            typer.echo(exc.ctx.get_help())
+            return 2
+        return _say(f"error: {exc.format_message()}", "red", exc.exit_code)
+    except typer.Abort:
+        return _say("interrupted", "yellow", 130)
+    except BaseException:
+        if not interrupts.received():
+            raise
+        return _say("interrupted", "yellow", 130)
+    if interrupts.received() or code == 130:  # typer turns a KeyboardInterrupt into status 130 without a word
+        return _say("interrupted", "yellow", 130)
+    return code if isinstance(code, int) else 0
 
-app.command("mavsim")(mavsim_command)
-from mavtune.sim.commands import bench as bench_command, surface as surface_command  # noqa: E402
 
-app.command("surface")(surface_command)
-app.command("bench")(bench_command)
-from mavtune.experiments.reproduce import reproduce_command  # noqa: E402
-
-app.command("reproduce")(reproduce_command)
-
-
-def _sigterm_as_ctrl_c(signum: int, frame: object) -> None:
-    """SIGTERM (a service manager, `kill`) ends a command like Ctrl-C: flights aborted, gains restored, journal and
-    result.json kept. A second SIGTERM is ignored while that happens."""
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    raise KeyboardInterrupt
+def _say(message: str, colour: str, code: int) -> int:
+    """One line on stderr (a message spread over lines is joined), then the exit status."""
+    typer.secho(" ".join(message.split("\n")), fg=colour, err=True)
+    return code
 
 
 def main() -> None:
-    """Entry point: run the app, turning MavtuneError into a one-line message and exit status 2."""
-    from mavtune.run import Interrupted
+    """The `mavtune` entry point of older installs: see mavtune.__main__.main."""
+    from mavtune.__main__ import main as entry
 
-    signal.signal(signal.SIGTERM, _sigterm_as_ctrl_c)
-    try:
-        app()
-    except Interrupted as exc:
-        typer.secho(str(exc), fg="yellow", err=True)
-        sys.exit(130)
-    except MavtuneError as exc:
-        typer.secho(f"error: {exc}", fg="red", err=True)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        typer.secho("interrupted", fg="yellow", err=True)
-        sys.exit(130)
+    entry()

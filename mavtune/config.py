@@ -12,16 +12,25 @@ An invalid file or flag becomes one line naming the field and the reason.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
+from pydantic import StrictBool, StrictInt  # `vehicles = true` is an error, not 1 vehicle
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from mavtune.errors import MavtuneError
 from mavtune.search import METHODS
 from mavtune.strategy import STRATEGIES
 from mavtune.tuner import Settings
+
+
+MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
+MAX_POINTS = 1_000  # nsection points per iteration
+MAX_BOOTSTRAPS = 1_000
+MIN_EPSILON = 1e-4  # below 1e-4 of a gain's range no flight tells two gains apart; EQL would plan 10^4+ rounds
+MAX_ROUNDS = 2_000  # a plan of more rounds (5 h of 9 s rounds) is refused unless flight.max_rounds is raised
 
 
 class _Section(BaseModel):
@@ -33,22 +42,22 @@ class Tuning(_Section):
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
     method: str = "eql"
-    epsilon: float = Field(0.125, gt=0, lt=0.5)
-    bootstraps: int | Literal["auto"] = 2
-    max_bootstraps: int = Field(10, ge=1)
-    vehicles: int = Field(2, ge=1)
+    epsilon: float = Field(0.125, ge=MIN_EPSILON, lt=0.5)
+    bootstraps: StrictInt | Literal["auto"] = 2
+    max_bootstraps: StrictInt = Field(10, ge=1, le=MAX_BOOTSTRAPS)
+    vehicles: StrictInt = Field(2, ge=1, le=MAX_VEHICLES)
     strategy: str = "avg"
-    replicates: int | None = Field(None, ge=1)
-    points: int | None = Field(None, ge=2)
-    reuse: bool = True
+    replicates: StrictInt | None = Field(None, ge=1, le=MAX_VEHICLES)
+    points: StrictInt | None = Field(None, ge=2, le=MAX_POINTS)
+    reuse: StrictBool = True
     initial: dict[str, float] = Field(default_factory=lambda: {"kd": 0.2})
-    seed: int = 0
-    adaptive: bool = False
+    seed: StrictInt = Field(0, ge=0)
+    adaptive: StrictBool = False
     confidence: float = Field(0.9, gt=0.5, lt=1.0, description="adaptive: p_correct a comparison needs to move on")
-    cap: int | None = Field(None, ge=1, description="adaptive: most flights of one point in one comparison "
+    cap: StrictInt | None = Field(None, ge=1, description="adaptive: most flights of one point in one comparison "
                             "(default 4 rounds' worth)")
-    stop_undecided: bool = Field(False, description="adaptive: a comparison undecided at the cap stops the search")
-    refly: bool = Field(False, description="reuse: a point carried into the next comparison is flown again there")
+    stop_undecided: StrictBool = Field(False, description="adaptive: a comparison undecided at the cap stops the search")
+    refly: StrictBool = Field(False, description="reuse: a point carried into the next comparison is flown again there")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":
@@ -68,9 +77,20 @@ class Tuning(_Section):
     @field_validator("bootstraps")
     @classmethod
     def _positive(cls, v: int | str) -> int | str:
-        if isinstance(v, int) and v < 1:
-            raise ValueError("must be at least 1, or \"auto\" for the paper's stop rule")
+        if isinstance(v, int) and not 1 <= v <= MAX_BOOTSTRAPS:
+            raise ValueError(f"must be from 1 to {MAX_BOOTSTRAPS}, or \"auto\" for the paper's stop rule")
         return v
+
+    def ignored(self) -> list[str]:
+        """Settings given that this strategy or method does not use (said as warnings, never silently)."""
+        unused = []
+        if self.replicates is not None and self.strategy != "groups":
+            unused.append(f"tuning.replicates = {self.replicates} is ignored: only the groups strategy uses it "
+                          f"(strategy is {self.strategy})")
+        if self.points is not None and self.method != "nsection":
+            unused.append(f"tuning.points = {self.points} is ignored: only the nsection method uses it "
+                          f"(method is {self.method})")
+        return unused
 
 
 class FlightPlan(_Section):
@@ -80,6 +100,15 @@ class FlightPlan(_Section):
     primitive_s: float = Field(8.0, gt=0, le=120)
     settle_s: float = Field(1.0, ge=0, le=60)
     battery_s: float = Field(600.0, gt=0, description="usable flight time of one battery pack, s")
+    max_rounds: StrictInt = Field(MAX_ROUNDS, ge=1, description="a plan of more rounds is refused (raise it to insist)")
+
+    @model_validator(mode="after")
+    def _round_fits_a_battery(self) -> "FlightPlan":
+        round_s = self.primitive_s + self.settle_s
+        if self.battery_s < round_s:
+            raise ValueError(f"battery_s = {self.battery_s:g} s is shorter than one round ({round_s:g} s: "
+                             f"{self.primitive_s:g} s primitive + {self.settle_s:g} s settle); no round can be flown")
+        return self
 
 
 class FleetChoice(_Section):
@@ -95,6 +124,26 @@ class Config(_Section):
     fleet: FleetChoice = Field(default_factory=FleetChoice)
     swarm: dict[str, Any] = Field(default_factory=dict)
     mavlink: dict[str, Any] = Field(default_factory=dict)
+
+    def fingerprint(self) -> dict[str, Any]:
+        """What a journal must agree on to be resumed: everything that changes what a recorded flight means."""
+        t, f = self.tuning, self.flight
+        mark = self.settings().fingerprint() | {
+            "vehicles": t.vehicles, "seed": t.seed, "fleet": self.fleet.kind,
+            "flight": {"primitive": f.primitive, "primitive_s": f.primitive_s, "settle_s": f.settle_s},
+        }
+        if self.fleet.kind == "sim":
+            mark["scenario"] = self.scenario().model_dump(mode="json")  # payload, wind, noise, cost, ...
+        if self.fleet.kind == "mavlink":
+            mark["urls"] = list(self.mavlink.get("urls") or [])
+        return mark
+
+    def ignored(self) -> list[str]:
+        """Everything given that this run will not use, one warning each."""
+        tables = {"sim": self.fleet.kind == "sim", "swarm": self.fleet.kind == "zenoh",
+                  "mavlink": self.fleet.kind in ("mavlink", "zenoh")}  # zenoh agents may share the file's [mavlink]
+        return self.tuning.ignored() + [f"the [{name}] table is ignored: fleet.kind is {self.fleet.kind}"
+                                        for name, used in tables.items() if getattr(self, name) and not used]
 
     def settings(self) -> Settings:
         """The engine's settings (validated again there: ranges, initial values, groups)."""
@@ -126,6 +175,21 @@ def validated(model: type[BaseModel], data: dict[str, Any], prefix: str = "") ->
         raise MavtuneError(f"config {where}: {reason}{got}") from None
 
 
+def _plain_numbers(given: Any, used: Any, where: str) -> None:
+    """Every number used is a finite number given as one: no NaN or infinity (`battery_s = inf` plans nothing
+    sane) and no true/false taken for 1/0 (`primitive_s = true` is not a 1 s primitive). Each is named."""
+    if isinstance(used, dict) and isinstance(given, dict):
+        for key, item in used.items():
+            _plain_numbers(given.get(key), item, f"{where}.{key}" if where != "config" else f"config {key}")
+    elif isinstance(used, (list, tuple)) and isinstance(given, (list, tuple)):
+        for item_given, item_used in zip(given, used):
+            _plain_numbers(item_given, item_used, where)
+    elif isinstance(used, float) and not math.isfinite(used):
+        raise MavtuneError(f"{where}: must be a finite number (got {used})")
+    elif isinstance(given, bool) and not isinstance(used, bool):
+        raise MavtuneError(f"{where}: must be a number, not {str(given).lower()}")
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """The tables of a TOML file; a missing or malformed file is one line naming it."""
     path = Path(path)
@@ -147,21 +211,25 @@ def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None
     for dotted, value in (overrides or {}).items():
         if value is None:
             continue
-        node = data
         *parents, leaf = dotted.split(".")
+        node = data
         for p in parents:
             node = node.setdefault(p, {})
+            if not isinstance(node, dict):
+                raise MavtuneError(f"config {p}: must be a table, got {node!r}")
         node[leaf] = value
-    urls = (data.get("mavlink") or {}).get("urls") or []
-    if (data.get("fleet") or {}).get("kind") == "mavlink" and urls:
-        given = (data.get("tuning") or {}).get("vehicles")
+    mav, tuning, fleet = (data.get(k) if isinstance(data.get(k), dict) else {} for k in ("mavlink", "tuning", "fleet"))
+    urls = mav.get("urls") or []
+    if fleet.get("kind") == "mavlink" and isinstance(urls, list) and urls and isinstance(data.get("tuning", {}), dict):
+        given = tuning.get("vehicles")
         if given is not None and given != len(urls):
             raise MavtuneError(f"config tuning.vehicles is {given} but {len(urls)} MAVLink URLs are given")
-        data.setdefault("tuning", {})["vehicles"] = len(urls)  # one vehicle per URL
+        data["tuning"] = {**tuning, "vehicles": len(urls)}  # one vehicle per URL
     config = validated(Config, data)
+    _plain_numbers(data, config.model_dump(), "config")
     config.settings()  # cross-field checks (initial inside its range, groups dividing the vehicles, …)
     if config.fleet.kind == "sim":
-        config.scenario()  # a bad [sim] value is named before anything is planned or written
+        _plain_numbers(config.sim, config.scenario().model_dump(), "config sim")  # named before anything is written
         from mavtune.sim.gains import GAIN_NAMES
 
         for name, (lo, hi) in config.tuning.space.items():

@@ -20,6 +20,8 @@ ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twi
 BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
 AdaptiveOpt = typer.Option(None, "--adaptive/--no-adaptive", help="Fly close comparisons again (up to a cap) until "
                            "the kept point is the best with probability [tuning] confidence.")
+MaxRoundsOpt = typer.Option(None, "--max-rounds", help="Refuse a plan of more rounds than this [2000]; raise it "
+                            "to fly a longer plan anyway.")
 
 
 def bootstraps_flag(value: Optional[str]) -> int | str | None:

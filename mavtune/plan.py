@@ -77,7 +77,7 @@ class Plan:
                 f" expected (at most {self.rounds_max}, if every comparison is too close to call until the cap)"
                 if self.adaptive else f" (guaranteed at most {self.rounds_max}, if no speculative point is ever used)"
                 if self.rounds_max != self.rounds else ""),
-            f"flights       {self.flights} ({self.vehicles} vehicles × {self.rounds} rounds; "
+            f"flights       {self.flights} ({counted(self.vehicles, 'vehicle')} × {counted(self.rounds, 'round')}; "
             f"{self.evaluations} points searched)",
             f"flight time   {clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
             f"primitive + {self.settle_s:g} s settle)",
@@ -86,6 +86,11 @@ class Plan:
                                                             if self.batteries_max != self.batteries else ""),
         ]
         return "\n".join(lines)
+
+
+def counted(n: int, noun: str) -> str:
+    """'1 vehicle', '2 vehicles'."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def clock(seconds: float) -> str:

@@ -1,7 +1,10 @@
 """A tuning run as the `mavtune tune` command does it: plan, fleet, live progress, run folder, report.
 
 The run folder holds `journal.sqlite` (every round, durable), `config.json`, `result.json` and the report.
-Pointing a new run at a folder that has a journal resumes it.
+Pointing a new run at a folder that has a journal resumes it — only with the settings it was started with.
+Everything that can be checked is checked before anything flies; whatever ends a run (finished, a stage done,
+Ctrl-C, an error) leaves the journal intact and result.json and report.md telling the same story.
+Rounds are numbered from 0 everywhere: console, journal, result.json, report.md and logs.
 """
 
 from __future__ import annotations
@@ -9,27 +12,28 @@ from __future__ import annotations
 import json
 import math
 import os
+import tempfile
 import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.markup import escape
 from rich.table import Table
 
+from mavtune import interrupts
 from mavtune.config import Config
-from mavtune.errors import MavtuneError
+from mavtune.errors import Interrupted, MavtuneError
 from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal
-from mavtune.plan import Plan, clock as _clock_s, make_plan
+from mavtune.plan import Plan, clock as _clock_s, counted, make_plan
 from mavtune.tuner import Round, StageDone, Tuner, TuningResult
 
 JOURNAL = "journal.sqlite"
-
-
-class Interrupted(MavtuneError):
-    """Ctrl-C during a run: every finished round is in the journal; the message says how to resume."""
+REPORT = "report.md"
+REPORT_AFTER_INTERRUPT_S = 1.0  # an interrupted run writes its report only if that is this quick
+MANY_VEHICLES = 8  # above this the per-round line summarises the vehicles instead of listing them
 
 
 def saved_config(out_dir: Path) -> dict[str, Any] | None:
@@ -38,15 +42,44 @@ def saved_config(out_dir: Path) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise MavtuneError(f"{path} is not valid JSON ({exc}); pass --config to say how the run was set up") from None
+        saved = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError, OSError) as exc:
+        raise MavtuneError(f"{path} is unreadable ({exc}); pass --config to say how the run was set up") from None
+    if not isinstance(saved, dict):
+        raise MavtuneError(f"{path} is not a mavtune configuration; pass --config to say how the run was set up")
+    return saved
 
 
 def plan_of(config: Config) -> Plan:
-    """The plan of a configuration, with its flight timing."""
-    f = config.flight
-    return make_plan(config.settings(), f.primitive_s, f.settle_s, f.battery_s)
+    """The plan of a configuration, with its flight timing; a plan longer than `flight.max_rounds` is refused
+    (before rehearsing it when even its fewest possible rounds are too many)."""
+    f, settings = config.flight, config.settings()
+    from mavtune.search import make_search
+
+    needs = make_search(settings.method, 0.0, 1.0, settings.epsilon, reuse=settings.reuse,
+                        points=settings.points).budget()
+    fewest = math.ceil(needs / settings.strategy_rule.slots(settings.vehicles)) * len(settings.space) * (
+        settings.bootstraps or 1)
+    if fewest > f.max_rounds:
+        _too_long(fewest, config, "at least ")
+    plan = make_plan(settings, f.primitive_s, f.settle_s, f.battery_s)
+    if plan.rounds > f.max_rounds:
+        _too_long(plan.rounds, config)
+    return plan
+
+
+def _too_long(rounds: int, config: Config, atleast: str = "") -> None:
+    round_s = config.flight.primitive_s + config.flight.settle_s
+    raise MavtuneError(f"the plan needs {atleast}{rounds} rounds ({_clock_s(rounds * round_s)} of flight), more than "
+                       f"flight.max_rounds = {config.flight.max_rounds}; raise it (--max-rounds) to fly it anyway")
+
+
+def warn(console: Console, config: Config) -> list[str]:
+    """Say every setting this run will not use (one line each) and return them for result.json."""
+    ignored = config.ignored()
+    for line in ignored:
+        console.print(f"[yellow]warning: {escape(line)}[/]", highlight=False)
+    return ignored
 
 
 def build_fleet(config: Config, out_dir: Path) -> Fleet:
@@ -66,10 +99,44 @@ def build_fleet(config: Config, out_dir: Path) -> Fleet:
     return mavlink_fleet(config, out_dir)
 
 
+def prepare_folder(out_dir: Path) -> None:
+    """Check the run folder before anything flies: a folder we can write, and no journal lost beside a result."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise MavtuneError(f"run folder {out_dir} is a file, not a folder")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out_dir, prefix=".mavtune-probe-"):
+            pass
+    except OSError as exc:
+        raise MavtuneError(f"run folder {out_dir} cannot be written ({exc.strerror or exc}); choose another --out") \
+            from None
+    journal = out_dir / JOURNAL
+    if journal.is_file() and journal.stat().st_size > 0:
+        return
+    recorded = _recorded_rounds(out_dir / "result.json")
+    if recorded:
+        state = "empty" if journal.exists() else "missing"
+        raise MavtuneError(f"{out_dir / 'result.json'} records {recorded} rounds but {journal} is {state}: restore "
+                           "the journal, or use a new run folder (nothing was changed)")
+
+
+def _recorded_rounds(path: Path) -> int:
+    """Rounds a result.json says were recorded (0 without one; an unreadable one counts as some)."""
+    if not path.exists():
+        return 0
+    try:
+        rounds = json.loads(path.read_text()).get("rounds", 0)
+        return int(rounds) if isinstance(rounds, (int, float)) else 1
+    except (OSError, ValueError, AttributeError, UnicodeDecodeError):
+        return 1
+
+
 class RoundView:
     """Live progress: a bar over the planned rounds and one line per round (gain, bracket, points, costs)."""
 
     def __init__(self, console: Console, plan: Plan, quiet: bool = False):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
         self.plan, self.quiet = plan, quiet
         self.progress = Progress(
             TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -89,14 +156,28 @@ class RoundView:
         lo, hi = rnd.bracket
         self.progress.update(self.task, completed=rnd.index + 1, total=total,
                              description=f"bootstrap {rnd.bootstrap} · {rnd.gain} in [{lo:.4g}, {hi:.4g}]")
-        if self.quiet:
-            return
-        points = " ".join(f"{a[rnd.gain]:.4g}" for a in rnd.assignments)
-        costs = " ".join(_cost_text(f.cost, f.status) for f in rnd.flights)
-        tag = " (journal)" if rnd.replayed else ""
-        self.progress.console.print(
-            f"[dim]round {rnd.index + 1:>3}/{total}[/] b{rnd.bootstrap} {rnd.gain:<4} "
-            f"[{lo:.4g}, {hi:.4g}]  {rnd.gain} = {points}  cost {costs}{tag}", highlight=False)
+        if not self.quiet:
+            self.progress.console.print(round_line(rnd), highlight=False)
+
+
+def round_line(rnd: Round) -> str:
+    """One round for the console (rounds from 0): the gain's bracket, each vehicle's point and cost, the mean."""
+    lo, hi = rnd.bracket
+    points = [a[rnd.gain] for a in rnd.assignments]
+    measured = [f.cost for f in rnd.flights if f.measured and math.isfinite(f.cost)]
+    mean = f"mean {sum(measured) / len(measured):.4g}" if measured else "no cost measured"
+    if len(rnd.flights) <= MANY_VEHICLES:
+        each = (f"{rnd.gain} per vehicle {' '.join(f'{p:.4g}' for p in points)}  cost per vehicle "
+                f"{' '.join(_cost_text(f.cost, f.status) for f in rnd.flights)}")
+    else:
+        lost = sum(f.status is Status.LOST for f in rnd.flights)
+        failed = sum(f.status is Status.FAILED for f in rnd.flights)
+        each = (f"{counted(len(set(points)), 'point')} of {rnd.gain} in [{min(points):.4g}, {max(points):.4g}] on "
+                f"{counted(len(rnd.flights), 'vehicle')}" + (f", [yellow]{lost} lost[/]" if lost else "")
+                + (f", [red]{failed} failed[/]" if failed else ""))
+    tag = " (journal)" if rnd.replayed else ""
+    return (f"[dim]round {rnd.index:>3}[/] bootstrap {rnd.bootstrap} {rnd.gain} in [{lo:.4g}, {hi:.4g}]  "
+            f"{each}  {mean}{tag}")
 
 
 def _cost_text(cost: float, status: Status) -> str:
@@ -118,79 +199,139 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     """
     console = console or Console()
     out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise MavtuneError(f"output path {out_dir} is a file, not a folder")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    journal = out_dir / JOURNAL
     settings = config.settings()
     plan = plan_of(config)
-    with Journal(journal) as book:
-        book.bind(settings.fingerprint())
-        if recorded := len(book.rounds()):
-            console.print(f"resuming {journal}: {recorded} rounds recorded will not be flown again")
+    prepare_folder(out_dir)
+    with Journal(out_dir / JOURNAL) as book:
+        book.bind(config.fingerprint())
+        book.check_writable()
+        if recorded := len(book):
+            console.print(f"resuming {out_dir / JOURNAL}: {counted(recorded, 'round')} recorded will not be flown "
+                          "again")
+        ignored = warn(console, config)
         console.print(plan_panel(config, plan))
-        (out_dir / "config.json").write_text(json.dumps(config.model_dump(mode="json"), indent=2))
+        _write_json(out_dir / "config.json", config.model_dump(mode="json"))
         fleet: Fleet | None = None
         tuner: Tuner | None = None
         started, status, error = time.time(), "error", None
         try:
             console.print(_fleet_line(config))
             fleet = build_fleet(config, out_dir)
-            tuner = Tuner(settings, fleet, book, stage_rounds=stage_rounds)
+            commits = _CountedCommits(book)
+            tuner = Tuner(settings, fleet, commits, stage_rounds=stage_rounds)
             with RoundView(console, plan, quiet) as view:
-                tuner.on_round = view
+                tuner.on_round = commits.counted(view)
                 tuner.run()
             status = "finished"
             if hasattr(fleet, "tuned"):
                 fleet.tuned = tuner.gains  # a real fleet keeps these on the vehicles only when told to
         except StageDone:
             status = "stage"
-        except KeyboardInterrupt:
-            status = "interrupted"
-        except Exception as exc:
-            error = str(exc) or type(exc).__name__
-            raise
+        except BaseException as exc:  # an interrupt can surface as another error from inside an import
+            if isinstance(exc, KeyboardInterrupt) or interrupts.received():
+                status = "interrupted"
+            else:
+                error = str(exc) or type(exc).__name__
+                raise
         finally:
-            try:
-                if fleet is not None:
-                    fleet.close()  # real vehicles get their original gains back here, whatever happened
-            finally:
-                result = tuner.snapshot() if tuner is not None else None
-                _write_summary(out_dir, config, plan, result, fleet, status, error, time.time() - started)
-                if report and result is not None:
-                    _report(console, out_dir, result, config, surface, status)
-        recorded = len(book.rounds())  # the journal is the truth: a round can be recorded as Ctrl-C arrives
+            if tuner is not None:
+                try:
+                    commits.hold.release()  # never left installed, whatever ended the run
+                except KeyboardInterrupt:
+                    status = "interrupted"
+            with interrupts.deferred():  # the vehicles are released and result.json written whole, come what may
+                try:
+                    if fleet is not None:
+                        fleet.close()  # real vehicles get their original gains back here, whatever happened
+                finally:
+                    result = tuner.snapshot() if tuner is not None else None
+                    summary = _summary(config, plan, result, fleet, status, error, time.time() - started, ignored)
+                    (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
+                    _write_json(out_dir / "result.json", summary)
+            if report and result is not None:
+                _report(console, out_dir, result, config, surface, status, summary)
+        recorded = len(book)
     if status == "interrupted":
-        raise Interrupted(f"interrupted: the journal keeps {recorded} rounds; `mavtune tune --out {out_dir}` resumes")
+        raise Interrupted(f"interrupted: the journal keeps {counted(recorded, 'round')}; `mavtune tune --out "
+                          f"{out_dir}` resumes")
     if status == "stage":
-        console.print(f"stage done: {tuner.flown} rounds flown now, {len(result.rounds)} of at most "
-                      f"{plan.rounds_max} recorded (report so far: {out_dir / 'report.md'}); swap batteries (or fix "
+        console.print(f"stage done: {counted(tuner.flown, 'round')} flown now, {len(result.rounds)} of at most "
+                      f"{plan.rounds_max} recorded (report so far: {out_dir / REPORT}); swap batteries (or fix "
                       f"what needs fixing), then `mavtune tune --out {out_dir}`")
         return None
-    console.print(f"tuned after {len(result.rounds)} rounds, {result.flights} flights "
+    console.print(f"tuned after {counted(len(result.rounds), 'round')}, {counted(result.flights, 'flight')} "
                   f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
     console.print(_result_table(result))
     console.print(f"run folder: {out_dir}")
     return result
 
 
+class _CountedCommits:
+    """The journal as the tuner sees it: Ctrl-C landing as a round is committed takes effect once the tuner has
+    counted that round (its on_round), so result.json never holds fewer rounds than the journal."""
+
+    def __init__(self, book: Journal):
+        self.book, self.hold = book, interrupts.Hold()
+
+    def append(self, record) -> None:
+        self.hold.start()
+        self.book.append(record)
+
+    def counted(self, view):
+        """`view` as the tuner's on_round, releasing a held interrupt once the round is counted."""
+        def on_round(rnd: Round) -> None:
+            self.hold.release()
+            view(rnd)
+        return on_round
+
+    def __getattr__(self, name: str):
+        return getattr(self.book, name)
+
+
 def _report(console: Console, out_dir: Path, result: TuningResult, config: Config, surface: Path | None,
-            status: str) -> None:
-    """Write the run report; a report that cannot be written is said, never hiding how the run ended."""
+            status: str, summary: dict[str, Any]) -> None:
+    """Write the run report, then say in result.json that it describes this state of the run.
+
+    The report of an earlier state is removed first, so report.md either matches result.json or is absent (and
+    result.json says why). After Ctrl-C the report gets REPORT_AFTER_INTERRUPT_S, so the command still ends at once;
+    another Ctrl-C while it is written stops it the same way. A report that cannot be written never hides how the
+    run ended."""
     from mavtune.report import write_run_report
 
     ending = {"finished": "", "stage": "in progress", "interrupted": "interrupted", "error": "stopped"}
     title = "mavtune tuning run" + (f" — {ending[status]} after {len(result.rounds)} rounds" if ending[status] else "")
+    why = None
     try:
-        write_run_report(out_dir, result, config, surface=surface, title=title)
+        if status == "interrupted":
+            with interrupts.time_limit(REPORT_AFTER_INTERRUPT_S):
+                write_run_report(out_dir, result, config, surface=surface, title=title)
+        else:
+            write_run_report(out_dir, result, config, surface=surface, title=title)
     except MavtuneError as exc:
-        console.print(f"[yellow]report not written: {exc}[/] (the journal and result.json are complete)")
+        why = str(exc)
+    except interrupts.TimeLimit:
+        why = f"it would take longer than {REPORT_AFTER_INTERRUPT_S:g} s after the interrupt"
+    except KeyboardInterrupt:
+        why = "interrupted while it was written"
+    if why is None:
+        summary["report"] = REPORT
+    else:
+        (out_dir / REPORT).unlink(missing_ok=True)
+        summary["report"] = None
+        summary["report_missing"] = f"{why}; `mavtune tune --out {out_dir}` writes it"
+        console.print(f"[yellow]report not written: {escape(summary['report_missing'])}[/] (the journal and "
+                      "result.json are complete)")
+    with interrupts.deferred():
+        _write_json(out_dir / "result.json", summary)
+    if why == "interrupted while it was written" and status != "interrupted":
+        raise KeyboardInterrupt
 
 
-def _write_summary(out_dir: Path, config: Config, plan: Plan, result: TuningResult | None, fleet: Fleet | None,
-                   status: str, error: str | None, wall_s: float) -> None:
-    """result.json, written atomically: how the run ended, the gains, every round, what the fleet reports."""
-    summary: dict[str, Any] = {"status": status, "error": error, "gains": None, "rounds": 0, "flights": 0}
+def _summary(config: Config, plan: Plan, result: TuningResult | None, fleet: Fleet | None, status: str,
+             error: str | None, wall_s: float, warnings: list[str]) -> dict[str, Any]:
+    """What result.json says: how the run ended, the gains, every round (from 0), what the fleet reports."""
+    summary: dict[str, Any] = {"status": status, "error": error, "gains": None, "rounds": 0, "flights": 0,
+                               "report": None, "warnings": warnings}
     if result is not None:
         by_status = Counter(f.status.value for r in result.rounds for f in r.flights)
         summary |= result.to_dict() | {
@@ -204,9 +345,13 @@ def _write_summary(out_dir: Path, config: Config, plan: Plan, result: TuningResu
                 "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s}}
     if fleet is not None and hasattr(fleet, "report"):
         summary |= fleet.report()  # e.g. drop-out events, original parameters and whether they were restored
-    path = out_dir / "result.json"
+    return summary
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write a JSON file atomically: readers see the old file or the new one, never half of either."""
     partial = path.with_suffix(".json.partial")
-    partial.write_text(json.dumps(summary, indent=2, default=str))
+    partial.write_text(json.dumps(data, indent=2, default=str))
     os.replace(partial, path)
 
 
@@ -215,17 +360,17 @@ def _fleet_line(config: Config) -> str:
     n, kind = config.tuning.vehicles, config.fleet.kind
     if kind == "zenoh":
         listen = config.swarm.get("listen", "tcp/0.0.0.0:7447")
-        return (f"waiting for {n} agents on {listen} (session {config.swarm.get('session', 'mavtune')!r}); "
+        return (f"waiting for {counted(n, 'agent')} on {listen} (session {config.swarm.get('session', 'mavtune')!r}); "
                 f"start them with `mavtune agent --id ID --connect {listen} ...`")
     if kind == "mavlink":
-        return f"connecting to {n} MAVLink vehicles: {', '.join(config.mavlink.get('urls', []))}"
-    return f"flying {n} simulated vehicles (seed {config.tuning.seed})"
+        return f"connecting to {counted(n, 'MAVLink vehicle')}: {', '.join(config.mavlink.get('urls', []))}"
+    return f"flying {counted(n, 'simulated vehicle')} (seed {config.tuning.seed})"
 
 
 def plan_panel(config: Config, plan: Plan) -> str:
     t = config.tuning
-    head = (f"[bold]plan[/]  {t.method} ε={t.epsilon:g} over {', '.join(t.space)} · {t.vehicles} × "
-            f"{config.fleet.kind} vehicles · strategy {t.strategy}{'' if t.reuse else ' (no reuse)'}")
+    head = (f"[bold]plan[/]  {t.method} ε={t.epsilon:g} over {', '.join(t.space)} · "
+            f"{counted(t.vehicles, config.fleet.kind + ' vehicle')} · strategy {t.strategy}{'' if t.reuse else ' (no reuse)'}")
     return head + "\n" + "\n".join("  " + line for line in plan.describe().splitlines())
 
 

@@ -78,3 +78,37 @@ def test_bank_build_tunes_each_payload_in_the_simulator(tmp_path):
     assert [e.mass_kg for e in built.entries] == pytest.approx([2.3, 3.2])
     for e in built.entries:
         assert json.loads((tmp_path / e.source.split("/")[-1] / "result.json").read_text())["gains"] == e.gains
+
+
+def test_a_tuned_mass_is_looked_up_as_itself_not_as_an_end_of_a_bracket():
+    b = bank()
+    b.add(2.3 + 0.45, {"kp": 0.65, "kd": 0.35})  # 2.7499999999999996 in floating point
+    found = b.lookup(2.75)
+    assert found.between == (2.75, 2.75) and found.inside and found.gains == {"kp": 0.65, "kd": 0.35}
+    assert b.lookup(3.0).between == (2.75, 3.2)
+
+
+@pytest.mark.parametrize("mass", [-1.0, 0.0, float("nan"), float("inf")])
+def test_lookup_refuses_a_mass_that_is_not_a_mass(mass):
+    with pytest.raises(MavtuneError, match="positive number of kg"):
+        bank().lookup(mass)
+
+
+def test_bank_file_keeps_masses_as_written(tmp_path):
+    path = tmp_path / "bank.json"
+    b = GainBank()
+    b.add(2.3 + 0.9, {"kp": 0.8, "kd": 0.2})
+    b.save(path)
+    assert '"mass_kg": 3.2,' in path.read_text()
+
+
+def test_lookup_command_says_at_for_a_tuned_mass_and_refuses_a_negative_one(tmp_path):
+    path = tmp_path / "bank.json"
+    b = bank()
+    b.add(2.75, {"kp": 0.65, "kd": 0.35})
+    b.save(path)
+    runner = CliRunner()
+    out = runner.invoke(app, ["bank", "lookup", str(path), "--mass-kg", "2.75"])
+    assert out.exit_code == 0 and out.output.strip().endswith("# at 2.75 kg")
+    refused = runner.invoke(app, ["bank", "lookup", str(path), "--mass-kg", "-1"])
+    assert isinstance(refused.exception, MavtuneError) and "positive number of kg" in str(refused.exception)

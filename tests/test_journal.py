@@ -176,3 +176,78 @@ def test_stages_need_a_journal():
 
     with pytest.raises(MavtuneError, match="needs a journal"):
         run_tuning(Settings(**SETTINGS), CountingFleet(2), None, stage_rounds=3)
+
+
+# ----- a journal is refused in one line, never repaired or rewritten ------------------------------------------
+
+
+def finished_journal(tmp_path):
+    path = tmp_path / "j.sqlite"
+    mavtune.tune(CountingFleet(2), journal=path, **SETTINGS)
+    return path
+
+
+def refused_untouched(path, match, **changes):
+    """Resuming `path` is refused with a one-line error matching `match`, and not a byte of it changes."""
+    before = path.read_bytes()
+    with pytest.raises(MavtuneError, match=match) as refused:
+        mavtune.tune(CountingFleet(2), journal=path, **{**SETTINGS, **changes})
+    assert "\n" not in str(refused.value)
+    assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize("damage, match", [
+    ("UPDATE rounds SET record = 'not json{' WHERE idx = 3", "round 3 does not match its checksum"),
+    ("UPDATE rounds SET record = replace(record, '\"cost\": 0.', '\"cost\": 1.') WHERE idx = 5",
+     "round 5 does not match its checksum"),  # a changed digit is found, not replayed
+    ("DELETE FROM rounds WHERE idx = 2", "no round 2 but holds round 3"),
+])
+def test_a_damaged_round_is_named(tmp_path, damage, match):
+    path = finished_journal(tmp_path)
+    with sqlite3.connect(path) as db:
+        db.execute(damage)
+    refused_untouched(path, match)
+
+
+def test_a_garbage_round_with_a_right_checksum_is_named(tmp_path):
+    from mavtune.journal import _digest
+
+    path = finished_journal(tmp_path)
+    with sqlite3.connect(path) as db:
+        row = (4, 1, "kd", 0.0, 1.0, '{"assignments": [{"kd": "high"}], "flights": []}')
+        db.execute("UPDATE rounds SET idx = ?, bootstrap = ?, gain = ?, started = ?, finished = ?, record = ?, "
+                   "digest = ? WHERE idx = 4", (*row, _digest(row)))
+    refused_untouched(path, "round 4 is unreadable")
+
+
+def test_another_programs_database_is_not_touched(tmp_path):
+    path = tmp_path / "other.sqlite"
+    with sqlite3.connect(path) as db:
+        db.execute("CREATE TABLE notes (text TEXT)")
+    refused_untouched(path, "not a mavtune journal")
+
+
+def test_damaged_pages_are_refused(tmp_path):
+    path = finished_journal(tmp_path)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2:len(data) // 2 + 2000] = bytes(range(256)) * 7 + bytes(208)
+    path.write_bytes(bytes(data))
+    refused_untouched(path, "journal .* (is damaged|is not a readable|does not match|unreadable|no round)")
+
+
+def test_a_journal_without_the_run_record_is_refused_not_guessed(tmp_path):
+    path = tmp_path / "j.sqlite"
+    with Journal(path) as j:
+        j.bind({"method": "eql"})  # an older fingerprint: no vehicles, seeds, scenario
+    with Journal(path) as j, pytest.raises(MavtuneError, match="does not record epsilon.*older mavtune"):
+        j.bind({"method": "eql", "epsilon": 0.125})
+
+
+def test_the_first_different_field_is_named_with_its_path(tmp_path):
+    path = tmp_path / "j.sqlite"
+    with Journal(path) as j:
+        j.bind({"scenario": {"payload_kg": 0.0, "wind": {"mean_mps": 2.0}}, "vehicles": 2})
+    with Journal(path) as j:
+        with pytest.raises(MavtuneError, match="scenario.wind.mean_mps was 2.0, now 3.0"):
+            j.bind({"scenario": {"payload_kg": 0.0, "wind": {"mean_mps": 3.0}}, "vehicles": 2})
+        j.bind({"scenario": {"payload_kg": 0, "wind": {"mean_mps": 2}}, "vehicles": 2})  # equal numbers agree

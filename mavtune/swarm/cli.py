@@ -42,7 +42,7 @@ def agent_command(
     seed: int = typer.Option(0, "--seed", help="Simulator seed of this vehicle (vehicle j of an in-process run: S+j)."),
     scenario: Optional[str] = typer.Option(None, "--scenario", help="sim: 'default', 'noise_free' or a JSON file."),
     mavlink: Optional[str] = typer.Option(None, "--mavlink", help="mavlink: the vehicle's URL, e.g. udp:127.0.0.1:14540."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Config file (TOML): [swarm] table (or top level), [mavlink] for mavlink."),
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help="Config file (TOML): [swarm] table (or top level), [mavlink] for mavlink."),
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
     token: Optional[str] = typer.Option(None, "--token", help="Shared token (overrides the config)."),
     min_flight_s: float = typer.Option(0.0, "--min-flight-s", help="Make each flight last at least this wall time."),

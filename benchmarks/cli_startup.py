@@ -1,0 +1,79 @@
+"""Start-up time of `mavtune --help` and `mavtune plan` (target ≤ 0.3 s), against a bare Python start.
+
+Each command runs REPEATS times, interleaved so that load drifts hit all of them alike; reported: the median
+wall time and the median CPU time (user + sys of the child, from resource.getrusage), with the load average.
+The slowest imports of `mavtune plan` come from `python -X importtime`. Writes benchmarks/results/cli_startup.md.
+
+    .venv/bin/python benchmarks/cli_startup.py [REPEATS]
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PYTHON = sys.executable
+COMMANDS = {
+    "python -c pass": [PYTHON, "-c", "pass"],
+    "mavtune --help": [PYTHON, "-m", "mavtune", "--help"],
+    "mavtune plan": [PYTHON, "-m", "mavtune", "plan"],
+    "mavtune --version": [PYTHON, "-m", "mavtune", "--version"],
+}
+
+
+def timed(argv: list[str]) -> tuple[float, float]:
+    """(wall s, CPU s) of one run of argv."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def slowest_imports(argv: list[str], n: int = 12) -> list[tuple[int, str]]:
+    """The n imports with the largest cumulative time (µs) in one `python -X importtime` run."""
+    err = subprocess.run([argv[0], "-X", "importtime", *argv[1:]], capture_output=True, text=True).stderr
+    rows = []
+    for line in err.splitlines():
+        if line.startswith("import time:") and "|" in line:
+            _, cumulative, name = line.split("|")
+            if cumulative.strip().isdigit():
+                rows.append((int(cumulative), name.rstrip()))
+    return sorted(rows, reverse=True)[:n]
+
+
+def main(repeats: int = 15) -> None:
+    load_before = os.getloadavg()
+    samples: dict[str, list[tuple[float, float]]] = {name: [] for name in COMMANDS}
+    for name, argv in COMMANDS.items():
+        timed(argv)  # warm the file cache
+    for _ in range(repeats):
+        for name, argv in COMMANDS.items():
+            samples[name].append(timed(argv))
+    load_after = os.getloadavg()
+    lines = ["# CLI start-up", "",
+             f"`{' '.join(Path(a).name if a == PYTHON else a for a in [PYTHON, *sys.argv])}`, {repeats} runs each, "
+             f"interleaved; {os.cpu_count()} cores; load average {load_before[0]:.1f} before, "
+             f"{load_after[0]:.1f} after ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).", "",
+             "| command | median wall, s | median CPU, s | CPU minus bare Python, s |", "| --- | ---: | ---: | ---: |"]
+    bare_cpu = statistics.median(c for _, c in samples["python -c pass"])
+    for name, runs in samples.items():
+        wall, cpu = statistics.median(w for w, _ in runs), statistics.median(c for _, c in runs)
+        lines.append(f"| `{name}` | {wall:.3f} | {cpu:.3f} | {cpu - bare_cpu:+.3f} |")
+    lines += ["", "Slowest imports of `mavtune plan` (cumulative, one `-X importtime` run, wall µs):", "", "```"]
+    lines += [f"{us:>9} {name}" for us, name in slowest_imports(COMMANDS["mavtune plan"])]
+    lines += ["```", ""]
+    out = Path(__file__).parent / "results" / "cli_startup.md"
+    out.parent.mkdir(exist_ok=True)
+    out.write_text("\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 15)

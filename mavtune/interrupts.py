@@ -1,0 +1,96 @@
+"""Ctrl-C and SIGTERM for the `mavtune` command: one interrupt, noticed wherever it lands, never lost.
+
+`install()` makes SIGINT and SIGTERM raise KeyboardInterrupt once and remembers that they came (`received()`),
+so an interrupt that lands inside an import and surfaces as another exception is still reported as one.
+`deferred()` holds them while the run folder is being written; `time_limit()` bounds work done after one.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_received: list[int] = []
+
+
+class TimeLimit(Exception):
+    """Raised inside a `time_limit` block whose time is up."""
+
+
+def received() -> bool:
+    """Whether SIGINT or SIGTERM arrived since `install()`."""
+    return bool(_received)
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    first = not _received
+    _received.append(signum)
+    if first:  # a second signal while the first one is being handled is only counted
+        raise KeyboardInterrupt
+
+
+def install() -> None:
+    """SIGINT and SIGTERM raise KeyboardInterrupt (once), in the main thread."""
+    for s in SIGNALS:
+        signal.signal(s, _interrupt)
+
+
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+class Hold:
+    """SIGINT/SIGTERM held from `start()` to `release()`, which delivers the first one that came to the handler
+    of before (KeyboardInterrupt, or only counted when one is already being handled). Main thread only."""
+
+    def __init__(self) -> None:
+        self.held: list[int] = []
+        self._before: dict[int, Any] | None = None
+
+    def start(self) -> None:
+        if self._before is None and _main_thread():
+            self._before = {s: signal.signal(s, lambda signum, frame: self.held.append(signum)) for s in SIGNALS}
+
+    def release(self) -> None:
+        if self._before is None:
+            return
+        for s, handler in self._before.items():
+            signal.signal(s, handler)
+        self._before = None
+        if self.held:
+            first, self.held = self.held[0], []
+            signal.raise_signal(first)
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """Hold SIGINT/SIGTERM for the block (files being written stay whole); one that came is raised at its end."""
+    hold = Hold()
+    hold.start()
+    try:
+        yield
+    finally:
+        hold.release()
+
+
+@contextmanager
+def time_limit(seconds: float) -> Iterator[None]:
+    """Raise TimeLimit inside the block after `seconds` of wall time (main thread only; elsewhere no limit)."""
+    if not _main_thread():
+        yield
+        return
+
+    def up(signum: int, frame: object) -> None:
+        raise TimeLimit(f"took longer than {seconds:g} s")
+
+    before = signal.signal(signal.SIGALRM, up)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, before)
