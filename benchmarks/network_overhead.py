@@ -56,12 +56,13 @@ def main() -> None:
     from mavtune.swarm import SwarmConfig, ZenohFleet
 
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    config = SwarmConfig(session="bench", token="bench", settle_s=0.0, result_timeout_s=30.0)
+    key = "benchmark swarm key " + os.urandom(8).hex()
+    config = SwarmConfig(session="bench", key=key, settle_s=0.0, result_timeout_s=30.0)
     fleet = ZenohFleet(endpoint, config)
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=str(REPO), MAVTUNE_SWARM_KEY=key)
     agents = [subprocess.Popen([sys.executable, "-c", "from mavtune.cli import main; main()", "agent",
                                 "--id", f"v{j}", "--connect", endpoint, "--vehicle", args.backend,
-                                "--seed", str(args.seed + j), "--session", "bench", "--token", "bench"],
+                                "--seed", str(args.seed + j), "--session", "bench"],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, start_new_session=True)
               for j in range(args.vehicles)]
     try:
