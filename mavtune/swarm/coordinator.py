@@ -81,6 +81,7 @@ class ZenohFleet:
         self._alive: dict[str, float] = {}  # vehicle → when it was last probed
         self._hello: dict[str, Hello] = {}
         self._late: set[tuple[int, str]] = set()  # (round, vehicle) of late results already kept
+        self._answered: set[tuple[int, str]] = set()  # (round, vehicle) whose result a round took
         self._round: _Round | None = None
         self.link = link if link is not None else open_router(listen, lease_ms=config.lease_ms, tls=config.tls)
         self.link.subscribe(self.keys.frm("*"), self._on_sample)
@@ -309,7 +310,9 @@ class ZenohFleet:
             log.debug("%s: round %d %s", sender, msg.round, msg.state.name)
             return
         if isinstance(msg, Result) and (rnd is None or msg.round != rnd.id):
-            if (msg.round, sender) not in self._late:  # nothing measured is discarded: kept in the events, once
+            if (msg.round, sender) in self._answered:
+                log.debug("%s: round %d answered again (a resend or a replay)", sender, msg.round)
+            elif (msg.round, sender) not in self._late:  # nothing measured is discarded: kept in the events, once
                 self._late.add((msg.round, sender))
                 self._event("late_result", msg.round, sender, f"cost {msg.cost!r} ({msg.status.value}) arrived "
                             "after its round closed", cost=msg.cost, gains=msg.gains)
@@ -338,6 +341,7 @@ class ZenohFleet:
         elif isinstance(msg, Result):
             rnd.acked.add(sender)
             rnd.results[sender] = msg
+            self._answered.add((msg.round, sender))
 
     def _on_hello(self, sender: str, msg: Hello) -> None:
         """An agent answered our probe: it is present, with this nonce for the run."""
