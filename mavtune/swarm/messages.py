@@ -4,8 +4,8 @@ On the wire a message is `HMAC-SHA256(key, body) ‖ body`, the body its JSON. T
 the session, the coordinator's run nonce (`run`, fresh for every coordinator start) and — except a Probe — the
 agent's nonce (`agent`, fresh for every run an agent joins), so a message of an earlier run, or one made for another
 agent, does not verify where it is replayed. `Codec.decode()` refuses (`Rejected`, with the reason) anything too
-large, unauthenticated, malformed or foreign; a Result also has to be self-consistent: a finite cost unless the
-flight failed or was lost, and trace arrays of equal length with finite samples.
+large, unauthenticated, malformed or foreign; a Result also has to be self-consistent: a finite cost ≥ 0 unless the
+flight failed or was lost (then NaN or +inf), and trace arrays of equal length with finite samples.
 """
 
 from __future__ import annotations
@@ -154,6 +154,8 @@ class Result(_Bound):
     def _check(self) -> "Result":
         if self.status is Status.OK and not math.isfinite(self.cost):
             raise ValueError(f"cost {self.cost!r} of a flight reported ok (a non-finite cost is a failed flight)")
+        if self.cost < 0:  # NaN compares False: a failed or lost flight may carry it
+            raise ValueError(f"negative cost {self.cost!r} (a cost sums absolute errors)")
         if not all(math.isfinite(g) for g in self.gains.values()):
             raise ValueError("non-finite gains")
         return self

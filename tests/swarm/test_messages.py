@@ -67,6 +67,7 @@ def _result_json(**change) -> bytes:
     {"trace": {"t_s": [0.0, 0.1], "z_ref_m": [1.0], "z_m": [1.0, 1.1]}},  # unequal lengths
     {"trace": {"t_s": [0.0, "NaN"], "z_ref_m": [1.0, 1.0], "z_m": [1.0, 1.1]}},
     {"cost": "-Infinity"}, {"cost": "NaN"},  # a non-finite cost reported ok
+    {"cost": -1.0}, {"cost": "-Infinity", "status": "failed"},  # a negative cost would win every comparison
     {"gains": {"kp": "NaN", "kd": 0.2}},
 ])
 def test_results_a_report_cannot_draw_are_rejected(change):
