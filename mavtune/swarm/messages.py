@@ -3,7 +3,7 @@
 On the wire a message is `HMAC-SHA256(key, body) ‖ body`, the body its JSON. The key never travels. Every body names
 the session, the coordinator's run nonce (`run`, fresh for every coordinator start) and — except a Probe — the
 agent's nonce (`agent`, fresh for every run an agent joins), so a message of an earlier run, or one made for another
-agent, does not verify where it is replayed. `Codec.decode()` refuses (`Rejected`, with the reason) anything too
+agent, is refused where it is replayed. `Codec.decode()` refuses (`Rejected`, with the reason) anything too
 large, unauthenticated, malformed or foreign; a Result also has to be self-consistent: a finite cost ≥ 0 unless the
 flight failed or was lost (then NaN or +inf), and trace arrays of equal length with finite samples.
 """
