@@ -19,7 +19,8 @@ from typing import Any, Callable, Sequence
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
 from mavtune.swarm.config import SwarmConfig, ensure_key
-from mavtune.swarm.messages import Ack, Assignment, Codec, Finish, Hello, Probe, Rejected, Result, Start, State
+from mavtune.swarm.messages import (Ack, AgentState, Assignment, Codec, Finish, Hello, Probe, Rejected, Result, Start,
+                                    State)
 from mavtune.swarm.ratelog import RateLimitedLog
 from mavtune.swarm.transport import Keys, Link, open_router
 
@@ -151,8 +152,11 @@ class ZenohFleet:
             if rnd.to_start():  # settle: the gain-change transient decays; drop-outs are still noticed
                 self._pump_until(lambda: False, cfg.settle_s)
             if rnd.to_start():
+                # a vehicle that said it is flying has the start: asked again only RESEND_MAX_S later (its result
+                # may have been dropped), not at every resend of the others'
                 self._resend_until(rnd.waiting_result, lambda vid: self._send(Start, vid, round=round_id),
-                                   cfg.result_timeout_s)
+                                   cfg.result_timeout_s,
+                                   due=lambda vid: time.monotonic() - rnd.flying.get(vid, -math.inf) >= RESEND_MAX_S)
                 self._lose(rnd, rnd.waiting_result(), f"no result within {cfg.result_timeout_s:g} s")
             return rnd.flights()
         finally:
@@ -203,14 +207,18 @@ class ZenohFleet:
         while not done() and self._pump(deadline):
             pass
 
-    def _resend_until(self, waiting: Callable[[], list[str]], send: Callable[[str], None], timeout_s: float) -> None:
-        """Send to every vehicle waiting(), and again to those still waiting after RESEND_FIRST_S, then twice as
-        long, ... (at most RESEND_MAX_S apart) until none is waiting or timeout_s has passed."""
+    def _resend_until(self, waiting: Callable[[], list[str]], send: Callable[[str], None], timeout_s: float,
+                      due: Callable[[str], bool] = lambda vid: True) -> None:
+        """Send to every vehicle waiting(), and again to those still waiting (and due) after RESEND_FIRST_S, then
+        twice as long, ... (at most RESEND_MAX_S apart) until none is waiting or timeout_s has passed."""
         deadline = time.monotonic() + timeout_s
         gap = RESEND_FIRST_S
+        first = True
         while True:
             for vid in waiting():
-                send(vid)
+                if first or due(vid):
+                    send(vid)
+            first = False
             self._pump_until(lambda: not waiting(), min(gap, deadline - time.monotonic()))
             if not waiting() or time.monotonic() >= deadline:
                 return
@@ -308,6 +316,8 @@ class ZenohFleet:
         rnd = self._round
         if isinstance(msg, State):
             log.debug("%s: round %d %s", sender, msg.round, msg.state.name)
+            if rnd is not None and msg.round == rnd.id and msg.state is AgentState.FLYING:
+                rnd.flying[sender] = time.monotonic()
             return
         if isinstance(msg, Result) and (rnd is None or msg.round != rnd.id):
             if (msg.round, sender) in self._answered:
@@ -388,6 +398,7 @@ class _Round:
         self.results: dict[str, Result] = {}
         self.lost: dict[str, str] = {}
         self.applied: dict[str, Gains] = {}  # the gains each agent acknowledged (clamped where its envelope says)
+        self.flying: dict[str, float] = {}  # vehicle → when it said it is flying this round
 
     def gains_problem(self, vid: str, msg: Ack | Result) -> str | None:
         """Why an acknowledgement or result does not answer this vehicle's assignment, or None."""

@@ -43,13 +43,13 @@ def test_coordinator_tunes_a_mavlink_vehicle_through_its_agent(tmp_path):
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         try:
             log, _ = coordinator.communicate(timeout=100)
-            assert coordinator.returncode == 0, log[-3000:]
         finally:
             for p in (coordinator, agent):
                 p.kill()
                 p.wait(timeout=10)
         agent_log = agent.stdout.read()
         agent.stdout.close()
+        assert coordinator.returncode == 0, log[-2000:] + "\nagent:\n" + agent_log[-3000:]
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS, agent_log[-3000:]
     result = json.loads((out / "result.json").read_text())
     assert result["status"] == "finished" and set(result["gains"]) == {"kp", "kd"}
