@@ -22,7 +22,9 @@ TUNE = {"initial": {"kd": 0.2}}  # the coordinator's defaults (tune's): eql, eps
 
 def start_swarm(procs, tmp_path, n, *, seed, noise_free, min_flight_s=0.0, result_timeout_s=20.0, out=None,
                 port=None, agents=True, extra=()):
-    """Start the coordinator (and n agents v0..v{n-1} with seeds seed+j); return (endpoint, out dir, twin)."""
+    """Start the coordinator (and n agents v0..v{n-1} with seeds seed+j); return (endpoint, out dir, twin).
+    The coordinator waits up to 120 s for them: a simulated agent joins once its simulator is compiled, which
+    takes a minute on a loaded machine when the numba cache is cold."""
     port = port or free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     out = out or tmp_path / "run"
@@ -32,7 +34,7 @@ def start_swarm(procs, tmp_path, n, *, seed, noise_free, min_flight_s=0.0, resul
     args_of, twin = backend(n, seed, noise_free)
     procs.start("coordinator", ["coordinator", "--listen", endpoint, "--vehicles", str(n), "--out", str(out),
                                 "--settle-s", "0", "--result-timeout-s", str(result_timeout_s),
-                                "--ack-timeout-s", "5", "--presence-timeout-s", "60", *SESSION, "--key-file", str(key),
+                                "--ack-timeout-s", "5", "--presence-timeout-s", "120", *SESSION, "--key-file", str(key),
                                 *extra])
     if agents:
         for j in range(n):
