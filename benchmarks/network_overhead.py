@@ -56,12 +56,13 @@ def main() -> None:
     from mavtune.swarm import SwarmConfig, ZenohFleet
 
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    config = SwarmConfig(session="bench", token="bench", settle_s=0.0, result_timeout_s=30.0)
+    key = "benchmark swarm key " + os.urandom(8).hex()
+    config = SwarmConfig(session="bench", key=key, settle_s=0.0, result_timeout_s=30.0)
     fleet = ZenohFleet(endpoint, config)
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=str(REPO), MAVTUNE_SWARM_KEY=key)
     agents = [subprocess.Popen([sys.executable, "-c", "from mavtune.cli import main; main()", "agent",
                                 "--id", f"v{j}", "--connect", endpoint, "--vehicle", args.backend,
-                                "--seed", str(args.seed + j), "--session", "bench", "--token", "bench"],
+                                "--seed", str(args.seed + j), "--session", "bench"],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, start_new_session=True)
               for j in range(args.vehicles)]
     try:
@@ -72,6 +73,7 @@ def main() -> None:
         fleet.fly(rounds[0], 10_000)  # warm up (first flight compiles the simulator in each agent)
         local.fly(rounds[0], 10_000)
         net, inproc = [], []
+        cpu0 = time.process_time()
         for k, assignments in enumerate(rounds):
             t0 = time.perf_counter()
             flights = fleet.fly(assignments, k)
@@ -80,11 +82,16 @@ def main() -> None:
             twins = local.fly(assignments, k)
             inproc.append(time.perf_counter() - t0)
             assert [f.cost for f in flights] == [f.cost for f in twins], f"round {k}: network and in-process differ"
+        cpu_s = time.process_time() - cpu0
         diff = [a - b for a, b in zip(net, inproc)]
-        print(f"{args.vehicles} vehicles, {args.rounds} rounds, backend {args.backend}, settle 0 s")
-        print(f"  in-process : {_ms(inproc)}")
-        print(f"  zenoh      : {_ms(net)}")
-        print(f"  overhead   : {_ms(diff)}")
+        lines = [f"{args.vehicles} vehicles, {args.rounds} rounds, backend {args.backend}, settle 0 s, "
+                 f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores",
+                 f"  in-process : {_ms(inproc)}", f"  zenoh      : {_ms(net)}", f"  overhead   : {_ms(diff)}",
+                 f"  coordinator CPU {cpu_s / args.rounds * 1e3:.2f} ms a round (both paths, this process)"]
+        print("\n".join(lines))
+        out = REPO / "benchmarks" / "results" / f"network_overhead_{args.backend}.txt"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text("\n".join(lines) + "\n")
     finally:
         fleet.close()
         for p in agents:

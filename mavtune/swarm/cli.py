@@ -44,7 +44,8 @@ def agent_command(
     mavlink: Optional[str] = typer.Option(None, "--mavlink", help="mavlink: the vehicle's URL, e.g. udp:127.0.0.1:14540."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="Config file (TOML): [swarm] table (or top level), [mavlink] for mavlink."),
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
-    token: Optional[str] = typer.Option(None, "--token", help="Shared token (overrides the config)."),
+    key_file: Optional[Path] = typer.Option(None, "--key-file", help="The swarm key (the coordinator's swarm.key); "
+                                            "or key_file in the config, or $MAVTUNE_SWARM_KEY."),
     min_flight_s: float = typer.Option(0.0, "--min-flight-s", help="Make each flight last at least this wall time."),
     state_dir: Optional[Path] = typer.Option(None, "--state-dir", help="mavlink: where the original gains are kept "
                                              "until restored [$XDG_STATE_HOME/mavtune/agent-ID]."),
@@ -56,7 +57,7 @@ def agent_command(
     from mavtune.swarm.vehicles import make_vehicle
 
     _logging(verbose)
-    cfg = load_swarm_config(config, session=session, token=token, connect=connect)
+    cfg = load_swarm_config(config, session=session, key_file=key_file, connect=connect)
     if cfg.connect is None:
         raise MavtuneError("give the coordinator's endpoint: --connect tcp/HOST:PORT (or connect = ... in --config)")
     backend = make_vehicle(vehicle, seed=seed, scenario=scenario, mavlink=mavlink, noise=toy_noise,
@@ -87,7 +88,8 @@ def coordinator_command(
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
     adaptive: Optional[bool] = AdaptiveOpt,
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
-    token: Optional[str] = typer.Option(None, "--token", help="Shared token (overrides the config)."),
+    key_file: Optional[Path] = typer.Option(None, "--key-file", help="The swarm key [made in OUT/swarm.key if none "
+                                            "is configured, nor in $MAVTUNE_SWARM_KEY]."),
     settle_s: Optional[float] = typer.Option(None, "--settle-s", help="Wait between acknowledgements and start."),
     result_timeout_s: Optional[float] = typer.Option(None, "--result-timeout-s", help="Wait for results."),
     ack_timeout_s: Optional[float] = typer.Option(None, "--ack-timeout-s", help="Wait for acknowledgements."),
@@ -103,7 +105,8 @@ def coordinator_command(
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
                             base=saved_config(out) if config is None else None, fleet__kind="zenoh",
                             tuning__adaptive=adaptive,
-                            swarm__listen=listen, swarm__session=session, swarm__token=token,
+                            swarm__listen=listen, swarm__session=session,
+                            swarm__key_file=None if key_file is None else str(key_file),
                             swarm__settle_s=settle_s, swarm__result_timeout_s=result_timeout_s,
                             swarm__ack_timeout_s=ack_timeout_s, swarm__presence_timeout_s=presence_timeout_s)
     run(cfg, out, quiet=True)

@@ -1,21 +1,37 @@
-"""Settings of a swarm session (shared by the coordinator and the agents): session id, token, timing, envelope, TLS.
+"""Settings of a swarm session (shared by the coordinator and the agents): session id, key, timing, envelope, TLS.
 
-Read from a TOML file (the `[swarm]` table, or the top level) and/or overridden from the command line.
+Read from a TOML file (the `[swarm]` table, or the top level) and/or overridden from the command line. The shared
+key authenticates every message (messages.Codec); there is no default: it comes from `key`, `key_file` or the
+MAVTUNE_SWARM_KEY environment variable, and a coordinator without one makes one (`ensure_key`).
 """
 
 from __future__ import annotations
 
+import logging
+import os
+import secrets
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mavtune.config import read_toml, validated
+from mavtune.errors import MavtuneError
 from mavtune.swarm.messages import SESSION_PATTERN, VEHICLE_PATTERN
+
+log = logging.getLogger(__name__)
+
+KEY_ENV = "MAVTUNE_SWARM_KEY"
+"""Environment variable holding the swarm key (instead of `key` or `key_file`)."""
+
+KEY_FILE = "swarm.key"
+"""Where a coordinator that was given no key writes the one it made, in its run folder."""
+
+MIN_KEY_CHARS = 16
 
 
 class SwarmConfig(BaseModel):
-    """One swarm session's settings; the coordinator and every agent must agree on `session` and `token`."""
+    """One swarm session's settings; the coordinator and every agent must agree on `session` and the key."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -24,7 +40,10 @@ class SwarmConfig(BaseModel):
     connect: str | None = None
     """Agent side: the coordinator's endpoint (e.g. tcp/10.0.0.1:7447)."""
     session: Annotated[str, Field(pattern=SESSION_PATTERN)] = "mavtune"
-    token: Annotated[str, Field(min_length=1, max_length=256)] = "mavtune"
+    key: Annotated[str, Field(min_length=MIN_KEY_CHARS, max_length=1024)] | None = None
+    """The shared secret that authenticates every message (never sent); prefer key_file or MAVTUNE_SWARM_KEY."""
+    key_file: Path | None = None
+    """A file holding the shared secret (its first line)."""
     lease_ms: Annotated[int, Field(ge=500, le=60_000)] = 2000
     """Zenoh link lease: a frozen vehicle is noticed after about 3/4 of it."""
     connect_timeout_s: float = -1.0
@@ -48,6 +67,14 @@ class SwarmConfig(BaseModel):
     tls: dict[str, Any] = {}
     """Passed through to Zenoh's `transport/link/tls` (root_ca_certificate, listen_private_key, ...)."""
 
+    @model_validator(mode="before")
+    @classmethod
+    def _no_token(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "token" in data:
+            raise ValueError("'token' is gone: messages are now authenticated with a key that never travels; "
+                             f"set key_file (or key, at least {MIN_KEY_CHARS} characters, or ${KEY_ENV})")
+        return data
+
     @model_validator(mode="after")
     def _check_envelope(self) -> "SwarmConfig":
         for name, (lo, hi) in self.envelope.items():
@@ -67,3 +94,59 @@ def load_swarm_config(path: str | Path | None = None, **overrides: Any) -> Swarm
             data = {k: v for k, v in raw.items() if k in SwarmConfig.model_fields or not isinstance(v, dict)}
     data.update({k: v for k, v in overrides.items() if v is not None})
     return validated(SwarmConfig, data, "swarm")
+
+
+def read_key(config: SwarmConfig) -> str | None:
+    """The configured key: `key`, else the first line of `key_file`, else $MAVTUNE_SWARM_KEY; None if none is set."""
+    if config.key is not None:
+        return config.key
+    if config.key_file is not None:
+        try:
+            text = config.key_file.read_text().strip()
+        except OSError as exc:
+            raise MavtuneError(f"swarm key file {config.key_file}: {exc.strerror or exc}") from None
+        return _checked(text.splitlines()[0] if text else "", f"key file {config.key_file}")
+    if os.environ.get(KEY_ENV):
+        return _checked(os.environ[KEY_ENV].strip(), f"${KEY_ENV}")
+    return None
+
+
+def require_key(config: SwarmConfig) -> str:
+    """An agent's key; MavtuneError saying where to put it when none is configured."""
+    key = read_key(config)
+    if key is None:
+        raise MavtuneError(f"no swarm key: give --key-file PATH (the coordinator's {KEY_FILE}), set ${KEY_ENV}, "
+                           "or key_file in the [swarm] table")
+    return key
+
+
+def ensure_key(config: SwarmConfig, out_dir: Path | None) -> str:
+    """A coordinator's key: the configured one, else the one in out_dir/swarm.key (a resumed run), else a new
+    random key written there (owner-only), with a log line telling how agents get it."""
+    key = read_key(config)
+    if key is not None:
+        return key
+    if out_dir is None:
+        raise MavtuneError(f"no swarm key: give key_file in [swarm] or set ${KEY_ENV}")
+    path = Path(out_dir) / KEY_FILE
+    if path.exists():
+        key = _checked(path.read_text().strip(), f"key file {path}")
+        log.warning("swarm key: %s (from the earlier run in this folder); agents: --key-file %s", path, path)
+        return key
+    key = secrets.token_hex(32)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "w") as f:
+            f.write(key + "\n")
+    except OSError as exc:
+        raise MavtuneError(f"cannot write the swarm key to {path}: {exc.strerror or exc}") from None
+    log.warning("no swarm key configured: made one in %s; copy it to every vehicle and start the agents with "
+                "--key-file %s (or set $%s)", path, KEY_FILE, KEY_ENV)
+    return key
+
+
+def _checked(key: str, where: str) -> str:
+    if len(key) < MIN_KEY_CHARS:
+        raise MavtuneError(f"swarm key from {where} is {len(key)} characters; it needs at least {MIN_KEY_CHARS}")
+    return key

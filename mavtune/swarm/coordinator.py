@@ -11,17 +11,35 @@ import logging
 import math
 import queue
 import re
+import secrets
 import time
 from enum import Enum
 from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
-from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.messages import Ack, Assignment, Finish, Hello, Probe, Result, Start, State, decode, encode
+from mavtune.swarm.config import SwarmConfig, ensure_key
+from mavtune.swarm.messages import (Ack, AgentState, Assignment, Codec, Finish, Hello, Probe, Rejected, Result, Start,
+                                    State)
+from mavtune.swarm.ratelog import RateLimitedLog
 from mavtune.swarm.transport import Keys, Link, open_router
 
 log = logging.getLogger(__name__)
+
+INBOX_SIZE = 4096
+"""Authenticated messages and liveliness changes waiting for the coordinator's thread; beyond it they are dropped."""
+
+RESEND_FIRST_S = 0.25
+"""An unanswered assignment, start or finish is sent again after this, then after twice as long, ..."""
+
+RESEND_MAX_S = 4.0
+"""... at most this far apart (puts drop rather than wait on a congested link, so a message may be lost)."""
+
+MAX_UNINTRODUCED = 256
+"""Liveliness tokens without a hello that the coordinator keeps probing; more are ignored (a token flood)."""
+
+PROBE_EVERY_S = 1.0
+"""A present token without a hello is probed again this often."""
 
 
 class CoordinatorState(str, Enum):
@@ -38,29 +56,39 @@ def vehicle_order(vehicle_id: str) -> list[Any]:
 
 
 class ZenohFleet:
-    """Fleet over Zenoh: assignment j of a round goes to the j-th present vehicle sorted by id."""
+    """Fleet over Zenoh: assignment j of a round goes to the j-th present vehicle sorted by id.
 
-    def __init__(self, listen: str, config: SwarmConfig, link: Link | None = None, expected: int = 1):
+    Every coordinator start is a new run with its own nonce: agents answer only messages of the run they were
+    probed by, and this fleet takes only messages of its run, from the agent instance that said hello, answering
+    what it asked — the first valid result of a round wins, its gains must be those the agent acknowledged.
+    """
+
+    def __init__(self, listen: str, config: SwarmConfig, link: Link | None = None, expected: int = 1,
+                 key: str | None = None):
         self.config = config
         self.expected = expected  # vehicles to wait for before round 1 (the paper's semaphore)
         self.tuned: Gains | None = None  # set when the run finished: agents configured to keep gains keep these
+        self.codec = Codec(config.session, key if key is not None else ensure_key(config, None))
+        self.run = secrets.token_hex(16)
         self._quorum = False
         self._finishing: set[str] = set()  # vehicles asked to release that have not answered yet
         self.keys = Keys(config.session)
         self.listen = listen
         self.state = CoordinatorState.IDLE
         self.events: list[dict[str, Any]] = []
-        self.dropped = 0
+        self._drops = RateLimitedLog(log)
         self._t0 = time.monotonic()
-        self._inbox: queue.Queue[tuple[str, str, Any]] = queue.Queue()
-        self._alive: set[str] = set()
+        self._inbox: queue.Queue[tuple[str, str, Any]] = queue.Queue(maxsize=INBOX_SIZE)
+        self._alive: dict[str, float] = {}  # vehicle → when it was last probed
         self._hello: dict[str, Hello] = {}
+        self._late: set[tuple[int, str]] = set()  # (round, vehicle) of late results already kept
+        self._answered: set[tuple[int, str]] = set()  # (round, vehicle) whose result a round took
         self._round: _Round | None = None
         self.link = link if link is not None else open_router(listen, lease_ms=config.lease_ms, tls=config.tls)
-        self.link.subscribe(self.keys.frm("*"), lambda k, p: self._inbox.put(("msg", k, p)))
-        self.link.watch_liveliness(self.keys.alive("*"), lambda k, a: self._inbox.put(("live", k, a)))
-        self.link.declare_token(self.keys.coordinator)  # agents release their vehicles when it goes
-        log.info("coordinator listening on %s, session %s", listen, config.session)
+        self.link.subscribe(self.keys.frm("*"), self._on_sample)
+        self.link.watch_liveliness(self.keys.alive("*"), lambda k, a: self._offer(("live", k, a)))
+        self.link.declare_token(self.keys.coordinator(self.run))  # agents release their vehicles when it goes
+        log.info("coordinator listening on %s, session %s, run %s", listen, config.session, self.run[:8])
 
     # --- Fleet protocol ----------------------------------------------------------------------------------------
     @property
@@ -80,9 +108,14 @@ class ZenohFleet:
             self.wait_for(1)
         return len(self.present)
 
+    @property
+    def dropped(self) -> int:
+        """Messages dropped so far (unauthenticated, malformed, foreign, replayed, unexpected, or over the inbox)."""
+        return self._drops.total
+
     def report(self) -> dict[str, Any]:
         """What result.json keeps of this fleet: the session, every drop-out event, the dropped messages."""
-        return {"session": self.config.session, "listen": self.listen, "events": self.events,
+        return {"session": self.config.session, "listen": self.listen, "swarm_run": self.run, "events": self.events,
                 "dropped_messages": self.dropped}
 
     def wait_for(self, n: int, timeout_s: float | None = None) -> list[str]:
@@ -97,7 +130,8 @@ class ZenohFleet:
             if len(present) != announced:
                 log.info("waiting for vehicles: %d of %d present %s", len(present), n, present)
                 announced = len(present)
-            if not self._pump(deadline):
+            self._probe_silent()
+            if not self._pump(min(deadline, time.monotonic() + PROBE_EVERY_S)) and time.monotonic() >= deadline:
                 raise MavtuneError(f"only {len(present)} of {n} vehicles joined session {self.config.session!r} "
                                    f"on {self.listen} within {timeout_s:g} s: {present}")
 
@@ -112,18 +146,17 @@ class ZenohFleet:
             self._event("unassigned", round_id, None, f"no vehicle present for assignment {j}")
         cfg = self.config
         try:
-            for vid, gains in zip(crew, rnd.assignments):
-                self._send(self.keys.to(vid), Assignment(session=cfg.session, token=cfg.token, round=round_id,
-                                                         vehicle=vid, gains=gains))
-            self._pump_until(lambda: not rnd.waiting_ack(), cfg.ack_timeout_s)
+            self._resend_until(rnd.waiting_ack, lambda vid: self._send(
+                Assignment, vid, round=round_id, gains=rnd.assignments[crew.index(vid)]), cfg.ack_timeout_s)
             self._lose(rnd, rnd.waiting_ack(), f"no acknowledgement within {cfg.ack_timeout_s:g} s")
             if rnd.to_start():  # settle: the gain-change transient decays; drop-outs are still noticed
                 self._pump_until(lambda: False, cfg.settle_s)
-            flyers = rnd.to_start()
-            if flyers:
-                self._send(self.keys.start, Start(session=cfg.session, token=cfg.token, round=round_id,
-                                                  vehicles=flyers))
-                self._pump_until(lambda: not rnd.waiting_result(), cfg.result_timeout_s)
+            if rnd.to_start():
+                # a vehicle that said it is flying has the start: asked again only RESEND_MAX_S later (its result
+                # may have been dropped), not at every resend of the others'
+                self._resend_until(rnd.waiting_result, lambda vid: self._send(Start, vid, round=round_id),
+                                   cfg.result_timeout_s,
+                                   due=lambda vid: time.monotonic() - rnd.flying.get(vid, -math.inf) >= RESEND_MAX_S)
                 self._lose(rnd, rnd.waiting_result(), f"no result within {cfg.result_timeout_s:g} s")
             return rnd.flights()
         finally:
@@ -136,19 +169,29 @@ class ZenohFleet:
         self.state = CoordinatorState.IDLE
         try:
             self._finishing = set(self.present)
-            if self._finishing:
-                self._send(self.keys.start, Finish(session=self.config.session, token=self.config.token,
-                                                   gains=self.tuned))
-                deadline = time.monotonic() + self.config.ack_timeout_s
-                while self._finishing and self._pump(deadline):
-                    pass
-                for vid in sorted(self._finishing):
-                    self._event("unreleased", None, vid, "no confirmation that the vehicle was released; its agent "
-                                "releases it when it notices the coordinator is gone")
+            self._resend_until(lambda: sorted(self._finishing),
+                               lambda vid: self._send(Finish, vid, gains=self.tuned), self.config.ack_timeout_s)
+            for vid in sorted(self._finishing):
+                self._event("unreleased", None, vid, "no confirmation that the vehicle was released; its agent "
+                            "releases it when it notices the coordinator is gone")
         finally:
             self.link.close()
 
     # --- event handling ---------------------------------------------------------------------------------------
+    def _on_sample(self, key: str, payload: bytes) -> None:
+        """Zenoh's callback: queue an authenticated payload; anything else is dropped here, before any parsing."""
+        if not self.codec.authentic(payload):
+            self._drops("unauthenticated", "dropped a message on %s: not authenticated by the session key", key)
+            return
+        self._offer(("msg", key, payload))
+
+    def _offer(self, item: tuple[str, str, Any]) -> None:
+        """Queue one event without ever blocking Zenoh's thread."""
+        try:
+            self._inbox.put_nowait(item)
+        except queue.Full:
+            self._drops("inbox_full", "dropped an event on %s: %d events are already waiting", item[1], INBOX_SIZE)
+
     def _drain(self) -> None:
         """Handle every event waiting now, without blocking."""
         while True:
@@ -163,6 +206,23 @@ class ZenohFleet:
         deadline = time.monotonic() + timeout_s
         while not done() and self._pump(deadline):
             pass
+
+    def _resend_until(self, waiting: Callable[[], list[str]], send: Callable[[str], None], timeout_s: float,
+                      due: Callable[[str], bool] = lambda vid: True) -> None:
+        """Send to every vehicle waiting(), and again to those still waiting (and due) after RESEND_FIRST_S, then
+        twice as long, ... (at most RESEND_MAX_S apart) until none is waiting or timeout_s has passed."""
+        deadline = time.monotonic() + timeout_s
+        gap = RESEND_FIRST_S
+        first = True
+        while True:
+            for vid in waiting():
+                if first or due(vid):
+                    send(vid)
+            first = False
+            self._pump_until(lambda: not waiting(), min(gap, deadline - time.monotonic()))
+            if not waiting() or time.monotonic() >= deadline:
+                return
+            gap = min(2 * gap, RESEND_MAX_S)
 
     def _lose(self, rnd: "_Round", vehicles: list[str], why: str) -> None:
         """Count these vehicles' flights of the round as LOST, and say so in the events."""
@@ -193,21 +253,32 @@ class ZenohFleet:
         """True when the configured vehicle list (if any) names this vehicle."""
         return self.config.allowed_vehicles is None or vid in self.config.allowed_vehicles
 
+    def _probe(self, vid: str) -> None:
+        self._alive[vid] = time.monotonic()
+        self._send(Probe, vid)
+
+    def _probe_silent(self) -> None:
+        """Probe again the present tokens that have not said hello (a probe or its answer may have been dropped)."""
+        now = time.monotonic()
+        for vid, last in list(self._alive.items()):
+            if vid not in self._hello and now - last >= PROBE_EVERY_S:
+                self._probe(vid)
+
     def _on_liveliness(self, vid: str, alive: bool) -> None:
         """A vehicle's token appeared (probe it for a hello) or went away (its open flight is LOST)."""
         if not self._allowed(vid):
-            log.warning("ignored vehicle %r: not in the configured vehicle list", vid)
+            self._drops("not_allowed", "ignored vehicle %r: not in the configured vehicle list", vid)
             return
         if alive:
             if vid not in self._alive:
-                self._alive.add(vid)
-                if vid in self._hello:
-                    self._event("joined", None if self._round is None else self._round.id, vid,
-                                f"backend {self._hello[vid].backend or '?'}")
-                self._send(self.keys.to(vid), Probe(session=self.config.session, token=self.config.token, vehicle=vid))
+                if sum(v not in self._hello for v in self._alive) >= MAX_UNINTRODUCED:
+                    self._drops("token_flood", "ignored the liveliness token of %r: %d tokens have not said hello",
+                                vid, MAX_UNINTRODUCED)
+                    return
+                self._probe(vid)
             return
         was_present = vid in self._alive and vid in self._hello
-        self._alive.discard(vid)
+        self._alive.pop(vid, None)
         self._hello.pop(vid, None)
         if was_present:
             self._event("left", None if self._round is None else self._round.id, vid, "liveliness token deleted")
@@ -216,59 +287,84 @@ class ZenohFleet:
 
     def _on_message(self, key: str, payload: bytes) -> None:
         """Validate one agent message and book it into the round; anything unexpected is dropped and counted."""
-        msg = decode(payload, session=self.config.session, token=self.config.token, where=f"coordinator <- {key}")
         sender = Keys.last_chunk(key)
-        if msg is None:
-            self.dropped += 1
+        try:
+            msg = self.codec.decode(payload)
+        except Rejected as exc:
+            self._drops("invalid", "dropped a message on %s: %s", key, exc)
             return
-        if getattr(msg, "vehicle", None) != sender:
-            self.dropped += 1
-            log.warning("dropped %s on %s: it claims to be from %r", msg.kind, key, getattr(msg, "vehicle", None))
+        if msg.vehicle != sender:
+            self._drops("impostor", "dropped %s on %s: it claims to be from %r", msg.kind, key, msg.vehicle)
+            return
+        if msg.run != self.run:
+            self._drops("stale", "dropped %s from %s: of run %s, not this run (a replay?)", msg.kind, sender,
+                        msg.run[:8])
             return
         if isinstance(msg, Hello):
-            if not self._allowed(sender):
-                self.dropped += 1
-                log.warning("dropped hello from %r: not in the configured vehicle list", sender)
-                return
-            if sender not in self._alive:
-                log.info("hello from %s before its liveliness token; waiting for the token", sender)
-            new = sender not in self._hello
-            self._hello[sender] = msg
-            if new and sender in self._alive:
-                self._event("joined", None if self._round is None else self._round.id, sender,
-                            f"backend {msg.backend or '?'}")
+            self._on_hello(sender, msg)
             return
-        if isinstance(msg, Ack) and msg.round == -1 and sender in self._finishing:
-            self._finishing.discard(sender)
-            self._event("released", None, sender, msg.reason)
+        hello = self._hello.get(sender)
+        if not isinstance(msg, (Ack, Result, State)) or hello is None or msg.agent != hello.agent:
+            self._drops("foreign", "dropped %s from %s: not from the agent that said hello in this run", msg.kind,
+                        sender)
+            return
+        if isinstance(msg, Ack) and msg.round == -1:
+            if sender in self._finishing:
+                self._finishing.discard(sender)
+                self._event("released", None, sender, msg.reason)
             return
         rnd = self._round
         if isinstance(msg, State):
             log.debug("%s: round %d %s", sender, msg.round, msg.state.name)
+            if rnd is not None and msg.round == rnd.id and msg.state is AgentState.FLYING:
+                rnd.flying[sender] = time.monotonic()
             return
         if isinstance(msg, Result) and (rnd is None or msg.round != rnd.id):
-            # nothing measured is discarded: a late result is kept in the events
-            self._event("late_result", msg.round, sender, f"cost {msg.cost!r} ({msg.status.value}) arrived after "
-                        "its round closed", cost=msg.cost, gains=msg.gains)
+            if (msg.round, sender) in self._answered:
+                log.debug("%s: round %d answered again (a resend or a replay)", sender, msg.round)
+            elif (msg.round, sender) not in self._late:  # nothing measured is discarded: kept in the events, once
+                self._late.add((msg.round, sender))
+                self._event("late_result", msg.round, sender, f"cost {msg.cost!r} ({msg.status.value}) arrived "
+                            "after its round closed", cost=msg.cost, gains=msg.gains)
             return
         if rnd is None or msg.round != rnd.id or sender not in rnd.crew:
-            self.dropped += 1
-            log.warning("dropped %s from %s for round %d: not expected now", msg.kind, sender, msg.round)
+            self._drops("unexpected", "dropped %s from %s for round %d: not expected now", msg.kind, sender,
+                        msg.round)
             return
-        if sender in rnd.lost:
-            if isinstance(msg, Result):
+        if not rnd.open(sender):
+            if isinstance(msg, Result) and sender in rnd.lost and (msg.round, sender) not in self._late:
+                self._late.add((msg.round, sender))
                 self._event("late_result", msg.round, sender, "result from a vehicle already counted lost",
                             cost=msg.cost, gains=msg.gains)
+            return  # the first valid outcome of a round stands
+        problem = rnd.gains_problem(sender, msg)
+        if problem:
+            self._drops("mismatch", "dropped %s from %s for round %d: %s", msg.kind, sender, msg.round, problem)
             return
         if isinstance(msg, Ack):
             if not msg.accepted:
                 rnd.refused[sender] = msg.reason
                 self._event("refused", rnd.id, sender, msg.reason)
             else:
+                rnd.applied[sender] = dict(msg.applied or {})
                 rnd.acked.add(sender)
         elif isinstance(msg, Result):
             rnd.acked.add(sender)
             rnd.results[sender] = msg
+            self._answered.add((msg.round, sender))
+
+    def _on_hello(self, sender: str, msg: Hello) -> None:
+        """An agent answered our probe: it is present, with this nonce for the run."""
+        if not self._allowed(sender):
+            self._drops("not_allowed", "dropped hello from %r: not in the configured vehicle list", sender)
+            return
+        if sender not in self._alive:
+            log.info("hello from %s before its liveliness token; waiting for the token", sender)
+        new = sender not in self._hello
+        self._hello[sender] = msg
+        if new and sender in self._alive:
+            self._event("joined", None if self._round is None else self._round.id, sender,
+                        f"backend {msg.backend or '?'}")
 
     def _event(self, event: str, round_id: int | None, vehicle: str | None, detail: str, **extra: Any) -> None:
         """Keep one event (for result.json) and log it."""
@@ -279,9 +375,15 @@ class ZenohFleet:
             else logging.INFO
         log.log(level, "round %s: %s %s (%s)", round_id, vehicle or "", event, detail)
 
-    def _send(self, key: str, msg: Any) -> None:
-        """Publish one message."""
-        self.link.put(key, encode(msg))
+    def _send(self, kind: type, vid: str, **fields: Any) -> None:
+        """Publish one message of this run to one agent (bound to the nonce it said hello with)."""
+        if kind is not Probe:
+            hello = self._hello.get(vid)
+            if hello is None:
+                return
+            fields["agent"] = hello.agent
+        msg = kind(session=self.config.session, run=self.run, vehicle=vid, **fields)
+        self.link.put(self.keys.to(vid), self.codec.encode(msg))
 
 
 class _Round:
@@ -295,6 +397,21 @@ class _Round:
         self.refused: dict[str, str] = {}
         self.results: dict[str, Result] = {}
         self.lost: dict[str, str] = {}
+        self.applied: dict[str, Gains] = {}  # the gains each agent acknowledged (clamped where its envelope says)
+        self.flying: dict[str, float] = {}  # vehicle → when it said it is flying this round
+
+    def gains_problem(self, vid: str, msg: Ack | Result) -> str | None:
+        """Why an acknowledgement or result does not answer this vehicle's assignment, or None."""
+        assigned = self.assignments[self.crew.index(vid)]
+        gains = msg.applied if isinstance(msg, Ack) else msg.gains
+        if isinstance(msg, Ack) and not msg.accepted:
+            return None
+        if gains is None or set(gains) != set(assigned):
+            return f"gains {sorted(gains or {})} are not the assignment's {sorted(assigned)}"
+        expected = self.applied.get(vid, assigned) if isinstance(msg, Result) else None
+        if expected is not None and gains != expected:
+            return f"gains {gains} are not the {expected} acknowledged"
+        return None
 
     def open(self, vid: str) -> bool:
         """True while the vehicle's outcome for this round is not known."""
@@ -342,4 +459,5 @@ def fleet_from_config(config: Any, out_dir: Any = None) -> ZenohFleet:
     if flight is not None:
         swarm.setdefault("settle_s", flight.settle_s)
     cfg = load_swarm_config(None, **swarm)
-    return ZenohFleet(cfg.listen, cfg, expected=int(config.tuning.vehicles))
+    key = ensure_key(cfg, out_dir)
+    return ZenohFleet(cfg.listen, cfg, expected=int(config.tuning.vehicles), key=key)

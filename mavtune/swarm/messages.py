@@ -1,34 +1,53 @@
 """Wire messages between the coordinator and the vehicle agents: versioned, validated (pydantic), authenticated.
 
-Every message carries the protocol version, the session id, the shared token and the round id. `decode()` turns
-raw bytes into a message or None (with a log line) — nothing malformed, foreign or unauthenticated gets through.
+On the wire a message is `HMAC-SHA256(key, body) ‖ body`, the body its JSON. The key never travels. Every body names
+the session, the coordinator's run nonce (`run`, fresh for every coordinator start) and — except a Probe — the
+agent's nonce (`agent`, fresh for every run an agent joins), so a message of an earlier run, or one made for another
+agent, is refused where it is replayed. `Codec.decode()` refuses (`Rejected`, with the reason) anything too
+large, unauthenticated, malformed or foreign; a Result also has to be self-consistent: a finite cost ≥ 0 unless the
+flight failed or was lost (then NaN or +inf), and trace arrays of equal length with finite samples.
 """
 
 from __future__ import annotations
 
+import hashlib
 import hmac
-import logging
 import math
 from enum import Enum
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
 from mavtune.fleet import Flight, Status, Trace
 
-log = logging.getLogger(__name__)
-
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 """Bumped on any incompatible change of the messages below; other versions are dropped."""
 
 MAX_MESSAGE_BYTES = 1_000_000
-"""Payloads larger than this are dropped before parsing (a decimated trace is a few kB)."""
+"""Payloads larger than this are dropped before anything else (a decimated trace is a few kB)."""
+
+MAC_BYTES = hashlib.sha256().digest_size
+"""The HMAC-SHA256 tag that prefixes every payload."""
+
+MAX_TRACE_POINTS = 10_000
+"""A trace on the wire has at most this many samples (agents send `trace_points`, 200 by default)."""
 
 SESSION_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
 """A session id is also a Zenoh key chunk, so it holds no '/', '*', '$', '?' or '#'."""
 
 VEHICLE_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
 """A vehicle id is a Zenoh key chunk too."""
+
+NONCE_PATTERN = r"^[0-9a-f]{32}$"
+"""Run and agent nonces: 16 random bytes in hex (secrets.token_hex(16))."""
+
+Nonce = Annotated[str, Field(pattern=NONCE_PATTERN)]
+VehicleId = Annotated[str, Field(pattern=VEHICLE_PATTERN)]
+GainName = Annotated[str, Field(min_length=1, max_length=64)]
+
+
+class Rejected(ValueError):
+    """A payload that is not a valid message of this session; the text says why (one line)."""
 
 
 class AgentState(str, Enum):
@@ -39,86 +58,107 @@ class AgentState(str, Enum):
 
 
 class _Message(BaseModel):
-    """Fields every message carries: version, session, token, round."""
+    """Fields every message carries: version, session, the coordinator's run nonce, the round, the vehicle."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")
 
-    v: Literal[1] = PROTOCOL_VERSION
+    v: Literal[2] = PROTOCOL_VERSION
     session: Annotated[str, Field(pattern=SESSION_PATTERN)]
-    token: Annotated[str, Field(max_length=256)]
+    run: Nonce
     round: Annotated[int, Field(ge=-1)] = -1
+    vehicle: VehicleId
 
 
-class Hello(_Message):
-    """Agent → coordinator: 'I am vehicle X, this is my backend and my gain envelope' (on start and on Probe)."""
+class _Bound(_Message):
+    """A message bound to one agent's nonce: made for (or by) that agent in this run, not replayable elsewhere."""
 
-    kind: Literal["hello"] = "hello"
-    vehicle: Annotated[str, Field(pattern=VEHICLE_PATTERN)]
-    backend: str = ""
-    state: AgentState = AgentState.IDLE
-    envelope: dict[str, tuple[float, float]] = {}
+    agent: Nonce
 
 
 class Probe(_Message):
-    """Coordinator → agent: 'introduce yourself' (sent when a liveliness token appears)."""
+    """Coordinator → agent: 'introduce yourself' (sent when a liveliness token appears; no secret in it)."""
 
     kind: Literal["probe"] = "probe"
-    vehicle: Annotated[str, Field(pattern=VEHICLE_PATTERN)]
 
 
-class Assignment(_Message):
+class Hello(_Bound):
+    """Agent → coordinator, answering a Probe of run `run`: 'I am vehicle X, my nonce for this run is `agent`'."""
+
+    kind: Literal["hello"] = "hello"
+    backend: Annotated[str, Field(max_length=64)] = ""
+    state: AgentState = AgentState.IDLE
+    envelope: dict[GainName, tuple[float, float]] = {}
+
+
+class Assignment(_Bound):
     """Coordinator → agent: the gains to apply and fly in round `round`."""
 
     kind: Literal["assignment"] = "assignment"
-    vehicle: Annotated[str, Field(pattern=VEHICLE_PATTERN)]
-    gains: dict[str, float]
+    gains: dict[GainName, float]
 
 
-class Ack(_Message):
-    """Agent → coordinator: the assignment of `round` was applied (accepted) or refused (outside the envelope)."""
+class Ack(_Bound):
+    """Agent → coordinator: the assignment of `round` was applied (the gains `applied`) or refused; round −1
+    confirms a Finish."""
 
     kind: Literal["ack"] = "ack"
-    vehicle: Annotated[str, Field(pattern=VEHICLE_PATTERN)]
     accepted: bool
-    reason: str = ""
+    reason: Annotated[str, Field(max_length=1000)] = ""
+    applied: dict[GainName, float] | None = None
 
 
-class Start(_Message):
-    """Coordinator → all agents: the one synchronised start signal of round `round` for the listed vehicles."""
+class Start(_Bound):
+    """Coordinator → agent: the start signal of round `round` (sent to every flying vehicle at once)."""
 
     kind: Literal["start"] = "start"
-    vehicles: list[Annotated[str, Field(pattern=VEHICLE_PATTERN)]]
 
 
-class Finish(_Message):
-    """Coordinator → all agents: the run is over; leave the vehicle on its original gains (or, where the agent is
+class Finish(_Bound):
+    """Coordinator → agent: the run is over; leave the vehicle on its original gains (or, where the agent is
     configured to keep them, on these tuned gains; None when the run did not finish)."""
 
     kind: Literal["finish"] = "finish"
-    gains: dict[str, float] | None = None
+    gains: dict[GainName, float] | None = None
 
 
 class TraceMsg(BaseModel):
-    """A decimated altitude trace on the wire (seconds, metres)."""
+    """A decimated altitude trace on the wire (seconds, metres): three arrays of equal length, finite samples."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
-    t_s: list[float]
-    z_ref_m: list[float]
-    z_m: list[float]
+    t_s: Annotated[list[float], Field(max_length=MAX_TRACE_POINTS)]
+    z_ref_m: Annotated[list[float], Field(max_length=MAX_TRACE_POINTS)]
+    z_m: Annotated[list[float], Field(max_length=MAX_TRACE_POINTS)]
+
+    @model_validator(mode="after")
+    def _check(self) -> "TraceMsg":
+        if not len(self.t_s) == len(self.z_ref_m) == len(self.z_m):
+            raise ValueError(f"trace arrays of unequal length {len(self.t_s)}, {len(self.z_ref_m)}, {len(self.z_m)}")
+        if not all(math.isfinite(x) for arr in (self.t_s, self.z_ref_m, self.z_m) for x in arr):
+            raise ValueError("trace holds a non-finite sample")
+        return self
 
 
-class Result(_Message):
+class Result(_Bound):
     """Agent → coordinator: the outcome of round `round` — cost, status and a decimated trace."""
 
     kind: Literal["result"] = "result"
-    vehicle: Annotated[str, Field(pattern=VEHICLE_PATTERN)]
-    gains: dict[str, float]
+    gains: dict[GainName, float]
     cost: float
     status: Status
     trace: TraceMsg | None = None
     info: dict[str, Any] = {}
     resent: bool = False
+
+    @model_validator(mode="after")
+    def _check(self) -> "Result":
+        if self.status is Status.OK and not math.isfinite(self.cost):
+            raise ValueError(f"cost {self.cost!r} of a flight reported ok (a non-finite cost is a failed flight)")
+        if self.cost < 0:  # NaN compares False: a failed or lost flight may carry it
+            raise ValueError(f"negative cost {self.cost!r} (a cost sums absolute errors)")
+        if not all(math.isfinite(g) for g in self.gains.values()):
+            raise ValueError("non-finite gains")
+        return self
 
     def to_flight(self) -> Flight:
         """The Flight this result reports."""
@@ -130,11 +170,10 @@ class Result(_Message):
                       trace=trace, info=info)
 
 
-class State(_Message):
-    """Agent → coordinator: a state-machine transition (IDLE ↔ FLYING), for the log."""
+class State(_Bound):
+    """Agent → coordinator: a state-machine transition (IDLE ↔ FLYING); FLYING also confirms the Start."""
 
     kind: Literal["state"] = "state"
-    vehicle: Annotated[str, Field(pattern=VEHICLE_PATTERN)]
     state: AgentState
 
 
@@ -142,38 +181,57 @@ Message = Annotated[Union[Hello, Probe, Assignment, Ack, Start, Finish, Result, 
 _ADAPTER: TypeAdapter[Message] = TypeAdapter(Message)
 
 
-def encode(msg: _Message) -> bytes:
-    """Serialise a message to JSON bytes (NaN/inf costs survive as JSON constants)."""
-    return msg.model_dump_json().encode()
+class Codec:
+    """Seals and opens the messages of one session with its shared key (HMAC-SHA256 over the JSON body)."""
+
+    def __init__(self, session: str, key: str | bytes):
+        self.session = session
+        self._key = key.encode() if isinstance(key, str) else bytes(key)
+        if not self._key:
+            raise ValueError("an empty swarm key")
+
+    def _tag(self, body: bytes) -> bytes:
+        return hmac.new(self._key, body, hashlib.sha256).digest()
+
+    def encode(self, msg: _Message) -> bytes:
+        """The payload of a message: its tag, then its JSON (NaN/inf costs survive as JSON constants)."""
+        body = msg.model_dump_json().encode()
+        return self._tag(body) + body
+
+    def authentic(self, payload: bytes) -> bool:
+        """True when the payload's size is sane and its tag verifies — cheap, checked before any parsing."""
+        if not MAC_BYTES < len(payload) <= MAX_MESSAGE_BYTES:
+            return False
+        return hmac.compare_digest(payload[:MAC_BYTES], self._tag(payload[MAC_BYTES:]))
+
+    def decode(self, payload: bytes) -> _Message:
+        """The message in a payload; Rejected (saying why) if it is oversized, unauthenticated, malformed or foreign."""
+        if len(payload) > MAX_MESSAGE_BYTES:
+            raise Rejected(f"{len(payload)} bytes is over the {MAX_MESSAGE_BYTES}-byte limit")
+        if not self.authentic(payload):
+            raise Rejected("not authenticated by the session key")
+        try:
+            msg = _ADAPTER.validate_json(payload[MAC_BYTES:])
+        except ValidationError as exc:
+            first = exc.errors()[0] if exc.errors() else {}
+            raise Rejected(f"invalid message ({first.get('msg', '?')} at "
+                           f"{'.'.join(str(p) for p in first.get('loc', ()))})") from None
+        if msg.session != self.session:
+            raise Rejected(f"{msg.kind} from session {msg.session!r}, not ours")
+        return msg
 
 
-def decode(payload: bytes, *, session: str, token: str, where: str = "") -> _Message | None:
-    """Parse and authenticate one payload; return None (and log why) if it is malformed, foreign or unauthenticated."""
-    if len(payload) > MAX_MESSAGE_BYTES:
-        log.warning("dropped %s: %d bytes is over the %d-byte limit", where, len(payload), MAX_MESSAGE_BYTES)
-        return None
-    try:
-        msg = _ADAPTER.validate_json(payload)
-    except ValidationError as exc:
-        first = exc.errors()[0] if exc.errors() else {}
-        log.warning("dropped %s: invalid message (%s at %s)", where, first.get("msg", "?"),
-                    ".".join(str(p) for p in first.get("loc", ())))
-        return None
-    if msg.session != session:
-        log.warning("dropped %s: %s from session %r, not ours", where, msg.kind, msg.session)
-        return None
-    if not hmac.compare_digest(msg.token.encode(), token.encode()):
-        log.warning("dropped %s: %s with a wrong token", where, msg.kind)
-        return None
-    return msg
-
-
-def result_from_flight(flight: Flight, *, session: str, token: str, round_id: int, vehicle: str) -> Result:
-    """The Result message reporting one flight."""
-    trace = None if flight.trace is None else TraceMsg(t_s=list(flight.trace.t_s), z_ref_m=list(flight.trace.z_ref_m),
-                                                       z_m=list(flight.trace.z_m))
+def result_from_flight(flight: Flight, *, session: str, run: str, agent: str, round_id: int, vehicle: str) -> Result:
+    """The Result message reporting one flight (a non-finite cost reported ok becomes failed; a trace keeps its
+    finite samples)."""
+    trace = None
+    if flight.trace is not None:
+        rows = [r for r in zip(flight.trace.t_s, flight.trace.z_ref_m, flight.trace.z_m)
+                if all(math.isfinite(float(x)) for x in r)]
+        trace = TraceMsg(t_s=[float(r[0]) for r in rows], z_ref_m=[float(r[1]) for r in rows],
+                         z_m=[float(r[2]) for r in rows])
     cost = float(flight.cost)
-    return Result(session=session, token=token, round=round_id, vehicle=vehicle, gains=dict(flight.gains),
+    return Result(session=session, run=run, agent=agent, round=round_id, vehicle=vehicle, gains=dict(flight.gains),
                   cost=cost, status=flight.status if math.isfinite(cost) or flight.status is not Status.OK
                   else Status.FAILED, trace=trace, info=_jsonable(flight.info))
 
@@ -189,4 +247,3 @@ def _jsonable(info: dict[str, Any]) -> dict[str, Any]:
         else:
             out[str(k)] = repr(v)
     return out
-

@@ -3,6 +3,10 @@
 The coordinator is a Zenoh router listening on an endpoint; every agent is a client connecting to it. Multicast
 scouting is off (only the configured endpoint is used), and a short link lease makes a frozen vehicle visible in
 about 1.5 s. Presence is a liveliness token per vehicle: PUT when it joins, DELETE when it leaves or dies.
+
+Nothing here waits on a slow peer: messages are put with CongestionControl.DROP (the swarm protocol resends what
+matters), and the router closes a link that has not taken a blocking message for BLOCK_CLOSE_US, so a client that
+stops reading (or floods) cannot stall the others long enough for their leases to run out.
 """
 
 from __future__ import annotations
@@ -22,6 +26,9 @@ log = logging.getLogger(__name__)
 
 ROOT = "mavtune"
 
+BLOCK_CLOSE_US = 500_000
+"""Router: a link that cannot take a CongestionControl.BLOCK message for this long (µs) is closed (Zenoh: 5 s)."""
+
 _CONNECT_ATTEMPT_S = 1.0
 """An agent's connection attempts are this short so that Ctrl-C is seen between them (Zenoh blocks signals)."""
 
@@ -32,7 +39,7 @@ def zenoh_reason(exc: BaseException) -> str:
 
 
 class Keys:
-    """Key expressions of one session: `mavtune/<session>/{alive,to,from}/<vehicle>` and `mavtune/<session>/start`."""
+    """Key expressions of one session: `mavtune/<session>/{alive,to,from}/<vehicle>`, `mavtune/<session>/coordinator/<run>`."""
 
     def __init__(self, session: str):
         self.prefix = f"{ROOT}/{session}"
@@ -49,15 +56,9 @@ class Keys:
         """One agent (or all with '*') → coordinator (hello, ack, result, state)."""
         return f"{self.prefix}/from/{vehicle}"
 
-    @property
-    def coordinator(self) -> str:
-        """The coordinator's liveliness token: agents release their vehicles when it goes."""
-        return f"{self.prefix}/coordinator"
-
-    @property
-    def start(self) -> str:
-        """Coordinator → all agents: the start signal of a round."""
-        return f"{self.prefix}/start"
+    def coordinator(self, run: str = "*") -> str:
+        """The liveliness token of the coordinator of run `run`: agents release their vehicles when it goes."""
+        return f"{self.prefix}/coordinator/{run}"
 
     @staticmethod
     def last_chunk(key: str) -> str:
@@ -77,6 +78,8 @@ def zenoh_config(mode: str, endpoint: str, *, lease_ms: int = 2000, connect_time
         cfg.insert_json5("mode", json.dumps(mode))
         if mode == "router":
             cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
+            cfg.insert_json5("transport/link/tx/queue/congestion_control/block/wait_before_close",
+                             json.dumps(BLOCK_CLOSE_US))
         else:
             cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
             timeout_ms = -1 if connect_timeout_s < 0 else int(connect_timeout_s * 1000)
@@ -103,11 +106,12 @@ class Link:
         self._closed = False
 
     def put(self, key: str, payload: bytes) -> None:
-        """Publish one message (reliable; blocks rather than drops when congested); nothing once closed."""
+        """Publish one message; dropped rather than waited on when the link is congested (callers resend what
+        matters); nothing once closed."""
         if self._closed:
             return
         try:
-            self._session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+            self._session.put(key, payload, congestion_control=zenoh.CongestionControl.DROP)
         except zenoh.ZError:
             if not self._closed:  # closed by another thread meanwhile: the message had nowhere to go anyway
                 raise

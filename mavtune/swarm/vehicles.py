@@ -87,7 +87,13 @@ def sim_vehicle(scenario: Any = None, seed: int = 0, trace_hz: float = 10.0) -> 
         from mavtune.sim.gains import parse_assignment
     except ImportError as exc:
         raise MavtuneError(f"the simulator (mavtune.sim.SimFleet) is not available: {exc}") from None
-    return FleetVehicle(SimFleet(1, scenario, seed=seed, trace_hz=trace_hz), "sim", parse_assignment)
+    fleet = SimFleet(1, scenario, seed=seed, trace_hz=trace_hz)
+    # Warm up before the agent announces itself: the first flight of a process compiles (or loads) the numba
+    # kernels, 4-40 s on a loaded machine, and a first measured flight that long races the coordinator's result
+    # timeout (a LOST flight, and other gains than the in-process run). A flight depends only on (seed, round),
+    # so this one changes nothing that follows.
+    fleet.fly([{"kp": 0.5, "kd": 0.5}], 0)
+    return FleetVehicle(fleet, "sim", parse_assignment)
 
 
 def mavlink_vehicle(url: str, settings: dict[str, Any] | None = None,

@@ -8,10 +8,14 @@ import pytest
 
 from mavtune.swarm.agent import Agent, check_envelope, decimate
 from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.messages import Ack, Assignment, Finish, Result, Start, decode, encode
+from mavtune.swarm.messages import Ack, Assignment, Codec, Finish, Hello, Probe, Result, Start
 from mavtune.swarm.transport import Keys
 from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
 from mavtune.fleet import Trace
+
+KEY = "test key of at least 16 chars"
+CODEC = Codec("s", KEY)
+RUN = "1" * 32
 
 
 class Recorder:
@@ -21,7 +25,7 @@ class Recorder:
         self.sent = []
 
     def put(self, key, payload):
-        self.sent.append(decode(payload, session="s", token="t"))
+        self.sent.append(CODEC.decode(payload))
 
     def subscribe(self, *a):
         pass
@@ -36,15 +40,26 @@ class Recorder:
         pass
 
 
-def make(envelope=None, policy="refuse"):
-    cfg = SwarmConfig(session="s", token="t", envelope=envelope or {}, envelope_policy=policy)
-    vehicle = FleetVehicle(ToyFleet(1, seed=1), "toy")
-    agent = Agent("v0", vehicle, cfg, Recorder())
+def joined(agent, run=RUN):
+    """The agent after answering the probe of `run` (its nonce for that run is agent._nonce)."""
+    agent.handle("probe", CODEC.encode(Probe(session="s", run=run, vehicle=agent.id)))
+    return agent
+
+
+def make(envelope=None, policy="refuse", vehicle=None):
+    cfg = SwarmConfig(session="s", key=KEY, envelope=envelope or {}, envelope_policy=policy)
+    vehicle = vehicle or FleetVehicle(ToyFleet(1, seed=1), "toy")
+    agent = joined(Agent("v0", vehicle, cfg, Recorder()))
     return agent, vehicle, Keys("s")
 
 
-def send(agent, keys, msg):
-    agent.handle(keys.start if isinstance(msg, Start) else keys.to("v0"), encode(msg))
+def msg(agent, kind, **fields):
+    """A coordinator message of the agent's run, bound to its nonce."""
+    return kind(session="s", run=agent.run_id, agent=agent._nonce, vehicle="v0", **fields)
+
+
+def send(agent, keys, m):
+    agent.handle(keys.to("v0"), CODEC.encode(m))
 
 
 def of(agent, kind):
@@ -53,11 +68,11 @@ def of(agent, kind):
 
 def test_assignment_then_start_flies_once_and_repeats_resend():
     agent, _, keys = make()
-    a = Assignment(session="s", token="t", round=3, vehicle="v0", gains={"kp": 0.4, "kd": 0.2})
+    a = msg(agent, Assignment, round=3, gains={"kp": 0.4, "kd": 0.2})
     send(agent, keys, a)
     assert of(agent, Ack)[-1].accepted and agent.flights_flown == 0  # no flight before the start
-    send(agent, keys, Start(session="s", token="t", round=3, vehicles=["v0"]))
-    send(agent, keys, Start(session="s", token="t", round=3, vehicles=["v0"]))
+    send(agent, keys, msg(agent, Start, round=3))
+    send(agent, keys, msg(agent, Start, round=3))
     send(agent, keys, a)
     results = of(agent, Result)
     assert agent.flights_flown == 1 and len(results) == 3
@@ -66,18 +81,18 @@ def test_assignment_then_start_flies_once_and_repeats_resend():
 
 def test_start_without_assignment_or_for_others_does_nothing():
     agent, _, keys = make()
-    send(agent, keys, Start(session="s", token="t", round=1, vehicles=["v0"]))
-    send(agent, keys, Assignment(session="s", token="t", round=2, vehicle="v0", gains={"kp": 0.4}))
-    send(agent, keys, Start(session="s", token="t", round=2, vehicles=["v1"]))
-    send(agent, keys, Start(session="s", token="t", round=1, vehicles=["v0"]))
+    send(agent, keys, msg(agent, Start, round=1))
+    send(agent, keys, msg(agent, Assignment, round=2, gains={"kp": 0.4}))
+    send(agent, keys, msg(agent, Start, round=2).model_copy(update={"vehicle": "v1"}))
+    send(agent, keys, msg(agent, Start, round=1))
     assert agent.flights_flown == 0 and not of(agent, Result)
 
 
 @pytest.mark.parametrize("gains", [{"kp": 1.2}, {"kp": -0.1}, {"kp": math.nan}, {"kd": math.inf}])
 def test_out_of_envelope_or_non_finite_gains_are_never_applied(gains):
     agent, vehicle, keys = make(envelope={"kp": (0.0, 1.0)})
-    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains=gains))
-    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    send(agent, keys, msg(agent, Assignment, round=0, gains=gains))
+    send(agent, keys, msg(agent, Start, round=0))
     assert vehicle._gains is None and agent.flights_flown == 0
     assert of(agent, Ack)[-1].accepted is False
 
@@ -86,8 +101,8 @@ def test_clamp_policy_flies_the_clamped_gains():
     gains, why = check_envelope({"kp": 1.5, "kd": 0.2}, {"kp": (0.0, 0.8)}, "clamp")
     assert gains == {"kp": 0.8, "kd": 0.2} and "clamped" in why
     agent, vehicle, keys = make(envelope={"kp": (0.0, 0.8)}, policy="clamp")
-    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 1.5, "kd": 0.2}))
-    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    send(agent, keys, msg(agent, Assignment, round=0, gains={"kp": 1.5, "kd": 0.2}))
+    send(agent, keys, msg(agent, Start, round=0))
     assert vehicle._gains == {"kp": 0.8, "kd": 0.2} and of(agent, Result)[0].gains == {"kp": 0.8, "kd": 0.2}
 
 
@@ -100,10 +115,10 @@ def test_decimate_keeps_at_most_n_points_and_the_last():
 
 def test_same_round_with_other_gains_is_flown_again_not_answered_from_the_store():
     agent, vehicle, keys = make()
-    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 0.4, "kd": 0.2}))
-    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
-    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 0.9, "kd": 0.2}))
-    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    send(agent, keys, msg(agent, Assignment, round=0, gains={"kp": 0.4, "kd": 0.2}))
+    send(agent, keys, msg(agent, Start, round=0))
+    send(agent, keys, msg(agent, Assignment, round=0, gains={"kp": 0.9, "kd": 0.2}))
+    send(agent, keys, msg(agent, Start, round=0))
     results = of(agent, Result)
     assert agent.flights_flown == 2 and [r.gains["kp"] for r in results] == [0.4, 0.9]
     assert not results[1].resent and results[1].cost != results[0].cost
@@ -112,11 +127,9 @@ def test_same_round_with_other_gains_is_flown_again_not_answered_from_the_store(
 def test_gains_the_backend_refuses_are_refused_at_assignment_and_never_applied():
     from mavtune.swarm.vehicles import sim_vehicle
 
-    cfg = SwarmConfig(session="s", token="t")
-    vehicle = sim_vehicle(seed=0)
-    agent, keys = Agent("v0", vehicle, cfg, Recorder()), Keys("s")
-    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 1.5, "kd": 0.2}))
-    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    agent, vehicle, keys = make(vehicle=sim_vehicle(seed=0))
+    send(agent, keys, msg(agent, Assignment, round=0, gains={"kp": 1.5, "kd": 0.2}))
+    send(agent, keys, msg(agent, Start, round=0))
     ack = of(agent, Ack)[-1]
     assert ack.accepted is False and "kp" in ack.reason
     assert vehicle._gains is None and agent.flights_flown == 0
@@ -137,10 +150,9 @@ class Crashing(FleetVehicle):
 
 
 def test_a_crashed_flight_is_lost_not_failed():
-    cfg = SwarmConfig(session="s", token="t")
-    agent, keys = Agent("v0", Crashing(), cfg, Recorder()), Keys("s")
-    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 0.4, "kd": 0.2}))
-    send(agent, keys, Start(session="s", token="t", round=0, vehicles=["v0"]))
+    agent, _, keys = make(vehicle=Crashing())
+    send(agent, keys, msg(agent, Assignment, round=0, gains={"kp": 0.4, "kd": 0.2}))
+    send(agent, keys, msg(agent, Start, round=0))
     result = of(agent, Result)[0]
     assert result.status.value == "lost" and "link gone" in result.info["detail"]
 
@@ -161,12 +173,12 @@ class ClosingRecorder(Recorder):
 def test_close_waits_for_the_flight_under_way_and_its_result():
     import threading
 
-    agent, keys = Agent("v0", Crashing(delay_s=0.3), SwarmConfig(session="s", token="t"), ClosingRecorder()), Keys("s")
+    cfg = SwarmConfig(session="s", key=KEY)
+    agent, keys = joined(Agent("v0", Crashing(delay_s=0.3), cfg, ClosingRecorder())), Keys("s")
     t = threading.Thread(target=agent.run, daemon=True)
     t.start()
-    agent._enqueue(keys.to("v0"), encode(Assignment(session="s", token="t", round=0, vehicle="v0",
-                                                    gains={"kp": 0.4, "kd": 0.2})))
-    agent._enqueue(keys.start, encode(Start(session="s", token="t", round=0, vehicles=["v0"])))
+    agent._on_sample(keys.to("v0"), CODEC.encode(msg(agent, Assignment, round=0, gains={"kp": 0.4, "kd": 0.2})))
+    agent._on_sample(keys.to("v0"), CODEC.encode(msg(agent, Start, round=0)))
     import time
 
     deadline = time.monotonic() + 5
@@ -189,17 +201,50 @@ class Releases(FleetVehicle):
 
 
 def test_the_vehicle_is_released_once_when_the_run_ends_or_the_coordinator_goes():
-    cfg = SwarmConfig(session="s", token="t")
-    vehicle = Releases()
-    agent, keys = Agent("v0", vehicle, cfg, Recorder()), Keys("s")
-    agent.handle(keys.coordinator, b"")  # nothing applied yet: nothing to release
+    agent, vehicle, keys = make(vehicle=Releases())
+
+    def coordinator_gone(run=RUN):
+        agent._on_coordinator(keys.coordinator(run), False)
+        agent._check_coordinator()
+
+    coordinator_gone()  # nothing applied yet: nothing to release
     assert vehicle.released == []
-    send(agent, keys, Assignment(session="s", token="t", round=0, vehicle="v0", gains={"kp": 0.4, "kd": 0.2}))
-    agent.handle(keys.start, encode(Finish(session="s", token="t", gains={"kp": 0.5, "kd": 0.3})))
+    send(agent, keys, msg(agent, Assignment, round=0, gains={"kp": 0.4, "kd": 0.2}))
+    send(agent, keys, msg(agent, Finish, gains={"kp": 0.5, "kd": 0.3}))
     assert vehicle.released == [{"kp": 0.5, "kd": 0.3}]
     assert of(agent, Ack)[-1].round == -1 and of(agent, Ack)[-1].reason == "released"
-    agent.handle(keys.coordinator, b"")  # the coordinator closing after Finish releases nothing twice
+    coordinator_gone()  # the coordinator closing after Finish releases nothing twice
     assert len(vehicle.released) == 1
-    send(agent, keys, Assignment(session="s", token="t", round=1, vehicle="v0", gains={"kp": 0.6, "kd": 0.2}))
-    agent.handle(keys.coordinator, b"")  # a crashed coordinator: originals back
+    send(agent, keys, msg(agent, Assignment, round=1, gains={"kp": 0.6, "kd": 0.2}))
+    coordinator_gone("2" * 32)  # another run's coordinator going away means nothing to this one
+    assert len(vehicle.released) == 1
+    coordinator_gone()  # a crashed coordinator: originals back
     assert vehicle.released == [{"kp": 0.5, "kd": 0.3}, None]
+
+
+def test_messages_of_another_run_or_nonce_and_stale_rounds_move_nothing():
+    """Replays: an earlier run's messages (even one this agent served), another agent's nonce, an older round."""
+    agent, vehicle, keys = make(vehicle=Releases())
+    first_nonce = agent._nonce
+    send(agent, keys, msg(agent, Assignment, round=5, gains={"kp": 0.4, "kd": 0.2}))
+    old_finish = msg(agent, Finish, gains={"kp": 0.0, "kd": 0.0})
+    joined(agent, "2" * 32)  # a new coordinator run: a fresh nonce
+    assert agent.run_id == "2" * 32 and agent._nonce != first_nonce
+    send(agent, keys, old_finish)  # replay from the earlier run
+    send(agent, keys, msg(agent, Finish, gains={"kp": 0.1, "kd": 0.1}).model_copy(update={"agent": "f" * 32}))
+    joined(agent, RUN)  # a replayed probe of the earlier run does not take the agent back
+    assert agent.run_id == "2" * 32
+    send(agent, keys, old_finish)
+    assert vehicle.released == [] and not of(agent, Ack)[1:]
+    send(agent, keys, msg(agent, Assignment, round=8, gains={"kp": 0.4, "kd": 0.2}))
+    send(agent, keys, msg(agent, Assignment, round=7, gains={"kp": 0.9, "kd": 0.9}))  # older than round 8
+    assert [a.round for a in of(agent, Ack)] == [5, 8]
+    hellos = of(agent, Hello)
+    assert [h.run for h in hellos] == [RUN, "2" * 32] and hellos[0].agent != hellos[1].agent
+
+
+def test_tuned_gains_outside_the_envelope_are_not_kept():
+    agent, vehicle, keys = make(envelope={"kp": (0.0, 0.5)}, vehicle=Releases())
+    send(agent, keys, msg(agent, Assignment, round=0, gains={"kp": 0.4, "kd": 0.2}))
+    send(agent, keys, msg(agent, Finish, gains={"kp": 0.9, "kd": 0.2}))
+    assert vehicle.released == [None]

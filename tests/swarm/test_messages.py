@@ -1,4 +1,4 @@
-"""Wire messages: round trip, authentication, and rejection of anything malformed or foreign."""
+"""Wire messages: round trip, authentication, and rejection of anything malformed, foreign or inconsistent."""
 
 from __future__ import annotations
 
@@ -9,50 +9,117 @@ from hypothesis import given, strategies as st
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Status, Trace
-from mavtune.swarm.config import load_swarm_config
-from mavtune.swarm.messages import (MAX_MESSAGE_BYTES, Assignment, Hello, Result, Start, decode, encode,
+from mavtune.swarm.config import KEY_ENV, ensure_key, load_swarm_config, read_key, require_key
+from mavtune.swarm.messages import (MAC_BYTES, MAX_MESSAGE_BYTES, Assignment, Codec, Hello, Rejected, Result, Start,
                                     result_from_flight)
 
-KW = dict(session="s1", token="tok")
+KEY = "k" * 32
+RUN, AGENT = "a" * 32, "b" * 32
+KW = dict(session="s1", run=RUN, agent=AGENT, vehicle="v0")
+CODEC = Codec("s1", KEY)
 
 
-def test_round_trip_keeps_every_field():
-    msg = Assignment(**KW, round=4, vehicle="v0", gains={"kp": 0.25, "kd": 0.2})
-    assert decode(encode(msg), **KW) == msg
+def test_round_trip_keeps_every_field_and_the_key_never_travels():
+    msg = Assignment(**KW, round=4, gains={"kp": 0.25, "kd": 0.2})
+    payload = CODEC.encode(msg)
+    assert CODEC.decode(payload) == msg
+    assert KEY.encode() not in payload
 
 
 def test_nan_cost_survives_the_wire_as_failed():
     flight = Flight(vehicle="x", gains={"kp": 0.5}, cost=math.inf, status=Status.OK, trace=Trace([0.0], [1.0], [1.1]))
-    res = result_from_flight(flight, **KW, round_id=2, vehicle="v1")
-    back = decode(encode(res), **KW)
+    res = result_from_flight(flight, session="s1", run=RUN, agent=AGENT, round_id=2, vehicle="v1")
+    back = CODEC.decode(CODEC.encode(res))
     assert isinstance(back, Result) and back.status is Status.FAILED and math.isinf(back.cost)
     assert back.to_flight().trace.z_m == [1.1]
 
 
-@pytest.mark.parametrize("payload", [
-    b"", b"null", b"[]", b"not json", b"\xff\xfe\x00", b'{"kind": "assignment"}',
-    encode(Assignment(session="other", token="tok", round=1, vehicle="v0", gains={})),
-    encode(Assignment(session="s1", token="nope", round=1, vehicle="v0", gains={})),
-    encode(Start(**KW, round=1, vehicles=["v0"])).replace(b'"v":1', b'"v":2'),
-    encode(Hello(**KW, vehicle="v0")).replace(b'"vehicle":"v0"', b'"vehicle":"a/b"'),
-    encode(Hello(**KW, vehicle="v0")).replace(b"}", b',"extra":1}', 1),
-    b"{" + b" " * MAX_MESSAGE_BYTES + b"}",
+def _sealed(body: bytes) -> bytes:
+    return CODEC._tag(body) + body
+
+
+@pytest.mark.parametrize("payload, why", [
+    (b"", "authenticated"), (b"x" * 40, "authenticated"),
+    (Codec("s1", "another key of 32 characters....").encode(Start(**KW, round=1)), "authenticated"),
+    (CODEC.encode(Start(**KW, round=1))[:-1] + b" ", "authenticated"),  # tampered body
+    (_sealed(b"null"), "invalid"), (_sealed(b"not json"), "invalid"), (_sealed(b'{"kind": "assignment"}'), "invalid"),
+    (CODEC.encode(Start(**{**KW, "session": "other"}, round=1)), "not ours"),
+    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":2', b'"v":1')), "invalid"),
+    (_sealed(Hello(**KW).model_dump_json().encode().replace(b'"vehicle":"v0"', b'"vehicle":"a/b"')), "invalid"),
+    (_sealed(Hello(**KW).model_dump_json().encode().replace(b"}", b',"extra":1}', 1)), "invalid"),
+    (b"{" + b" " * MAX_MESSAGE_BYTES + b"}", "limit"),
 ])
-def test_bad_payloads_are_dropped(payload):
-    assert decode(payload, **KW) is None
+def test_bad_payloads_are_rejected_saying_why(payload, why):
+    with pytest.raises(Rejected, match=why):
+        CODEC.decode(payload)
+
+
+def _result_json(**change) -> bytes:
+    good = Result(**KW, round=1, gains={"kp": 0.5, "kd": 0.2}, cost=3.0, status=Status.OK,
+                  trace={"t_s": [0.0, 0.1], "z_ref_m": [1.0, 1.0], "z_m": [1.0, 1.1]})
+    data = good.model_dump(mode="json") | change
+    import json
+
+    return _sealed(json.dumps(data).encode())
+
+
+@pytest.mark.parametrize("change", [
+    {"trace": {"t_s": [0.0, 0.1], "z_ref_m": [1.0], "z_m": [1.0, 1.1]}},  # unequal lengths
+    {"trace": {"t_s": [0.0, "NaN"], "z_ref_m": [1.0, 1.0], "z_m": [1.0, 1.1]}},
+    {"cost": "-Infinity"}, {"cost": "NaN"},  # a non-finite cost reported ok
+    {"cost": -1.0}, {"cost": "-Infinity", "status": "failed"},  # a negative cost would win every comparison
+    {"gains": {"kp": "NaN", "kd": 0.2}},
+])
+def test_results_a_report_cannot_draw_are_rejected(change):
+    assert isinstance(CODEC.decode(_result_json()), Result)
+    with pytest.raises(Rejected, match="invalid"):
+        CODEC.decode(_result_json(**change))
 
 
 @given(st.binary(max_size=200))
-def test_arbitrary_bytes_never_raise(payload):
-    decode(payload, **KW)
+def test_arbitrary_bytes_never_raise_anything_but_rejected(payload):
+    for p in (payload, _sealed(payload)):  # unauthenticated, then authenticated but not a message
+        with pytest.raises(Rejected):
+            CODEC.decode(p)
 
 
-def test_config_rejects_bad_session_and_envelope(tmp_path):
+def test_config_rejects_bad_session_envelope_and_the_old_token(tmp_path):
     with pytest.raises(MavtuneError, match="session"):
         load_swarm_config(session="a/b")
     with pytest.raises(MavtuneError, match="envelope"):
         load_swarm_config(envelope={"kp": (0.9, 0.1)})
+    with pytest.raises(MavtuneError, match="token"):
+        load_swarm_config(token="mavtune")
+    with pytest.raises(MavtuneError, match="key"):
+        load_swarm_config(key="short")
     f = tmp_path / "swarm.toml"
-    f.write_text('[swarm]\nsession = "field1"\ntoken = "x"\nenvelope = { kp = [0.1, 0.9] }\n')
-    cfg = load_swarm_config(f, token="override")
-    assert (cfg.session, cfg.token, cfg.envelope["kp"]) == ("field1", "override", (0.1, 0.9))
+    f.write_text(f'[swarm]\nsession = "field1"\nkey = "{KEY}"\nenvelope = {{ kp = [0.1, 0.9] }}\n')
+    cfg = load_swarm_config(f, session="override")
+    assert (cfg.session, read_key(cfg), cfg.envelope["kp"]) == ("override", KEY, (0.1, 0.9))
+
+
+def test_there_is_no_default_key(tmp_path, monkeypatch, caplog):
+    monkeypatch.delenv(KEY_ENV, raising=False)
+    cfg = load_swarm_config()
+    assert read_key(cfg) is None
+    with pytest.raises(MavtuneError, match="--key-file"):
+        require_key(cfg)  # an agent without a key does not start
+    made = ensure_key(cfg, tmp_path)  # a coordinator makes one, says where, and reuses it on resume
+    path = tmp_path / "swarm.key"
+    assert len(made) == 64 and path.read_text().strip() == made and path.stat().st_mode & 0o077 == 0
+    assert "--key-file" in caplog.text and made not in caplog.text
+    assert ensure_key(cfg, tmp_path) == made
+    assert ensure_key(cfg, tmp_path / "other") != made
+    assert read_key(load_swarm_config(key_file=str(path))) == made
+    monkeypatch.setenv(KEY_ENV, "e" * 20)
+    assert require_key(cfg) == "e" * 20
+    monkeypatch.setenv(KEY_ENV, "short")
+    with pytest.raises(MavtuneError, match="at least"):
+        require_key(cfg)
+
+
+def test_the_tag_covers_the_whole_body():
+    payload = CODEC.encode(Assignment(**KW, round=1, gains={"kp": 0.25}))
+    assert len(payload) > MAC_BYTES and CODEC.authentic(payload)
+    forged = payload.replace(b"0.25", b"0.95")
+    assert not CODEC.authentic(forged)

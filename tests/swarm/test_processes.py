@@ -16,24 +16,30 @@ from .conftest import backend, free_port
 
 pytestmark = [pytest.mark.integration]
 
-SESSION = ["--session", "itest", "--token", "s3cret"]
+SESSION = ["--session", "itest"]
 TUNE = {"initial": {"kd": 0.2}}  # the coordinator's defaults (tune's): eql, eps 0.125, 2 bootstraps, avg, reuse
 
 
 def start_swarm(procs, tmp_path, n, *, seed, noise_free, min_flight_s=0.0, result_timeout_s=20.0, out=None,
                 port=None, agents=True, extra=()):
-    """Start the coordinator (and n agents v0..v{n-1} with seeds seed+j); return (endpoint, out dir, twin)."""
+    """Start the coordinator (and n agents v0..v{n-1} with seeds seed+j); return (endpoint, out dir, twin).
+    The coordinator waits up to 120 s for them: a simulated agent joins once its simulator is compiled, which
+    takes a minute on a loaded machine when the numba cache is cold."""
     port = port or free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     out = out or tmp_path / "run"
+    key = tmp_path / "swarm.key"  # the agents' copy of the key (the coordinator reads it, or makes OUT/swarm.key)
+    if not key.exists():
+        key.write_text("integration-test swarm key\n")
     args_of, twin = backend(n, seed, noise_free)
     procs.start("coordinator", ["coordinator", "--listen", endpoint, "--vehicles", str(n), "--out", str(out),
                                 "--settle-s", "0", "--result-timeout-s", str(result_timeout_s),
-                                "--ack-timeout-s", "5", "--presence-timeout-s", "60", *SESSION, *extra])
+                                "--ack-timeout-s", "5", "--presence-timeout-s", "120", *SESSION, "--key-file", str(key),
+                                *extra])
     if agents:
         for j in range(n):
             procs.start(f"v{j}", ["agent", "--id", f"v{j}", "--connect", endpoint, *args_of(j), *SESSION,
-                                  "--min-flight-s", str(min_flight_s)])
+                                  "--key-file", str(key), "--min-flight-s", str(min_flight_s)])
     return endpoint, out, twin
 
 
@@ -68,8 +74,9 @@ def test_agents_equal_in_process_run(procs, tmp_path, n, seed):
     assert wait_exit(procs, "coordinator", 180) == 0, procs.log("coordinator")[-3000:]
     result = json.loads((out / "result.json").read_text())
     local = mavtune.tune(twin, **TUNE)
+    assert result["flights_by_status"]["lost"] == 0, result["events"]  # a lost flight changes what is averaged
     assert result["gains"] == local.gains
-    assert result["rounds"] == len(local.rounds) and result["flights_by_status"]["lost"] == 0
+    assert result["rounds"] == len(local.rounds)
     assert [[f["cost"] for f in r["flights"]] for r in result["rounds_log"]] == [r.costs for r in local.rounds]
 
 
@@ -117,12 +124,16 @@ def test_tune_command_with_zenoh_fleet_equals_in_process(procs, tmp_path):
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     config = tmp_path / "run.toml"
-    config.write_text('[swarm]\nsession = "itest"\ntoken = "s3cret"\nsettle_s = 0.0\nresult_timeout_s = 20.0\n')
+    config.write_text('[swarm]\nsession = "itest"\nsettle_s = 0.0\nresult_timeout_s = 20.0\n')
     args_of, twin = backend(2, 9, noise_free=False)
-    for j in range(2):
-        procs.start(f"v{j}", ["agent", "--id", f"v{j}", "--connect", endpoint, *args_of(j), *SESSION])
+    out = tmp_path / "run"
     procs.start("coordinator", ["tune", "--config", str(config), "--fleet", "zenoh", "--listen", endpoint,
-                                "--vehicles", "2", "--seed", "9", "--out", str(tmp_path / "run"), "--quiet"])
+                                "--vehicles", "2", "--seed", "9", "--out", str(out), "--quiet"])
+    # no key configured: the coordinator makes one in its run folder and says how agents get it
+    assert procs.wait_log("coordinator", "--key-file", 30), procs.log("coordinator")[-2000:]
+    for j in range(2):
+        procs.start(f"v{j}", ["agent", "--id", f"v{j}", "--connect", endpoint, *args_of(j), *SESSION,
+                              "--key-file", str(out / "swarm.key")])
     assert wait_exit(procs, "coordinator", 100) == 0, procs.log("coordinator")[-3000:]
     result = json.loads((tmp_path / "run" / "result.json").read_text())
     assert result["gains"] == mavtune.tune(twin, **TUNE).gains

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.timeout(30)
 
 def test_a_run_that_fails_still_writes_result_json(tmp_path):
     config = load_config(None, {"fleet.kind": "zenoh", "tuning.vehicles": 2, "swarm.session": "r1",
-                                "swarm.token": "x", "swarm.presence_timeout_s": 0.5,
+                                "swarm.key": "a key of sixteen+ chars", "swarm.presence_timeout_s": 0.5,
                                 "swarm.listen": f"tcp/127.0.0.1:{free_port()}"})
     with pytest.raises(MavtuneError, match="0 of 2 vehicles"):
         run(config, tmp_path, quiet=True)

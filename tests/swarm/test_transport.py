@@ -12,6 +12,8 @@ from mavtune.swarm.transport import Keys, zenoh_config
 
 def test_router_and_client_settings():
     r = zenoh_config("router", "tcp/127.0.0.1:7447", lease_ms=2000)
+    # a link that cannot take a blocking message within half a second is closed, not waited on for 5 s
+    assert json.loads(r.get_json("transport/link/tx/queue/congestion_control/block/wait_before_close")) == 500_000
     assert json.loads(r.get_json("mode")) == "router" and json.loads(r.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7447"]
     assert json.loads(r.get_json("scouting/multicast/enabled")) is False
     assert json.loads(r.get_json("transport/link/tx/lease")) == 2000
@@ -35,8 +37,8 @@ def test_bad_settings_are_one_line_errors():
 
 def test_key_layout():
     k = Keys("s1")
-    assert (k.alive("v0"), k.to("v0"), k.frm("*"), k.start) == (
-        "mavtune/s1/alive/v0", "mavtune/s1/to/v0", "mavtune/s1/from/*", "mavtune/s1/start")
+    assert (k.alive("v0"), k.to("v0"), k.frm("*"), k.coordinator("ab12")) == (
+        "mavtune/s1/alive/v0", "mavtune/s1/to/v0", "mavtune/s1/from/*", "mavtune/s1/coordinator/ab12")
     assert Keys.last_chunk(k.frm("v7")) == "v7"
 
 

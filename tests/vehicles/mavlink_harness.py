@@ -26,12 +26,19 @@ def free_udp_port() -> int:
 def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1):
     """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT); kills it afterwards."""
     port = free_udp_port()
+    with mavsim_on(port, *args, autopilot=autopilot, seed=seed, speed=speed, sysid=sysid):
+        yield f"udpin:127.0.0.1:{port}"
+
+
+@contextmanager
+def mavsim_on(port: int, *args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1):
+    """Run `mavtune mavsim` sending to 127.0.0.1:port until the block ends."""
     cmd = [sys.executable, "-c", "from mavtune.cli import main; main()", "mavsim", "--port", str(port),
            "--autopilot", autopilot, "--seed", str(seed), "--speed", str(speed), "--sysid", str(sysid),
            "--noise-free", "--duration", "120", *args]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
-        yield f"udpin:127.0.0.1:{port}"
+        yield
     finally:
         proc.kill()
         proc.wait(timeout=10)

@@ -27,14 +27,15 @@ def free_tcp_port() -> int:
 def test_coordinator_tunes_a_mavlink_vehicle_through_its_agent(tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     (tmp_path / "agent.toml").write_text(
-        "[swarm]\nsession = \"mv\"\ntoken = \"t\"\nresult_timeout_s = 60.0\n"
+        f"[swarm]\nsession = \"mv\"\nkey_file = \"{tmp_path / 'swarm.key'}\"\nresult_timeout_s = 60.0\n"
         "[mavlink]\nprimitive_s = 4.0\nsettle_s = 0.5\nparam_timeout_s = 0.3\nheartbeat_wait_s = 20.0\n"
         "[mavlink.safety]\nheartbeat_timeout_s = 0.5\nposition_timeout_s = 1.0\nmax_altitude_error_m = 1.0\n")
     out = tmp_path / "run"
+    (tmp_path / "swarm.key").write_text("mavlink swarm test key\n")
     with mavsim(autopilot="px4") as url:
         coordinator = subprocess.Popen(
             [*MAVTUNE, "coordinator", "--listen", endpoint, "--vehicles", "1", "--out", str(out), "--session", "mv",
-             "--token", "t", "--settle-s", "0", "--result-timeout-s", "60", "--bootstraps", "1", "--epsilon",
+             "--key-file", str(tmp_path / "swarm.key"), "--settle-s", "0", "--result-timeout-s", "60", "--bootstraps", "1", "--epsilon",
              "0.25"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         agent = subprocess.Popen(
             [*MAVTUNE, "agent", "--id", "m0", "--connect", endpoint, "--vehicle", "mavlink", "--mavlink", url,
@@ -42,13 +43,13 @@ def test_coordinator_tunes_a_mavlink_vehicle_through_its_agent(tmp_path):
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         try:
             log, _ = coordinator.communicate(timeout=100)
-            assert coordinator.returncode == 0, log[-3000:]
         finally:
             for p in (coordinator, agent):
                 p.kill()
                 p.wait(timeout=10)
         agent_log = agent.stdout.read()
         agent.stdout.close()
+        assert coordinator.returncode == 0, log[-2000:] + "\nagent:\n" + agent_log[-3000:]
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS, agent_log[-3000:]
     result = json.loads((out / "result.json").read_text())
     assert result["status"] == "finished" and set(result["gains"]) == {"kp", "kd"}

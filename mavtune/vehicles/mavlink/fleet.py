@@ -199,9 +199,11 @@ class MavlinkFleet:
 
     def report(self) -> dict[str, Any]:
         """What result.json keeps of this fleet: the originals, whether they (or the tuned gains) were confirmed
-        on every vehicle at the end, and every event."""
+        on every vehicle at the end, every event, and each link's one-way delay (TIMESYNC; None: unanswered)."""
         return {"original_params": self.original_params, "restored": bool(self.restored) and not self.kept_tuned,
-                "kept_tuned": self.kept_tuned, "events": self.events}
+                "kept_tuned": self.kept_tuned, "events": self.events,
+                "link_delay_ms": {v.name: None if v.link_delay_s is None else round(1e3 * v.link_delay_s, 2)
+                                  for v in self.vehicles}}
 
     def finish(self, tuned: Gains | None = None) -> bool:
         """Leave every vehicle with its originals (or `tuned`, normalised) and release it; True if all confirmed."""

@@ -1,9 +1,16 @@
-"""One MAVLink connection (pymavlink) with a reader thread that keeps the vehicle's latest state and notifies waiters."""
+"""One MAVLink connection (pymavlink) with a reader thread that keeps the vehicle's latest state and notifies waiters.
+
+A link carries more than the autopilot: companions, cameras, gimbals, antenna trackers, other ground stations. The
+autopilot is the first component whose HEARTBEAT names an autopilot and a vehicle type (`is_autopilot`), not the
+first to speak; position, altitude, mode, parameters and acknowledgements are taken from that component only, and
+the altitude from a rangefinder only when it looks down (MAV_SENSOR_ROTATION_PITCH_270).
+"""
 
 from __future__ import annotations
 
 import logging
 import math
+import statistics
 import threading
 import time
 from dataclasses import dataclass, field
@@ -17,6 +24,21 @@ from mavtune.errors import MavtuneError
 log = logging.getLogger(__name__)
 
 _SCHEMES = ("udp:", "udpin:", "udpout:", "tcp:", "tcpin:", "serial:")
+
+NOT_VEHICLES = frozenset(getattr(mavlink, name) for name in (
+    "MAV_TYPE_GENERIC", "MAV_TYPE_GCS", "MAV_TYPE_ANTENNA_TRACKER", "MAV_TYPE_ONBOARD_CONTROLLER", "MAV_TYPE_GIMBAL",
+    "MAV_TYPE_ADSB", "MAV_TYPE_CAMERA", "MAV_TYPE_CHARGING_STATION", "MAV_TYPE_FLARM", "MAV_TYPE_SERVO",
+    "MAV_TYPE_ODID", "MAV_TYPE_BATTERY", "MAV_TYPE_PARACHUTE", "MAV_TYPE_LOG", "MAV_TYPE_OSD", "MAV_TYPE_IMU",
+    "MAV_TYPE_GPS", "MAV_TYPE_WINCH") if hasattr(mavlink, name))
+"""HEARTBEAT types of components that are not a vehicle's autopilot (ground stations, trackers, payloads)."""
+
+DOWNWARD = mavlink.MAV_SENSOR_ROTATION_PITCH_270
+"""DISTANCE_SENSOR orientation of a rangefinder looking down: the only one that measures altitude."""
+
+
+def is_autopilot(autopilot: int, mav_type: int) -> bool:
+    """True for the HEARTBEAT of a vehicle's autopilot: it names an autopilot and a vehicle type."""
+    return autopilot != mavlink.MAV_AUTOPILOT_INVALID and mav_type not in NOT_VEHICLES
 
 
 def parse_url(url: str) -> tuple[str, int]:
@@ -67,10 +89,14 @@ class VehicleState:
     heartbeat_wall_s: float = 0.0
     heartbeats: int = 0
     position: PositionSample | None = None
-    distance_m: float | None = None
-    distance_t_s: float | None = None
+    distance_m: float | None = None  # the downward rangefinder's last reading (m)
+    distance_t_s: float | None = None  # its vehicle time
+    distance_wall_s: float = 0.0  # its wall time
+    ignored: dict[str, int] = field(default_factory=dict)  # what was not the autopilot's, by kind (for the log)
     params: dict[str, tuple[float, int, int]] = field(default_factory=dict)  # name → (value, type, arrival no.)
     param_arrivals: int = 0
+    param_index: dict[int, str] = field(default_factory=dict)  # index → name, from PARAM_VALUE
+    param_count: int | None = None  # how many parameters the autopilot says it has
     acks: dict[int, tuple[int, int]] = field(default_factory=dict)  # command → (result, arrival no.)
     ack_arrivals: int = 0
 
@@ -92,6 +118,7 @@ class MavlinkLink:
         except Exception as exc:  # pymavlink raises OSError/ValueError/serial errors
             raise MavtuneError(f"cannot open MAVLink connection {url!r}: {exc}") from None
         self.state = VehicleState()
+        self._timesync: dict[int, int] = {}  # our ts1 (ns) → round trip (ns) of its TIMESYNC answer
         self._cond = threading.Condition()
         self._send_lock = threading.Lock()
         self._listeners: list[Callable[[PositionSample], None]] = []
@@ -117,21 +144,30 @@ class MavlinkLink:
             except Exception:  # never let one odd message kill the reader
                 log.exception("error handling %s from %s", msg.get_type(), self.url)
 
+    def _ignore(self, what: str) -> None:
+        with self._cond:
+            n = self.state.ignored.get(what, 0) + 1
+            self.state.ignored[what] = n
+        if n == 1:
+            log.info("%s: ignoring %s", self.url, what)
+
     def _handle(self, msg) -> None:
         mtype = msg.get_type()
         if mtype == "BAD_DATA":
             return
-        src = msg.get_srcSystem()
+        src, comp = msg.get_srcSystem(), msg.get_srcComponent()
         st = self.state
         if mtype == "HEARTBEAT":
-            if msg.type == mavlink.MAV_TYPE_GCS or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
-                return  # another ground station or a peripheral, not the autopilot
+            if not is_autopilot(msg.autopilot, msg.type):
+                self._ignore(f"HEARTBEAT of a type-{msg.type} component {src}/{comp} (not an autopilot)")
+                return
             if self.target_system is None:
                 self.target_system = src
-            if src != self.target_system or st.component not in (None, msg.get_srcComponent()):
-                return  # another vehicle, or another component of ours (its mode is not the autopilot's)
+            if src != self.target_system or st.component not in (None, comp):
+                self._ignore(f"HEARTBEAT of {src}/{comp} (not the target autopilot)")
+                return  # another vehicle, or another autopilot-like component of ours
             with self._cond:
-                st.system, st.component = src, msg.get_srcComponent()
+                st.system, st.component = src, comp
                 st.mav_autopilot, st.mav_type = msg.autopilot, msg.type
                 st.mode = mavutil.mode_string_v10(msg)
                 st.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
@@ -139,8 +175,10 @@ class MavlinkLink:
                 st.heartbeats += 1
                 self._cond.notify_all()
             return
-        if self.target_system is None or src != self.target_system:
-            return
+        if st.component is None or src != self.target_system or comp != st.component:
+            if mtype in ("LOCAL_POSITION_NED", "DISTANCE_SENSOR", "PARAM_VALUE", "EXTENDED_SYS_STATE", "COMMAND_ACK"):
+                self._ignore(f"{mtype} from {src}/{comp} (not the autopilot)")
+            return  # only the autopilot says where the vehicle is, what it holds and what it did
         if mtype == "LOCAL_POSITION_NED":
             sample = PositionSample(
                 msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z, msg.vz, time.monotonic()
@@ -152,25 +190,35 @@ class MavlinkLink:
             for fn in listeners:
                 fn(sample)
         elif mtype == "DISTANCE_SENSOR":
+            if msg.orientation != DOWNWARD:
+                self._ignore(f"DISTANCE_SENSOR {msg.id} with orientation {msg.orientation} (not looking down)")
+                return
             with self._cond:
                 st.distance_m = msg.current_distance / 100.0 if msg.current_distance > 0 else math.nan
                 st.distance_t_s = msg.time_boot_ms / 1000.0
+                st.distance_wall_s = time.monotonic()
         elif mtype == "EXTENDED_SYS_STATE":
             with self._cond:
                 st.landed_state = msg.landed_state
-        elif mtype in ("PARAM_VALUE", "COMMAND_ACK") and msg.get_srcComponent() != st.component:
-            return  # a camera or gimbal of the same system answering with its own parameters
         elif mtype == "PARAM_VALUE":
             name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else msg.param_id.decode().rstrip("\x00")
             with self._cond:
                 st.param_arrivals += 1
                 st.params[name] = (float(msg.param_value), int(msg.param_type), st.param_arrivals)
+                if 0 <= msg.param_index < 65535:
+                    st.param_index[int(msg.param_index)] = name
+                    st.param_count = int(msg.param_count)
                 self._cond.notify_all()
         elif mtype == "COMMAND_ACK":
             with self._cond:
                 st.ack_arrivals += 1
                 st.acks[msg.command] = (msg.result, st.ack_arrivals)
                 self._cond.notify_all()
+        elif mtype == "TIMESYNC" and msg.tc1 != 0:  # the answer to one of our requests (tc1 = 0 asks us)
+            with self._cond:
+                if msg.ts1 in self._timesync and self._timesync[msg.ts1] < 0:
+                    self._timesync[msg.ts1] = time.monotonic_ns() - msg.ts1
+                    self._cond.notify_all()
 
     def wait_for(self, predicate: Callable[[VehicleState], bool], timeout_s: float) -> bool:
         """Block until predicate(state) holds (checked under the state lock) or the timeout passes."""
@@ -187,7 +235,8 @@ class MavlinkLink:
         """A consistent copy of the vehicle state (params dict copied)."""
         with self._cond:
             st = self.state
-            return VehicleState(**{**vars(st), "params": dict(st.params), "acks": dict(st.acks)})
+            return VehicleState(**{**vars(st), "params": dict(st.params), "acks": dict(st.acks),
+                                   "param_index": dict(st.param_index), "ignored": dict(st.ignored)})
 
     def heartbeat_age_s(self) -> float:
         """Wall seconds since the last HEARTBEAT of the target vehicle (inf before the first)."""
@@ -221,6 +270,26 @@ class MavlinkLink:
         self.send(lambda m: m.command_long_send(
             self.target_system or 0, self.target_component, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
             message_id, 1e6 / rate_hz, 0, 0, 0, 0, 0))
+
+    def measure_delay(self, samples: int = 10, timeout_s: float = 2.0) -> tuple[float | None, int]:
+        """The link's one-way delay (s): half the median round trip of `samples` TIMESYNC requests the autopilot
+        answered within timeout_s, and how many it answered; (None, 0) when it answered none."""
+        sent: list[int] = []
+        for _ in range(samples):
+            ts1 = time.monotonic_ns()
+            with self._cond:
+                self._timesync[ts1] = -1
+            sent.append(ts1)
+            self.send(lambda m: m.timesync_send(0, ts1))
+            time.sleep(timeout_s / (4 * samples))
+        self.wait_for(lambda st: all(self._timesync[t] >= 0 for t in sent), timeout_s)
+        with self._cond:
+            rtts = [self._timesync.pop(t) for t in sent if self._timesync.get(t, -1) >= 0]
+            for t in sent:
+                self._timesync.pop(t, None)
+        if not rtts:
+            return None, 0
+        return statistics.median(rtts) / 2e9, len(rtts)
 
     @property
     def target_component(self) -> int:

@@ -56,6 +56,43 @@ class ParamClient:
             found.update({n: st.params[n][0] for n in missing if n in st.params and st.params[n][2] > start})
         return found
 
+    def list_all(self, timeout_s: float | None = None) -> dict[str, float] | None:
+        """Every parameter the autopilot has (PARAM_REQUEST_LIST), or None when the list did not arrive whole: no
+        PARAM_VALUE for 2 × timeout_s at some point, twice."""
+        quiet_s = 2 * (self.timeout_s if timeout_s is None else timeout_s)
+        for _ in range(2):
+            self.link.send(lambda m: m.param_request_list_send(self.link.target_system or 0,
+                                                               self.link.target_component))
+            arrivals = -1
+            while True:
+                st = self.link.snapshot()
+                if st.param_count is not None and len(st.param_index) >= st.param_count:
+                    return {name: st.params[name][0] for name in st.param_index.values()}
+                if st.param_arrivals == arrivals:
+                    break  # silent for quiet_s
+                arrivals = st.param_arrivals
+                self.link.wait_for(lambda s, a=arrivals: s.param_arrivals > a, quiet_s)
+        return None
+
+    def find(self, names: list[str], retries: int = 2) -> dict[str, float]:
+        """The values of those of `names` the vehicle has. A name it did not answer is looked up in its full
+        parameter list: absent when the list lacks it; MavtuneError when the list did not come either (the vehicle
+        did not answer — busy starting up, or a lossy link), so a silent vehicle is never taken for one without
+        the parameter."""
+        found = self.probe(names, retries=retries)
+        missing = [n for n in names if n not in found]
+        if not missing:
+            return found
+        log.info("%s: %s not answered; asking for the full parameter list", self.link.url, ", ".join(missing))
+        listing = self.list_all()
+        if listing is None:
+            raise MavtuneError(
+                f"{self.link.url}: the vehicle did not answer PARAM_REQUEST_READ for {', '.join(missing)} "
+                f"({retries} tries of {self.timeout_s:g} s) nor send its whole parameter list; it may be busy "
+                "starting up or the link lossy: try again, or raise param_timeout_s")
+        found.update({n: listing[n] for n in missing if n in listing})
+        return found
+
     def read(self, name: str) -> float:
         """The current value of a parameter, asked afresh; MavtuneError when the vehicle never answers."""
         got = self.probe([name], retries=self.retries)

@@ -34,6 +34,10 @@ TRACE_HZ = 10.0  # decimation of the trace kept in each Flight
 CALM_HOLD_S = 0.5  # vehicle seconds the hover must stay calm before new gains / the primitive
 CLOCK_RESET_S = 5.0  # a position sample this much older than the phase start means time_boot_ms restarted
 POSITION_HZ = 50.0  # LOCAL_POSITION_NED rate asked of the autopilot (the cost is computed on a 100 Hz grid)
+LINK_DELAY_WARN_S = 0.010
+"""One-way link delay above which the cost is distorted: autopilots apply setpoints on arrival, so the vehicle
+follows the circle late by the delay and the cost grows with it — at 25 ms each way the ranking of kp 0.125 vs
+0.875 flipped, at 100 ms the cost barely told gains apart (issue 12)."""
 
 
 class MavlinkVehicle:
@@ -90,7 +94,7 @@ class MavlinkVehicle:
         self.params = ParamClient(self.link, cfg.param_timeout_s, cfg.param_retries)
         gain_map = cfg.gain_map(self.profile.autopilot)
         names = sorted({n for c in gain_map.values() for n, _ in self.profile.family(c.param)})
-        present = self.params.probe(names, retries=min(3, cfg.param_retries))
+        present = self.params.find(names, retries=min(3, cfg.param_retries))
         self.gains: dict[str, ResolvedGain] = {g: resolve_gain(g, c, self.profile, present) for g, c in gain_map.items()}
         self.original_params: dict[str, float] = {rg.vehicle_param: present[rg.vehicle_param] for rg in self.gains.values()}
         if originals:
@@ -103,6 +107,17 @@ class MavlinkVehicle:
         self.current_params = {rg.vehicle_param: present[rg.vehicle_param] for rg in self.gains.values()}
         self.last_safe_params = dict(self.original_params)
         self.streamer = SetpointStreamer(self.link, cfg.setpoint_hz)
+        self.link_delay_s, answered = self.link.measure_delay()
+        if self.link_delay_s is None:
+            log.warning("%s: the autopilot did not answer TIMESYNC; the link delay is unknown (a delay of 25 ms each "
+                        "way is enough to reorder costs)", self.name)
+        elif self.link_delay_s > LINK_DELAY_WARN_S:
+            log.warning("%s: link delay %.0f ms each way (TIMESYNC, %d answers): setpoints arrive late and the cost "
+                        "grows with the delay — 25 ms each way reordered kp 0.125 and 0.875; fly from a companion "
+                        "computer or a faster link", self.name, 1e3 * self.link_delay_s, answered)
+        else:
+            log.info("%s: link delay %.1f ms each way (TIMESYNC, %d answers)", self.name, 1e3 * self.link_delay_s,
+                     answered)
         # the readiness check needs a position: wait for the stream (wall time; a radio link may start it slowly)
         if not self.link.wait_for(lambda st: st.position is not None, cfg.heartbeat_wait_s):
             log.warning("%s: no LOCAL_POSITION_NED within %g s of the first HEARTBEAT", self.name, cfg.heartbeat_wait_s)
@@ -116,9 +131,18 @@ class MavlinkVehicle:
             return "closed"
         if self._released:
             return self._released
-        return preflight_problem(
+        problem = preflight_problem(
             self.link.snapshot(), self.link.heartbeat_age_s(), self.profile, self.config.safety, self._in_control
         )
+        if problem is None and self.config.altitude_source == "distance_sensor":
+            st = self.link.snapshot()
+            what = "a downward rangefinder (DISTANCE_SENSOR, orientation PITCH_270)"
+            if st.distance_t_s is None:
+                return f"no reading from {what}; altitude_source = \"distance_sensor\" needs one"
+            age_s = time.monotonic() - st.distance_wall_s
+            if age_s > self.config.safety.position_timeout_s:
+                return f"no reading from {what} for {age_s:.1f} s"
+        return problem
 
     @property
     def released(self) -> str | None:

@@ -240,6 +240,10 @@ class SimVehicle:
         if name in self.params:
             self._param_value(name)
 
+    def _on_timesync(self, msg) -> None:
+        if msg.tc1 == 0:  # a request: answered at once with our clock, as PX4 and ArduPilot do
+            self.conn.mav.timesync_send(time.monotonic_ns(), msg.ts1)
+
     def _on_param_request_list(self, msg) -> None:
         for name in self.param_names:
             self._param_value(name)
