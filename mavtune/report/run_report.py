@@ -49,6 +49,7 @@ def _write(out: Path, result, config, surface: Any, title: str) -> Path:
     parts += _settings_section(result, config, summary)
     parts += ["## Final gains", "", md.table(["gain", "value"], [[g, md.num(v, 6)] for g, v in result.gains.items()],
                                             ["l", "r"]), ""]
+    parts += tuned_params_section(summary)
     parts += _plan_section(result, config, summary, round_s)
 
     parts += ["## Timeline", ""]
@@ -77,6 +78,25 @@ def _write(out: Path, result, config, surface: Any, title: str) -> Path:
     path = out / REPORT
     path.write_text("\n".join(parts))
     return path
+
+
+def tuned_params_section(summary: dict) -> list[str]:
+    """The tuned gains as each vehicle's parameters (± the search tolerance), the parameter files, and the range
+    edges the gains reached (from result.json; nothing when it has none)."""
+    parts: list[str] = []
+    tolerance = summary.get("tuned_params_tolerance") or {}
+    rows = [[f"`{vehicle}`", f"`{name}`", md.num(value, 4), md.num(tolerance.get(vehicle, {}).get(name, math.nan), 2)]
+            for vehicle, params in (summary.get("tuned_params") or {}).items() for name, value in params.items()]
+    if rows:
+        parts += ["## Tuned parameters", "", md.table(["vehicle", "parameter", "value", "±"], rows, ["l", "l", "r", "r"]),
+                  ""]
+        if summary.get("param_files"):
+            parts += ["Load them with a ground station: " + ", ".join(f"`{f}`" for f in summary["param_files"])
+                      + " (`.parm`: Mission Planner, MAVProxy; `.params`: QGroundControl).", ""]
+    edges = summary.get("range_edges") or []
+    if edges:
+        parts += ["## Range edges", ""] + [f"- {e['message']}" for e in edges] + [""]
+    return parts
 
 
 def _read_json(path: Path) -> dict[str, Any]:
