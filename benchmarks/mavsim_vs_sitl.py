@@ -1,11 +1,13 @@
 """mavsim checked against the real autopilot: the same grid of gains flown on ArduCopter SITL and on
 `mavtune mavsim --autopilot ardupilot`, through the same MavlinkVehicle and cost.
 
-For each vehicle every grid point (kp, kd) is flown `--repeats` times in a shuffled order; the script writes the
-cost grids, the cost curves along kp and kd (the mean over the other gain), their Spearman rank correlation,
-where the optimum lies, and the wall and CPU time per flight, to benchmarks/results/mavsim_vs_sitl.{json,md}.
+For each vehicle every grid point (kp, kd) is flown `--repeats` times in a shuffled order; a point's cost is the
+median of its repeats (a loaded machine delays a flight's setpoints now and then, on SITL too). The script writes
+the cost grids, the cost curves along kp and kd (the mean over the other gain), their Spearman rank correlation,
+where the optimum lies, and the wall and CPU time per flight, to benchmarks/results/mavsim_vs_sitl_LABEL.json and
+gathers every label's figures in benchmarks/results/mavsim_vs_sitl.md.
 
-    python benchmarks/mavsim_vs_sitl.py --grid 5 --repeats 2
+    python benchmarks/mavsim_vs_sitl.py --grid 5 --repeats 3 --label after
 """
 
 from __future__ import annotations
@@ -58,14 +60,21 @@ def fly_grid(url: str, grid: np.ndarray, repeats: int, seed: int, config: Mavlin
             "params": {g: rg.vehicle_param for g, rg in vehicle.gains.items()}}
 
 
+def point_costs(costs: np.ndarray) -> np.ndarray:
+    """The cost of each grid point: the median of its repeats (NaN when none flew OK)."""
+    with np.errstate(all="ignore"):
+        return np.array([[np.nanmedian(c) if np.isfinite(c).any() else np.nan for c in row] for row in costs])
+
+
 def curves(costs: np.ndarray) -> dict[str, np.ndarray]:
-    """Mean cost along kp (over kd and repeats) and along kd (over kp and repeats)."""
-    return {"kp": np.nanmean(costs, axis=(1, 2)), "kd": np.nanmean(costs, axis=(0, 2))}
+    """Mean point cost along kp (over kd) and along kd (over kp)."""
+    points = point_costs(costs)
+    return {"kp": np.nanmean(points, axis=1), "kd": np.nanmean(points, axis=0)}
 
 
 def compare(grid: np.ndarray, sitl: dict, sim: dict) -> dict:
     """Rank correlations of the grids and the curves, and where each puts the optimum."""
-    a, b = np.nanmean(sitl["costs"], axis=2), np.nanmean(sim["costs"], axis=2)
+    a, b = point_costs(sitl["costs"]), point_costs(sim["costs"])
     ok = np.isfinite(a) & np.isfinite(b)
     out = {"grid_spearman": float(spearmanr(a[ok], b[ok]).statistic)}
     ca, cb = curves(sitl["costs"]), curves(sim["costs"])
@@ -92,7 +101,7 @@ def markdown(grid: np.ndarray, sitl: dict, sim: dict, cmp: dict, args, load: tup
     def row(vals):
         return " | ".join(f"{v:.3g}" for v in vals)
 
-    lines = [f"# mavsim vs ArduCopter SITL ({label})", "",
+    lines = [f"## {label}", "",
              f"`python benchmarks/mavsim_vs_sitl.py --grid {args.grid} --repeats {args.repeats} --speed {args.speed}`"
              f" — load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (2 cores, shared).", "",
              f"The same {args.grid} × {args.grid} grid of normalised (kp, kd) → ({sitl['params']['kp']}, "
@@ -117,8 +126,8 @@ def markdown(grid: np.ndarray, sitl: dict, sim: dict, cmp: dict, args, load: tup
              "| SITL cost along kd | " + row(cmp["kd"]["sitl"]) + " |",
              "| mavsim cost along kd | " + row(cmp["kd"]["mavsim"]) + " |", ""]
     for name, d in (("SITL", sitl), ("mavsim", sim)):
-        mean = np.nanmean(d["costs"], axis=2)
-        lines += [f"{name} mean cost (rows kp, columns kd):", "",
+        mean = point_costs(d["costs"])
+        lines += [f"{name} median cost (rows kp, columns kd):", "",
                   "| kp \\ kd | " + " | ".join(f"{g:g}" for g in grid) + " |", "| --- |" + " ---: |" * len(grid)]
         lines += [f"| {grid[i]:g} | " + row(mean[i]) + " |" for i in range(len(grid))] + [""]
     return "\n".join(lines)
@@ -130,8 +139,11 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--speed", type=int, default=10, help="speed-up of SITL and mavsim")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--label", default="after", help="name of this comparison (file suffix)")
+    parser.add_argument("--label", default="after", help="name of this comparison (file suffix, section title)")
+    parser.add_argument("--gather", action="store_true", help="only rebuild mavsim_vs_sitl.md from the JSON files")
     args = parser.parse_args()
+    if args.gather:
+        return gather()
     if sitl_binary() is None:
         sys.exit(SKIP_REASON)
     grid = np.linspace(0.0, 1.0, args.grid)
@@ -156,10 +168,18 @@ def main() -> None:
             "rusage_children_cpu_s": resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime,
             **{n: {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in d.items()}
                for n, d in results.items()}}
+    data["markdown"] = markdown(grid, results["sitl"], results["mavsim"], cmp, args, load, args.label)
     (RESULTS / f"mavsim_vs_sitl_{args.label}.json").write_text(json.dumps(data, indent=1))
-    text = markdown(grid, results["sitl"], results["mavsim"], cmp, args, load, args.label)
-    (RESULTS / f"mavsim_vs_sitl_{args.label}.md").write_text(text)
-    print(text)
+    print(data["markdown"])
+    gather()
+
+
+def gather() -> None:
+    """benchmarks/results/mavsim_vs_sitl.md from every mavsim_vs_sitl_LABEL.json there (oldest first)."""
+    runs = sorted(RESULTS.glob("mavsim_vs_sitl_*.json"), key=lambda p: p.stat().st_mtime)
+    parts = ["# mavsim vs ArduCopter SITL", "", "Written by `benchmarks/mavsim_vs_sitl.py`; one section per run.", ""]
+    parts += [json.loads(p.read_text()).get("markdown", "") for p in runs]
+    (RESULTS / "mavsim_vs_sitl.md").write_text("\n".join(parts))
 
 
 if __name__ == "__main__":
