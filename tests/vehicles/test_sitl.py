@@ -13,7 +13,7 @@ import threading
 import time
 
 import pytest
-from pymavlink import mavutil
+from pymavlink import mavparm, mavutil
 
 from mavtune.journal import Journal
 from mavtune.vehicles.mavlink.config import MavlinkConfig
@@ -59,8 +59,10 @@ def test_one_vehicle_avg_tunes_and_restores(tmp_path):
     params = result["tuned_params"][sitl.tuner_url]
     assert set(params) == set(ORIGINALS)
     assert 0.5 <= params["PSC_POSZ_P"] <= 3.0 and 1.0 <= params["PSC_VELZ_P"] <= 8.0 * 1.6
-    parm = (tmp_path / "tuned.parm").read_text()
-    assert f"PSC_POSZ_P {params['PSC_POSZ_P']:g}" in parm
+    parm = mavparm.MAVParmDict()
+    assert parm.load(str(tmp_path / "tuned.parm"), use_excludes=False)
+    assert {n: parm[n] for n in params} == pytest.approx(params, rel=1e-6)
+    assert (tmp_path / "tuned.params").is_file()
     print(f"SITL ×10: {result['rounds']} rounds in {wall_s:.1f} s wall, gains {result['gains']}, params {params}")
 
 

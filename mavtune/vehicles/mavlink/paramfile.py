@@ -5,14 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Mapping
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 QGC_HEADER = "# Vehicle-Id Component-Id Name Value Type"
 
 
 def format_value(value: float) -> str:
-    """A parameter value as the ground stations write it: the float32 value, shortest exact decimal."""
-    return f"{float(value):.7g}"
+    """A parameter value as MAVLink carries it: the shortest decimal that reads back as the same float32."""
+    return np.format_float_positional(np.float32(value), trim="-")
 
 
 def parm_text(params: Mapping[str, float], comment: str = "") -> str:
