@@ -139,7 +139,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--speed", type=int, default=10, help="speed-up of SITL and mavsim")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--label", default="after", help="name of this comparison (file suffix, section title)")
+    parser.add_argument("--label", default="after", help="name of this comparison (file suffix)")
+    parser.add_argument("--title", default=None, help="section title in mavsim_vs_sitl.md (default: the label)")
     parser.add_argument("--gather", action="store_true", help="only rebuild mavsim_vs_sitl.md from the JSON files")
     args = parser.parse_args()
     if args.gather:
@@ -168,7 +169,8 @@ def main() -> None:
             "rusage_children_cpu_s": resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime,
             **{n: {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in d.items()}
                for n, d in results.items()}}
-    data["markdown"] = markdown(grid, results["sitl"], results["mavsim"], cmp, args, load, args.label)
+    data["markdown"] = markdown(grid, results["sitl"], results["mavsim"], cmp, args, load,
+                                args.title or args.label)
     (RESULTS / f"mavsim_vs_sitl_{args.label}.json").write_text(json.dumps(data, indent=1))
     print(data["markdown"])
     gather()

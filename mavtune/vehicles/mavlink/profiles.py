@@ -94,7 +94,9 @@ ARDUPILOT = AutopilotProfile(
     autopilot=Autopilot.ARDUPILOT,
     mav_autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
     flight_mode="GUIDED",
-    hold_mode="LOITER",
+    # GUIDED holds the last position target once setpoints stop (ArduCopter times out velocity/acceleration targets
+    # after 3 s); LOITER would follow the RC throttle stick — on SITL without RC it descends and lands (checked)
+    hold_mode="GUIDED",
     allowed_modes=("GUIDED", "LOITER", "POSHOLD", "ALT_HOLD"),
     stream_before_switch=False,
     families=(
