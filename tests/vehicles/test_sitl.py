@@ -63,6 +63,8 @@ def test_one_vehicle_avg_tunes_and_restores(tmp_path):
     assert parm.load(str(tmp_path / "tuned.parm"), use_excludes=False)
     assert {n: parm[n] for n in params} == pytest.approx(params, rel=1e-6)
     assert (tmp_path / "tuned.params").is_file()
+    for edge in result["range_edges"]:
+        assert edge["param"] in ORIGINALS and edge["param"] in edge["message"]
     print(f"SITL ×10: {result['rounds']} rounds in {wall_s:.1f} s wall, gains {result['gains']}, params {params}")
 
 

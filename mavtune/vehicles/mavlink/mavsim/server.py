@@ -297,9 +297,10 @@ class SimVehicle:
             self._send("global_position_int", t_ms, lat, lon, int((HOME[2] - ned[2]) * 1000), int(-ned[2] * 1000),
                        int(vel[0] * 100), int(vel[1] * 100), int(vel[2] * 100), 0)
         elif msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE:
-            r = np.eye(3) if self.plant is None else self.plant.rotation[0]
-            roll, pitch = math.atan2(-r[2, 1], r[2, 2]), math.asin(max(-1.0, min(1.0, r[2, 0])))
-            self._send("attitude", t_ms, roll, pitch, 0.0, 0.0, 0.0, 0.0)
+            r = np.eye(3) if self.plant is None else self.plant.rotation[0]  # body FLU → world z-up
+            # the same attitude as FRD body → NED (conjugated by diag(1, −1, −1)), as ZYX Euler angles
+            roll, pitch = math.atan2(r[2, 1], r[2, 2]), math.asin(max(-1.0, min(1.0, r[2, 0])))
+            self._send("attitude", t_ms, roll, pitch, math.atan2(-r[1, 0], r[0, 0]), 0.0, 0.0, 0.0)
         elif msg_id == mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR and self.plant is not None:
             d_cm = int(round(float(self.plant.altitude_measured_m[0]) * 100))
             self._send("distance_sensor", t_ms, 5, 4000, min(max(d_cm, 5), 4000), mavlink.MAV_DISTANCE_SENSOR_LASER,
