@@ -112,7 +112,7 @@ def _connect_tcp(url: str, timeout_s: float) -> mavutil.mavfile:
             time.sleep(0.1)
 
 
-def guided_hover(master: mavutil.mavfile, altitude_m: float = HOVER_M, timeout_s: float = 90.0) -> None:
+def guided_hover(master: mavutil.mavfile, altitude_m: float = HOVER_M, timeout_s: float = 150.0) -> None:
     """What a pilot does before tuning: GUIDED, arm (retried until pre-arm checks pass), take off (retried until
     it climbs; ArduCopter disarms again when a takeoff does not follow soon), wait until near the altitude."""
     deadline = time.monotonic() + timeout_s
