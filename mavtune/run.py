@@ -24,6 +24,7 @@ from rich.table import Table
 
 from mavtune import interrupts
 from mavtune.config import Config
+from mavtune.edges import range_edges
 from mavtune.errors import Interrupted, MavtuneError
 from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal
@@ -213,7 +214,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
         _write_json(out_dir / "config.json", config.model_dump(mode="json"))
         fleet: Fleet | None = None
         tuner: Tuner | None = None
-        started, status, error = time.time(), "error", None
+        started, status, error, outcome = time.time(), "error", None, {}
         try:
             console.print(_fleet_line(config))
             fleet = build_fleet(config, out_dir)
@@ -225,6 +226,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
             status = "finished"
             if hasattr(fleet, "tuned"):
                 fleet.tuned = tuner.gains  # a real fleet keeps these on the vehicles only when told to
+            outcome = tuned_outcome(fleet, tuner.gains, settings, out_dir)
         except StageDone:
             status = "stage"
         except BaseException as exc:  # an interrupt can surface as another error from inside an import
@@ -245,7 +247,8 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                         fleet.close()  # real vehicles get their original gains back here, whatever happened
                 finally:
                     result = tuner.snapshot() if tuner is not None else None
-                    summary = _summary(config, plan, result, fleet, status, error, time.time() - started, ignored)
+                    summary = _summary(config, plan, result, fleet, status, error, time.time() - started, ignored,
+                                       outcome)
                     (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
                     _write_json(out_dir / "result.json", summary)
             if report and result is not None:
@@ -262,6 +265,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console.print(f"tuned after {counted(len(result.rounds), 'round')}, {counted(result.flights, 'flight')} "
                   f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
     console.print(_result_table(result))
+    print_outcome(console, outcome)
     console.print(f"run folder: {out_dir}")
     return result
 
@@ -328,7 +332,7 @@ def _report(console: Console, out_dir: Path, result: TuningResult, config: Confi
 
 
 def _summary(config: Config, plan: Plan, result: TuningResult | None, fleet: Fleet | None, status: str,
-             error: str | None, wall_s: float, warnings: list[str]) -> dict[str, Any]:
+             error: str | None, wall_s: float, warnings: list[str], outcome: dict[str, Any]) -> dict[str, Any]:
     """What result.json says: how the run ended, the gains, every round (from 0), what the fleet reports."""
     summary: dict[str, Any] = {"status": status, "error": error, "gains": None, "rounds": 0, "flights": 0,
                                "report": None, "warnings": warnings}
@@ -345,6 +349,7 @@ def _summary(config: Config, plan: Plan, result: TuningResult | None, fleet: Fle
                 "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s}}
     if fleet is not None and hasattr(fleet, "report"):
         summary |= fleet.report()  # e.g. drop-out events, original parameters and whether they were restored
+    summary |= outcome
     return summary
 
 
@@ -353,6 +358,34 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
     partial = path.with_suffix(".json.partial")
     partial.write_text(json.dumps(data, indent=2, default=str))
     os.replace(partial, path)
+
+
+def tuned_outcome(fleet: Fleet, gains: dict[str, float], settings, out_dir: Path) -> dict[str, Any]:
+    """What a finished run says beyond the gains: the range edges they lie at and, for MAVLink vehicles, the gains
+    as each vehicle's parameters (± the search tolerance) and the ground-station parameter files written."""
+    edges = range_edges(gains, settings.space, settings.epsilon)
+    outcome: dict[str, Any] = {}
+    if hasattr(fleet, "explain_edge"):
+        edges = [fleet.explain_edge(e) for e in edges]
+        tolerance = {n: settings.epsilon * (hi - lo) for n, (lo, hi) in settings.space.items()}
+        outcome["tuned_params"] = fleet.parameters(gains)
+        outcome["tuned_params_tolerance"] = fleet.parameter_tolerances(tolerance)
+        outcome["param_files"] = [p.name for p in fleet.write_param_files(gains, out_dir)]
+    outcome["range_edges"] = [e.to_dict() for e in edges]
+    return outcome
+
+
+def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
+    """The tuned parameters of each vehicle, the files to load them from, and any range edge reached."""
+    tolerance = outcome.get("tuned_params_tolerance", {})
+    for vehicle, params in outcome.get("tuned_params", {}).items():
+        values = ", ".join(f"{n} = {v:.4g} ± {tolerance.get(vehicle, {}).get(n, 0):.2g}" for n, v in params.items())
+        console.print(f"{vehicle}: {values}", highlight=False)
+    if outcome.get("param_files"):
+        console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
+                      f"{', '.join(outcome['param_files'])}", highlight=False)
+    for edge in outcome.get("range_edges", []):
+        console.print(f"[yellow]range edge:[/] {edge['message']}", highlight=False)
 
 
 def _fleet_line(config: Config) -> str:

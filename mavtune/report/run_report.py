@@ -89,6 +89,25 @@ def _write(out: Path, result, config, surface: Any, title: str) -> Path:
     return path
 
 
+def tuned_params_section(summary: dict) -> list[str]:
+    """The tuned gains as each vehicle's parameters (± the search tolerance), the parameter files, and the range
+    edges the gains reached (from result.json; nothing when it has none)."""
+    parts: list[str] = []
+    tolerance = summary.get("tuned_params_tolerance") or {}
+    rows = [[f"`{vehicle}`", f"`{name}`", md.num(value, 4), md.num(tolerance.get(vehicle, {}).get(name, math.nan), 2)]
+            for vehicle, params in (summary.get("tuned_params") or {}).items() for name, value in params.items()]
+    if rows:
+        parts += ["## Tuned parameters", "", md.table(["vehicle", "parameter", "value", "±"], rows, ["l", "l", "r", "r"]),
+                  ""]
+        if summary.get("param_files"):
+            parts += ["Load them with a ground station: " + ", ".join(f"`{f}`" for f in summary["param_files"])
+                      + " (`.parm`: Mission Planner, MAVProxy; `.params`: QGroundControl).", ""]
+    edges = summary.get("range_edges") or []
+    if edges:
+        parts += ["## Range edges", ""] + [f"- {e['message']}" for e in edges] + [""]
+    return parts
+
+
 def _guarded(section: Callable[[Report], list[str]], rep: Report) -> list[str]:
     """A section's lines; one that fails on data it did not foresee is replaced by a line saying so, so the rest of
     the report is still written (the error is a bug to fix; the tests check no section fails)."""
@@ -164,7 +183,11 @@ def _fleet_events(rep: Report) -> list[str]:
     return ["## Fleet events", "", _events_table(events), ""] if events else []
 
 
-SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _plan_vs_actual, _tuning, _timeline,
+def _tuned_params(rep: Report) -> list[str]:
+    return tuned_params_section(rep.summary)
+
+
+SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _tuned_params, _plan_vs_actual, _tuning, _timeline,
                                                   _cost_surface, _rounds, _fleet_events]
 
 

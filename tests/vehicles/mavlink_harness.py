@@ -12,7 +12,7 @@ from mavtune.vehicles.mavlink.config import MavlinkConfig, SafetyConfig
 from mavtune.vehicles.mavlink.link import MavlinkLink
 from mavtune.vehicles.mavlink.params import ParamClient
 
-SPEED = 20.0  # simulated seconds per wall second
+SPEED = 10.0  # simulated seconds per wall second (setpoints act on arrival: a higher speed-up magnifies the link latency)
 
 
 def free_udp_port() -> int:
@@ -23,7 +23,8 @@ def free_udp_port() -> int:
 
 
 @contextmanager
-def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1):
+def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1,
+           duration: float = 120.0):
     """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT); kills it afterwards."""
     port = free_udp_port()
     with mavsim_on(port, *args, autopilot=autopilot, seed=seed, speed=speed, sysid=sysid):
@@ -35,7 +36,7 @@ def mavsim_on(port: int, *args: str, autopilot: str = "px4", seed: int = 0, spee
     """Run `mavtune mavsim` sending to 127.0.0.1:port until the block ends."""
     cmd = [sys.executable, "-c", "from mavtune.cli import main; main()", "mavsim", "--port", str(port),
            "--autopilot", autopilot, "--seed", str(seed), "--speed", str(speed), "--sysid", str(sysid),
-           "--noise-free", "--duration", "120", *args]
+           "--noise-free", "--duration", str(duration), *args]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         yield

@@ -28,6 +28,13 @@ def test_tune_one_px4_vehicle_end_to_end(tmp_path):
     assert summary["original_params"] == {url: PX4_ORIGINALS}
     assert set(summary["gains"]) == {"kp", "kd"} and all(0 <= v <= 1 for v in summary["gains"].values())
     assert summary["flights_by_status"]["ok"] == summary["flights"] > 0
+    tuned = summary["tuned_params"][url]  # the gains in the autopilot's own names and units, and as files
+    assert tuned == pytest.approx({"MPC_Z_P": 0.1 + 1.4 * summary["gains"]["kp"],
+                                   "MPC_Z_VEL_P_ACC": 2.0 + 13.0 * summary["gains"]["kd"]})
+    assert summary["param_files"] == ["tuned.parm", "tuned.params"]
+    assert (tmp_path / "tuned.parm").read_text().count("\n") == 3  # a comment and two NAME VALUE lines
+    for edge in summary["range_edges"]:  # every edge names its parameter and what to do
+        assert edge["param"] in PX4_ORIGINALS and edge["hint"] and edge["param"] in edge["message"]
     on_disk = json.loads((tmp_path / "result.json").read_text())
     assert on_disk["gains"] == summary["gains"] and on_disk["restored"] is True
     assert json.loads((tmp_path / "original_params.json").read_text()) == {url: PX4_ORIGINALS}

@@ -45,7 +45,7 @@ DEFAULT_GAINS: dict[Autopilot, dict[str, GainParam]] = {
     },
     # ArduCopter cascade, same structure: PSC_POSZ_P (1/s) then PSC_VELZ_P (1/s); 4.7 names are found by probing.
     Autopilot.ARDUPILOT: {
-        "kp": GainParam(param="PSC_POSZ_P", min=0.5, max=3.0),
+        "kp": GainParam(param="PSC_POSZ_P", min=1.0, max=3.0),
         "kd": GainParam(param="PSC_VELZ_P", min=1.0, max=8.0),
     },
 }

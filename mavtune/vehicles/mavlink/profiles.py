@@ -88,11 +88,15 @@ PX4 = AutopilotProfile(
 )
 
 # ArduCopter <= 4.6 names first; Copter 4.7 renamed them PSC_D_* and scaled the acceleration gains by 0.1.
+# Limits: the @Range of AC_PosControl's parameter metadata (PSC_POSZ_P 1–3, PSC_VELZ_P 1–8, PSC_VELZ_I 0.02–1, kept
+# from 0 because 0 is the default, PSC_ACCZ_P 0.2–1.5, _I 0–3, _D 0–0.4); PX4: @min/@max of mc_pos_control.
 ARDUPILOT = AutopilotProfile(
     autopilot=Autopilot.ARDUPILOT,
     mav_autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
     flight_mode="GUIDED",
-    hold_mode="LOITER",
+    # GUIDED holds the last position target once setpoints stop (ArduCopter times out velocity/acceleration targets
+    # after 3 s); LOITER would follow the RC throttle stick — on SITL without RC it descends and lands (checked)
+    hold_mode="GUIDED",
     allowed_modes=("GUIDED", "LOITER", "POSHOLD", "ALT_HOLD"),
     stream_before_switch=False,
     families=(
@@ -105,16 +109,16 @@ ARDUPILOT = AutopilotProfile(
         (("PSC_ACCZ_D", 1.0), ("PSC_D_ACC_D", 0.1)),
     ),
     specs=(
-        ParamSpec("PSC_POSZ_P", 1.0, 0.5, 3.0),
+        ParamSpec("PSC_POSZ_P", 1.0, 1.0, 3.0),
         ParamSpec("PSC_VELZ_P", 5.0, 1.0, 8.0),
-        ParamSpec("PSC_VELZ_I", 0.0, 0.0, 10.0),
+        ParamSpec("PSC_VELZ_I", 0.0, 0.0, 1.0),
         ParamSpec("PSC_VELZ_D", 0.0, 0.0, 1.0),
         ParamSpec("PSC_ACCZ_P", 0.5, 0.2, 1.5),
         ParamSpec("PSC_ACCZ_I", 1.0, 0.0, 3.0),
         ParamSpec("PSC_ACCZ_D", 0.0, 0.0, 0.4),
-        ParamSpec("PSC_D_POS_P", 1.0, 0.5, 3.0),
+        ParamSpec("PSC_D_POS_P", 1.0, 1.0, 3.0),
         ParamSpec("PSC_D_VEL_P", 5.0, 1.0, 8.0),
-        ParamSpec("PSC_D_VEL_I", 0.0, 0.0, 10.0),
+        ParamSpec("PSC_D_VEL_I", 0.0, 0.0, 1.0),
         ParamSpec("PSC_D_VEL_D", 0.0, 0.0, 1.0),
         ParamSpec("PSC_D_ACC_P", 0.05, 0.02, 0.15),
         ParamSpec("PSC_D_ACC_I", 0.1, 0.0, 0.3),

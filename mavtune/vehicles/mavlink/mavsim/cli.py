@@ -21,6 +21,7 @@ def mavsim_command(
     on_ground: Annotated[bool, typer.Option(help="start landed and disarmed (accepts arm and takeoff commands)")] = False,
     noise_free: Annotated[bool, typer.Option(help="no wind, no sensor noise")] = False,
     fault: Annotated[Optional[list[str]], typer.Option(help=f"inject a fault (repeatable): {FAULT_HELP}")] = None,
+    link_delay_ms: Annotated[float, typer.Option(help="delay every message by this much each way, wall ms")] = 0.0,
     duration: Annotated[Optional[float], typer.Option(help="stop after this many wall seconds")] = None,
     verbose: Annotated[bool, typer.Option(help="log faults and mode changes")] = False,
 ) -> None:
@@ -28,9 +29,10 @@ def mavsim_command(
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="mavsim: %(message)s")
     vehicle = SimVehicle(
         port, autopilot, seed=seed, speed=speed, system_id=system_id, altitude_m=altitude, on_ground=on_ground,
-        noise_free=noise_free, faults=parse_faults(fault),
+        noise_free=noise_free, faults=parse_faults(fault), link_delay_s=link_delay_ms / 1000.0,
     )
-    typer.echo(f"mavsim: {autopilot} sysid {system_id} → udp 127.0.0.1:{port}, speed ×{speed:g}, plant {vehicle.plant_kind}")
+    typer.echo(f"mavsim: {autopilot} sysid {system_id} → udp 127.0.0.1:{port}, speed ×{speed:g}"
+               + (f", link delay {link_delay_ms:g} ms each way" if link_delay_ms else ""))
     try:
         vehicle.run(duration)
     except KeyboardInterrupt:

@@ -1,30 +1,39 @@
 """A simulated PX4/ArduPilot vehicle on a real MAVLink UDP endpoint, flying `mavtune.sim`'s plant.
 
 Like PX4 SITL it *sends* to 127.0.0.1:PORT and answers whoever listens there (ground URL `udpin:127.0.0.1:PORT`).
-It speaks HEARTBEAT (autopilot type, custom modes, armed flag), the PARAM_* protocol with the autopilot's
-parameter names and defaults (PARAM_SET is echoed by PARAM_VALUE), MAV_CMD_DO_SET_MODE, arming and takeoff,
-streams LOCAL_POSITION_NED at 50 Hz, DISTANCE_SENSOR at 20 Hz and EXTENDED_SYS_STATE at 1 Hz (vehicle time),
-and follows SET_POSITION_TARGET_LOCAL_NED in OFFBOARD (PX4) or GUIDED (ArduPilot).
+It speaks what a ground station and mavtune rely on, as the real autopilots do (checked against ArduCopter SITL):
+HEARTBEAT at 1 Hz (type HEXAROTOR, the autopilot's custom modes and base_mode flags, from the first second — the
+plant is compiled in the background meanwhile), the PARAM_* protocol with the autopilot's names and defaults
+(ArduPilot stores any PARAM_SET, negative or of another type, and echoes it; PX4 drops a PARAM_SET whose type is
+not the parameter's), MAV_CMD_DO_SET_MODE / SET_MODE, arming and takeoff, SET_MESSAGE_INTERVAL,
+REQUEST_MESSAGE and AUTOPILOT_VERSION, and streams LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE,
+DISTANCE_SENSOR, SYS_STATUS, EXTENDED_SYS_STATE and HOME_POSITION. It follows SET_POSITION_TARGET_LOCAL_NED in
+OFFBOARD (PX4) or GUIDED (ArduPilot) from the moment it arrives (ArduPilot advances the target by its velocity,
+PX4 holds it); entering GUIDED holds the current position until a new target comes. `link_delay_s` delays every
+message each way.
 
-Gain mapping (both autopilots run a P position loop feeding a P velocity loop, in acceleration units):
-k_x(z) = POS_P · VEL_P [1/s²] and k_v(z) = VEL_P [1/s], with POS_P = MPC_Z_P / PSC_POSZ_P / PSC_D_POS_P and
-VEL_P = MPC_Z_VEL_P_ACC / PSC_VELZ_P / PSC_D_VEL_P. The integral and acceleration-loop gains are stored and
-echoed but do not change the plant. The diverge fault adds a growing altitude oscillation to the reference
-while the named parameter is above its threshold (the plant refuses negative gains).
+Gain mapping: see `mavtune.vehicles.mavlink.mavsim.cascade` (ArduCopter's PSC_POSZ_P → PSC_VELZ_P → PSC_ACCZ_*
+cascade with its limits and filters) and, for PX4, the P position loop feeding a P velocity loop in acceleration
+units: k_x(z) = MPC_Z_P · MPC_Z_VEL_P_ACC [1/s²], k_v(z) = MPC_Z_VEL_P_ACC [1/s]. The diverge fault adds a growing
+altitude oscillation to the reference while the named parameter is above its threshold.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
+from collections import deque
 from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavtune.errors import MavtuneError
+from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude
 from mavtune.vehicles.mavlink.mavsim.faults import Faults
 from mavtune.vehicles.mavlink.mavsim.plant import make_plant
 from mavtune.vehicles.mavlink.params import as_float32
@@ -33,15 +42,42 @@ from mavtune.vehicles.mavlink.profiles import ARDUPILOT, PX4, Autopilot, Autopil
 log = logging.getLogger(__name__)
 
 DT_S = 0.01  # plant step
-POSITION_HZ = 50.0
-DISTANCE_HZ = 20.0
+MAX_BURST_S = 3 * DT_S  # vehicle time stepped between two looks at the link
+HEARTBEAT_HZ = 1.0  # both autopilots: 1 Hz (of vehicle time under a speed-up, as SITL; at least 1 Hz of wall time)
+STREAM_HZ = {  # default rates (vehicle time); SET_MESSAGE_INTERVAL changes them
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 50.0,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: 10.0,
+    mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: 20.0,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.2,
+}
+HOME = (-35.363262, 149.165237, 584.0)  # lat, lon (deg), altitude AMSL (m): ArduPilot SITL's default home
+EARTH_RADIUS_M = 6378137.0
 OFFBOARD_LOSS_S = 1.0  # PX4 COM_OF_LOSS_T: OFFBOARD without setpoints for this long falls back to Hold
+GUIDED_TIMEOUT_S = 3.0  # ArduCopter GUIDED: a velocity/acceleration target older than this is stopped
 FLAVOURS = ("px4", "ardupilot", "ardupilot-4.7")
+VERSIONS = {"px4": (1, 15, 0), "ardupilot": (4, 6, 0), "ardupilot-4.7": (4, 7, 0)}
 POS_P_NAMES = ("MPC_Z_P", "PSC_POSZ_P", "PSC_D_POS_P")
 VEL_P_NAMES = ("MPC_Z_VEL_P_ACC", "PSC_VELZ_P", "PSC_D_VEL_P")
 IGNORE_POS = 0b111
 IGNORE_VEL = 0b111 << 3
 IGNORE_ACC = 0b111 << 6
+CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+                | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED)
+# base_mode flags besides CUSTOM_MODE_ENABLED and SAFETY_ARMED, as the autopilots send them (PX4 commander;
+# ArduCopter reports MANUAL_INPUT | STABILIZE | GUIDED in every mode: 217 armed)
+_F = mavlink
+PX4_MODE_FLAGS = {"MANUAL": _F.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED,
+                  "ACRO": _F.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED,
+                  "STABILIZED": _F.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | _F.MAV_MODE_FLAG_STABILIZE_ENABLED,
+                  "ALTCTL": _F.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | _F.MAV_MODE_FLAG_STABILIZE_ENABLED,
+                  "POSCTL": _F.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | _F.MAV_MODE_FLAG_STABILIZE_ENABLED
+                  | _F.MAV_MODE_FLAG_GUIDED_ENABLED}
+PX4_AUTO_FLAGS = _F.MAV_MODE_FLAG_AUTO_ENABLED | _F.MAV_MODE_FLAG_GUIDED_ENABLED | _F.MAV_MODE_FLAG_STABILIZE_ENABLED
+ARDUPILOT_FLAGS = (_F.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | _F.MAV_MODE_FLAG_STABILIZE_ENABLED
+                   | _F.MAV_MODE_FLAG_GUIDED_ENABLED)
 
 
 def flavour_params(flavour: str) -> tuple[AutopilotProfile, dict[str, float]]:
@@ -54,13 +90,21 @@ def flavour_params(flavour: str) -> tuple[AutopilotProfile, dict[str, float]]:
     raise MavtuneError(f"unknown autopilot {flavour!r} for mavsim; use {', '.join(FLAVOURS)}")
 
 
+def base_mode(profile: AutopilotProfile, mode: str, armed: bool) -> int:
+    """The HEARTBEAT base_mode the real autopilot sends in `mode` (PX4 POSCTL 217, Hold/OFFBOARD 157 armed)."""
+    if profile.autopilot is Autopilot.PX4:
+        flags = PX4_MODE_FLAGS.get(mode, PX4_AUTO_FLAGS)
+    else:
+        flags = ARDUPILOT_FLAGS
+    return flags | mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+
+
 @dataclass
 class _Target:
     pos: np.ndarray  # NED
     vel: np.ndarray
     acc: np.ndarray
-    t_s: float  # vehicle time the setpoint is for (its time_boot_ms), for extrapolation
-    received_s: float  # vehicle time it arrived, for the offboard-loss failsafe
+    received_s: float  # vehicle time it arrived: applied from then (extrapolated by ArduPilot), and for failsafes
     received_wall_s: float  # wall time it arrived (the link lives in wall time even when the sim runs faster)
 
 
@@ -79,23 +123,32 @@ class SimVehicle:
         on_ground: bool = False,
         noise_free: bool = False,
         faults: Faults | None = None,
+        link_delay_s: float = 0.0,
     ):
         if not (speed > 0 and math.isfinite(speed)):
             raise MavtuneError(f"--speed must be a positive number, got {speed}")
         if not 0 < port < 65536:
             raise MavtuneError(f"--port must be in 1..65535, got {port}")
+        if not (link_delay_s >= 0 and math.isfinite(link_delay_s)):
+            raise MavtuneError(f"--link-delay-ms must be a number >= 0, got {link_delay_s * 1000:g}")
         self.profile, self.params = flavour_params(flavour)
+        self.version = VERSIONS[flavour]
         self.param_names = sorted(self.params)
         self.speed = speed
+        self.link_delay_s = link_delay_s
         self.faults = faults or Faults()
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=system_id, source_component=1)
+        self._send_lock = threading.Lock()
         self.system_id = system_id
-        self.plant, self.plant_kind = make_plant(seed, noise_free)
         self.t_s = 0.0
         self.armed = not on_ground
         self.airborne = not on_ground
-        start = np.array([0.0, 0.0, altitude_m if self.airborne else 0.0])
-        self.plant.reset(start)
+        self._start_m = np.array([0.0, 0.0, altitude_m if self.airborne else 0.0])
+        self.plant: Any = None  # built (and its kernel compiled) in the background: heartbeats flow meanwhile
+        self.plant_kind = "starting"
+        self._plant_args = (seed, noise_free)
+        self._built: tuple[Any, str] | None = None
+        self.cascade = ArduCopterAltitude() if self.profile.autopilot is Autopilot.ARDUPILOT else None
         self.mode = "POSCTL" if self.profile.autopilot is Autopilot.PX4 else "LOITER"
         self._hold_ned = self._ned_position()
         self._target: _Target | None = None
@@ -105,26 +158,54 @@ class SimVehicle:
         self._silent_until = 0.0  # wall time until which the link is down (heartbeat-gap fault)
         self._drop_counts: dict[str, int] = {}
         self._poisoned: dict[str, float] = {}
-        self._next = {"position": 0.0, "distance": 0.0, "ext": 0.0, "hb": 0.0}
-        self._hb_wall = 0.0
+        self._rates = dict(STREAM_HZ)
+        self._next = {msg_id: 0.0 for msg_id in STREAM_HZ}
+        self._next_hb, self._hb_wall = 0.0, 0.0
+        self._inbox: deque = deque()  # (wall time due, message) under the link delay
+        self._outbox: deque = deque()  # (wall time due, send)
         self._stopped = False
         self._diverge_since: float | None = None
-        self._apply_gains()
 
     # ---- plant ---------------------------------------------------------------------------------------------
+    def _build_plant(self) -> None:
+        """Build the plant and compile its kernel (seconds, with numba) while the loop already answers."""
+        plant, kind = make_plant(*self._plant_args)
+        plant.reset(self._start_m)
+        plant.step(self._start_m)  # the first step compiles
+        plant.reset(self._start_m)
+        self._built = (plant, kind)  # the serving loop adopts it (one thread touches the plant)
+
+    def _adopt_plant(self) -> None:
+        self.plant, self.plant_kind = self._built
+        self._next_hb = 0.0  # say at once that the vehicle is up (MAV_STATE_ACTIVE)
+        self._apply_gains()
+        log.info("plant ready: %s", self.plant_kind)
+
     def _ned_position(self) -> np.ndarray:
-        p = self.plant.position_m[0]
+        p = self._start_m if self.plant is None else self.plant.position_m[0]
         return np.array([p[0], -p[1], -p[2]])
 
+    def _ned_velocity(self) -> np.ndarray:
+        v = np.zeros(3) if self.plant is None else self.plant.velocity_mps[0]
+        return np.array([v[0], -v[1], -v[2]])
+
     def _apply_gains(self) -> None:
-        pos_p = next(self.params[n] for n in POS_P_NAMES if n in self.params)
-        vel_p = next(self.params[n] for n in VEL_P_NAMES if n in self.params)
-        self.plant.set_gains(pos_p * vel_p, vel_p)
         diverging = any(self.params.get(n, -math.inf) > thr for n, thr in self.faults.diverge.items())
         if diverging and self._diverge_since is None:
             self._diverge_since = self.t_s
         elif not diverging:
             self._diverge_since = None
+        if self.plant is None:
+            return
+        if self.cascade is not None:  # ArduCopter: the cascade commands the acceleration; the plant's PD is off
+            for name, value in self.params.items():
+                canonical, scale = self.profile.family(name)[0][0], dict(self.profile.family(name))[name]
+                self.cascade.gains[canonical] = value / scale
+            self.plant.set_gains(0.0, 0.0)
+            return
+        pos_p = next(self.params[n] for n in POS_P_NAMES if n in self.params)
+        vel_p = next(self.params[n] for n in VEL_P_NAMES if n in self.params)
+        self.plant.set_gains(max(pos_p, 0.0) * max(vel_p, 0.0), max(vel_p, 0.0))  # the plant takes no negative gain
 
     def _reference(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The NED reference the autopilot tracks now, by mode."""
@@ -133,24 +214,35 @@ class SimVehicle:
             return self._hold_ned, zero, zero
         if self.mode == self.profile.flight_mode and self._target is not None:
             tg = self._target
-            if (self.profile.autopilot is Autopilot.PX4 and self.t_s - tg.received_s > OFFBOARD_LOSS_S
-                    and time.monotonic() - tg.received_wall_s > max(OFFBOARD_LOSS_S / self.speed, 0.5)):
-                log.info("offboard setpoints lost for %.1f s: failsafe to %s", self.t_s - tg.received_s,
-                         self.profile.hold_mode)
-                self._set_mode(self.profile.hold_mode)
-                return self._hold_ned, zero, zero
-            dt = min(max(self.t_s - tg.t_s, 0.0), 0.2)
+            age_s = self.t_s - tg.received_s
+            if self.profile.autopilot is Autopilot.PX4:
+                # the link lives in wall time: a sped-up simulation waits COM_OF_LOSS_T of both clocks
+                if age_s > OFFBOARD_LOSS_S and time.monotonic() - tg.received_wall_s > OFFBOARD_LOSS_S:
+                    log.info("offboard setpoints lost for %.1f s: failsafe to %s", age_s, self.profile.hold_mode)
+                    self._set_mode(self.profile.hold_mode)
+                    return self._hold_ned, zero, zero
+                return tg.pos, tg.vel, tg.acc  # PX4 holds the setpoint as it came
+            dt = min(age_s, GUIDED_TIMEOUT_S)  # ArduCopter advances the target by its velocity from its arrival
             return tg.pos + tg.vel * dt + 0.5 * tg.acc * dt * dt, tg.vel + tg.acc * dt, tg.acc
         return self._hold_ned, zero, zero
 
     def _step(self) -> None:
+        if self.plant is None:
+            return  # booting: vehicle time stands still until the plant is ready
         pos, vel, acc = self._reference()
         if self._diverge_since is not None:  # the diverge fault: a growing altitude oscillation, as from a bad gain
             t = self.t_s - self._diverge_since
             pos = pos + np.array([0.0, 0.0, min(0.1 * math.exp(t / 0.5), 4.0) * math.sin(2 * math.pi * 0.5 * t)])
         flip = np.array([1.0, -1.0, -1.0])  # NED → the plant's z-up frame (a proper rotation)
+        pos, vel, acc = pos * flip, vel * flip, acc * flip
         if self.airborne:
-            self.plant.step(pos * flip, vel * flip, acc * flip)
+            if self.cascade is not None:
+                p, v = self.plant.position_m[0], self.plant.velocity_mps[0]
+                acc = acc.copy()
+                acc[2] = self.cascade.step(DT_S, pos[2], vel[2], acc[2], p[2], v[2])
+                pos, vel = pos.copy(), vel.copy()
+                pos[2], vel[2] = p[2], v[2]
+            self.plant.step(pos, vel, acc)
         self.t_s += DT_S
         for when, action in list(self._timed):
             if self.t_s >= when:
@@ -171,61 +263,99 @@ class SimVehicle:
         if mode != self.mode:
             self._hold_ned = self._ned_position()
             self.mode = mode
+            if self.profile.autopilot is Autopilot.ARDUPILOT:
+                self._target = None  # ArduCopter enters GUIDED holding where it is, not at an old target
 
     # ---- messages out ---------------------------------------------------------------------------------------
     def _silent(self) -> bool:
         return time.monotonic() < self._silent_until
 
+    def _send(self, name: str, *args: Any) -> None:
+        """Send message `name` (pymavlink's `<name>_send`) now, or after the link delay."""
+        send: Callable[[], None] = lambda: getattr(self.conn.mav, name + "_send")(*args)  # noqa: E731
+        if self.link_delay_s > 0:
+            self._outbox.append((time.monotonic() + self.link_delay_s, send))
+        else:
+            with self._send_lock:
+                send()
+
     def _heartbeat(self) -> None:
-        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
-        if self.armed:
-            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         status = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
-        self.conn.mav.heartbeat_send(
-            mavlink.MAV_TYPE_QUADROTOR, self.profile.mav_autopilot, base, self.profile.custom_mode_word(self.mode), status
-        )
+        if self.plant is None:
+            status = mavlink.MAV_STATE_BOOT
+        self._send("heartbeat", mavlink.MAV_TYPE_HEXAROTOR, self.profile.mav_autopilot,
+                   base_mode(self.profile, self.mode, self.armed), self.profile.custom_mode_word(self.mode), status)
+
+    def _stream(self, msg_id: int) -> None:
+        """Send one sample of a streamed message."""
+        t_ms = int(self.t_s * 1000)
+        ned, vel = self._ned_position(), self._ned_velocity()
+        if msg_id == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
+            self._send("local_position_ned", t_ms, *ned, *vel)
+        elif msg_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
+            lat, lon = _latlon(ned)
+            self._send("global_position_int", t_ms, lat, lon, int((HOME[2] - ned[2]) * 1000), int(-ned[2] * 1000),
+                       int(vel[0] * 100), int(vel[1] * 100), int(vel[2] * 100), 0)
+        elif msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE:
+            r = np.eye(3) if self.plant is None else self.plant.rotation[0]  # body FLU → world z-up
+            # the same attitude as FRD body → NED (conjugated by diag(1, −1, −1)), as ZYX Euler angles
+            roll, pitch = math.atan2(r[2, 1], r[2, 2]), math.asin(max(-1.0, min(1.0, r[2, 0])))
+            self._send("attitude", t_ms, roll, pitch, math.atan2(-r[1, 0], r[0, 0]), 0.0, 0.0, 0.0)
+        elif msg_id == mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR and self.plant is not None:
+            d_cm = int(round(float(self.plant.altitude_measured_m[0]) * 100))
+            self._send("distance_sensor", t_ms, 5, 4000, min(max(d_cm, 5), 4000), mavlink.MAV_DISTANCE_SENSOR_LASER,
+                       0, mavlink.MAV_SENSOR_ROTATION_PITCH_270, 0)
+        elif msg_id == mavlink.MAVLINK_MSG_ID_SYS_STATUS:
+            sensors = mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+            self._send("sys_status", sensors, sensors, sensors, 200, 16000, -1, -1, 0, 0, 0, 0, 0, 0)
+        elif msg_id == mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
+            landed = mavlink.MAV_LANDED_STATE_IN_AIR if self.airborne else mavlink.MAV_LANDED_STATE_ON_GROUND
+            self._send("extended_sys_state", mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
+        elif msg_id == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
+            lat, lon = _latlon(np.zeros(3))
+            self._send("home_position", lat, lon, int(HOME[2] * 1000), 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
+                       0.0, 0.0, 0.0)
+        elif msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            major, minor, patch = self.version
+            sw = (major << 24) | (minor << 16) | (patch << 8) | mavlink.FIRMWARE_VERSION_TYPE_OFFICIAL
+            self._send("autopilot_version", CAPABILITIES, sw, 0, 0, 0, b"mavsim\0\0", bytes(8), bytes(8), 0, 0,
+                       self.system_id)
 
     def _periodic(self) -> None:
+        now = time.monotonic()
+        while self._outbox and self._outbox[0][0] <= now:
+            with self._send_lock:
+                self._outbox.popleft()[1]()
         if self._silent():
             return
-        now = time.monotonic()
-        t_ms = int(self.t_s * 1000)
-        if self.t_s >= self._next["hb"] or now - self._hb_wall >= 0.2:
+        if self.t_s >= self._next_hb or now - self._hb_wall >= 1.0 / HEARTBEAT_HZ:
             self._heartbeat()
-            self._next["hb"], self._hb_wall = self.t_s + 1.0, now
-        if self.t_s >= self._next["position"]:
-            ned = self._ned_position()
-            v = self.plant.velocity_mps[0]
-            self.conn.mav.local_position_ned_send(t_ms, *ned, v[0], -v[1], -v[2])
-            self._next["position"] = self.t_s + 1.0 / POSITION_HZ - 1e-9
-        if self.t_s >= self._next["distance"]:
-            d_cm = int(round(float(self.plant.altitude_measured_m[0]) * 100))
-            self.conn.mav.distance_sensor_send(
-                t_ms, 5, 4000, min(max(d_cm, 5), 4000), mavlink.MAV_DISTANCE_SENSOR_LASER, 0,
-                mavlink.MAV_SENSOR_ROTATION_PITCH_270, 0,
-            )
-            self._next["distance"] = self.t_s + 1.0 / DISTANCE_HZ - 1e-9
-        if self.t_s >= self._next["ext"]:
-            landed = mavlink.MAV_LANDED_STATE_IN_AIR if self.airborne else mavlink.MAV_LANDED_STATE_ON_GROUND
-            self.conn.mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
-            self._next["ext"] = self.t_s + 1.0
+            self._next_hb, self._hb_wall = self.t_s + 1.0 / HEARTBEAT_HZ, now
+        if self.plant is None:
+            return
+        for msg_id, hz in self._rates.items():
+            if hz > 0 and self.t_s >= self._next[msg_id]:
+                self._stream(msg_id)
+                self._next[msg_id] = self.t_s + 1.0 / hz - 1e-9
 
     def _param_value(self, name: str) -> None:
-        self.conn.mav.param_value_send(
-            name.encode(), self.params[name], mavlink.MAV_PARAM_TYPE_REAL32, len(self.params), self.param_names.index(name)
-        )
+        self._send("param_value", name.encode(), self.params[name], mavlink.MAV_PARAM_TYPE_REAL32, len(self.params),
+                   self.param_names.index(name))
 
     def _ack(self, command: int, result: int) -> None:
-        self.conn.mav.command_ack_send(command, result)
+        self._send("command_ack", command, result)
 
     # ---- messages in ----------------------------------------------------------------------------------------
     def _receive(self) -> None:
+        now = time.monotonic()
         while True:
             msg = self.conn.recv_match(blocking=False)
             if msg is None:
-                return
-            if self._silent() or msg.get_type() == "BAD_DATA":
-                continue
+                break
+            if not self._silent() and msg.get_type() != "BAD_DATA":
+                self._inbox.append((now + self.link_delay_s, msg))
+        while self._inbox and self._inbox[0][0] <= now:
+            msg = self._inbox.popleft()[1]
             target = getattr(msg, "target_system", 0)
             if target not in (0, self.system_id):
                 continue
@@ -252,6 +382,9 @@ class SimVehicle:
         name, value = msg.param_id, float(msg.param_value)
         if name not in self.params or not math.isfinite(value):
             return
+        if self.profile.autopilot is Autopilot.PX4 and msg.param_type != mavlink.MAV_PARAM_TYPE_REAL32:
+            log.info("PARAM_SET %s of type %d dropped (PX4: the parameter is REAL32)", name, msg.param_type)
+            return
         value = as_float32(value)
         if name in self._poisoned:
             if value == self._poisoned[name]:
@@ -263,7 +396,7 @@ class SimVehicle:
                 log.warning("fault: PARAM_SET %s=%g dropped", name, value)
                 self._poisoned[name] = value
                 return
-        self.params[name] = value
+        self.params[name] = value  # stored as sent, negative too, as the autopilots do
         self._apply_gains()
         self._param_value(name)
 
@@ -285,8 +418,29 @@ class SimVehicle:
             self.airborne = True
             self._hold_ned = np.array([*self._ned_position()[:2], -alt])
             self._ack(msg.command, mavlink.MAV_RESULT_ACCEPTED)
+        elif msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            self._ack(msg.command, self._set_interval(int(msg.param1), float(msg.param2)))
+        elif msg.command in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            msg_id = (mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+                      if msg.command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else int(msg.param1))
+            known = msg_id in STREAM_HZ or msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            self._ack(msg.command, mavlink.MAV_RESULT_ACCEPTED if known else mavlink.MAV_RESULT_DENIED)
+            if known:
+                self._stream(msg_id)
         else:
             self._ack(msg.command, mavlink.MAV_RESULT_UNSUPPORTED)
+
+    def _set_interval(self, msg_id: int, interval_us: float) -> int:
+        """MAV_CMD_SET_MESSAGE_INTERVAL: interval in µs, 0 the default rate, −1 off."""
+        if msg_id not in STREAM_HZ or not math.isfinite(interval_us):
+            return mavlink.MAV_RESULT_DENIED
+        if interval_us == 0:
+            self._rates[msg_id] = STREAM_HZ[msg_id]
+        elif interval_us < 0:
+            self._rates[msg_id] = 0.0
+        else:
+            self._rates[msg_id] = min(1e6 / interval_us, 1.0 / DT_S)
+        return mavlink.MAV_RESULT_ACCEPTED
 
     def _on_set_mode(self, msg) -> None:
         word = int(msg.custom_mode)
@@ -309,7 +463,7 @@ class SimVehicle:
     def _mode_names(self) -> list[str]:
         if self.profile.autopilot is Autopilot.PX4:
             return list(mavutil.px4_map)
-        return list(mavutil.mode_mapping_byname(mavlink.MAV_TYPE_QUADROTOR))
+        return list(mavutil.mode_mapping_byname(mavlink.MAV_TYPE_HEXAROTOR))
 
     def _on_set_position_target_local_ned(self, msg) -> None:
         if msg.coordinate_frame != mavlink.MAV_FRAME_LOCAL_NED:
@@ -320,11 +474,7 @@ class SimVehicle:
         acc = np.array([msg.afx, msg.afy, msg.afz]) if not mask & IGNORE_ACC else np.zeros(3)
         if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(vel)) and np.all(np.isfinite(acc))):
             return
-        # a setpoint computed for vehicle time time_boot_ms is extrapolated from then: transport latency, which a
-        # faster-than-real-time simulation magnifies, then does not show up as tracking error
-        stamp = msg.time_boot_ms / 1000.0
-        self._target = _Target(pos, vel, acc, stamp if self.t_s - 0.2 <= stamp <= self.t_s else self.t_s, self.t_s,
-                               time.monotonic())
+        self._target = _Target(pos, vel, acc, self.t_s, time.monotonic())  # applied on arrival, as the autopilots do
         moving = bool(np.any(np.abs(vel) > 1e-6))
         if moving and not self._moving:
             self.primitives += 1
@@ -340,19 +490,28 @@ class SimVehicle:
 
     # ---- loop ------------------------------------------------------------------------------------------------
     def run(self, duration_s: float | None = None) -> None:
-        """Serve in (speed ×) real time until stop() or duration_s of wall time."""
+        """Serve in (speed ×) real time until stop() or duration_s of wall time; heartbeats and parameters are
+        answered from the start, while the plant is built in the background."""
+        builder = threading.Thread(target=self._build_plant, name="mavsim-plant", daemon=True)
+        builder.start()
         start = last = time.monotonic()
         budget_s = 0.0
         while not self._stopped:
             now = time.monotonic()
             if duration_s is not None and now - start >= duration_s:
                 break
-            budget_s = min(budget_s + (now - last) * self.speed, 0.25 * max(self.speed, 1.0))
+            if self.plant is None and self._built is not None:
+                self._adopt_plant()
+            if self.plant is not None:
+                # at most ×speed; a starved process runs slower (as SITL does) instead of catching up in a burst
+                # that would leave the setpoints arriving meanwhile to act late
+                budget_s = min(budget_s + (now - last) * self.speed, MAX_BURST_S)
+                while budget_s >= DT_S:
+                    self._step()
+                    self._periodic()
+                    self._receive()
+                    budget_s -= DT_S
             last = now
-            while budget_s >= DT_S:
-                self._step()
-                self._periodic()
-                budget_s -= DT_S
             self._receive()
             self._periodic()
             time.sleep(0.001)
@@ -364,3 +523,10 @@ class SimVehicle:
     def close(self) -> None:
         """Close the socket."""
         self.conn.close()
+
+
+def _latlon(ned: np.ndarray) -> tuple[int, int]:
+    """Latitude and longitude (degE7) of a NED offset from HOME (flat earth: metres from home are small)."""
+    lat = HOME[0] + math.degrees(ned[0] / EARTH_RADIUS_M)
+    lon = HOME[1] + math.degrees(ned[1] / (EARTH_RADIUS_M * math.cos(math.radians(HOME[0]))))
+    return int(lat * 1e7), int(lon * 1e7)

@@ -1,0 +1,20 @@
+"""The report's lines for a MAVLink run: tuned parameters with their ±, the parameter files, the range edges."""
+
+from __future__ import annotations
+
+from mavtune.report.run_report import tuned_params_section
+
+
+def test_lists_each_vehicles_parameters_files_and_edges():
+    summary = {"tuned_params": {"tcp:a": {"PSC_POSZ_P": 2.625, "PSC_VELZ_P": 6.6875}},
+               "tuned_params_tolerance": {"tcp:a": {"PSC_POSZ_P": 0.5, "PSC_VELZ_P": 1.75}},
+               "param_files": ["tuned.parm", "tuned.params"],
+               "range_edges": [{"message": "kd = 0.812 lies within ... PSC_VELZ_P ..."}]}
+    text = "\n".join(tuned_params_section(summary))
+    assert "| `tcp:a` | `PSC_POSZ_P` | 2.625 | 0.5 |" in text and "`PSC_VELZ_P` | 6.688 | 1.8 |" in text
+    assert "`tuned.parm`" in text and "QGroundControl" in text
+    assert "## Range edges" in text and "- kd = 0.812" in text
+
+
+def test_says_nothing_for_a_simulated_run_without_edges():
+    assert tuned_params_section({"range_edges": []}) == []

@@ -1,0 +1,220 @@
+"""Tuning against ArduPilot's own ArduCopter SITL (the real flight code: EKF3, the PSC_* position controller,
+GUIDED, the parameter protocol). Short runs (ε = 0.25, one bootstrap, SITL at ×10); every test reads the gains
+back over MAVLink afterwards and checks the originals are on the vehicle again."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from pymavlink import mavparm, mavutil
+
+from mavtune.journal import Journal
+from mavtune.vehicles.mavlink.config import MavlinkConfig
+
+from mavlink_harness import tune_mavlink
+from sitl_harness import SKIP_REASON, read_sitl_params, sitl_binary, sitl_vehicles
+
+pytestmark = [
+    pytest.mark.sitl, pytest.mark.integration, pytest.mark.timeout(240),
+    pytest.mark.skipif(sitl_binary() is None, reason=SKIP_REASON),
+]
+
+ORIGINALS = {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}  # this SITL build's defaults
+MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+SHORT = dict(bootstraps=1, epsilon=0.25)
+
+
+def sitl_config(**changes) -> MavlinkConfig:
+    """Defaults for a SITL at ×10: the link's timeouts are wall time, so they need no scaling."""
+    return MavlinkConfig(**{"param_timeout_s": 0.5, "heartbeat_wait_s": 20.0, **changes})
+
+
+def assert_restored(urls: list[str]) -> None:
+    for url in urls:
+        assert read_sitl_params(url, list(ORIGINALS)) == ORIGINALS, url
+
+
+def journal_rounds(out) -> int:
+    with Journal(out / "journal.sqlite") as j:
+        return len(j.rounds())
+
+
+def test_one_vehicle_avg_tunes_and_restores(tmp_path):
+    with sitl_vehicles(1) as (sitl,):
+        started = time.monotonic()
+        result = tune_mavlink([sitl.tuner_url], tmp_path, sitl_config(), **SHORT)
+        wall_s = time.monotonic() - started
+        assert_restored([sitl.tuner_url])
+    assert result["status"] == "finished" and result["restored"] is True
+    assert result["original_params"] == {sitl.tuner_url: ORIGINALS}
+    assert result["flights_by_status"]["ok"] == result["flights"] == result["rounds"] > 0
+    assert journal_rounds(tmp_path) == result["rounds"]
+    params = result["tuned_params"][sitl.tuner_url]
+    assert set(params) == set(ORIGINALS)
+    assert 0.5 <= params["PSC_POSZ_P"] <= 3.0 and 1.0 <= params["PSC_VELZ_P"] <= 8.0 * 1.6
+    parm = mavparm.MAVParmDict()
+    assert parm.load(str(tmp_path / "tuned.parm"), use_excludes=False)
+    assert {n: parm[n] for n in params} == pytest.approx(params, rel=1e-6)
+    assert (tmp_path / "tuned.params").is_file()
+    for edge in result["range_edges"]:
+        assert edge["param"] in ORIGINALS and edge["param"] in edge["message"]
+    print(f"SITL ×10: {result['rounds']} rounds in {wall_s:.1f} s wall, gains {result['gains']}, params {params}")
+
+
+@pytest.mark.slow
+def test_two_vehicles_split_each_flies_its_own_point(tmp_path):
+    with sitl_vehicles(2) as vehicles:
+        urls = [v.tuner_url for v in vehicles]
+        result = tune_mavlink(urls, tmp_path, sitl_config(), strategy="split", vehicles=2, **SHORT)
+        assert_restored(urls)
+    assert result["status"] == "finished" and result["restored"] is True
+    flown = [[f["vehicle"] for f in r["flights"]] for r in result["rounds_log"]]
+    assert all(sorted(v) == sorted(urls) for v in flown)
+    assert any(len({f["gains"]["kp"] if r["gain"] == "kp" else f["gains"]["kd"] for f in r["flights"]}) == 2
+               for r in result["rounds_log"])  # split: different points on the two vehicles
+    assert result["flights_by_status"]["ok"] == result["flights"]
+
+
+def _free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_two_agents_under_the_zenoh_coordinator(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
+    (tmp_path / "agent.toml").write_text(
+        "[swarm]\nsession = \"sitl\"\ntoken = \"t\"\nresult_timeout_s = 60.0\n"
+        "[mavlink]\nparam_timeout_s = 0.5\nheartbeat_wait_s = 20.0\n")
+    out = tmp_path / "run"
+    with sitl_vehicles(2) as vehicles:
+        urls = [v.tuner_url for v in vehicles]
+        procs = [subprocess.Popen(
+            [*MAVTUNE, "coordinator", "--listen", endpoint, "--vehicles", "2", "--out", str(out), "--session",
+             "sitl", "--token", "t", "--settle-s", "0", "--result-timeout-s", "60", "--bootstraps", "1",
+             "--epsilon", "0.25"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
+        try:
+            for i, url in enumerate(urls):
+                procs.append(subprocess.Popen(
+                    [*MAVTUNE, "agent", "--id", f"s{i}", "--connect", endpoint, "--vehicle", "mavlink",
+                     "--mavlink", url, "--config", str(tmp_path / "agent.toml"), "--state-dir",
+                     str(tmp_path / f"state{i}")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            log, _ = procs[0].communicate(timeout=200)
+            assert procs[0].returncode == 0, log[-3000:]
+            for agent in procs[1:]:  # agents release their vehicles on Finish and stay for the next run
+                agent.send_signal(signal.SIGINT)
+                agent.wait(timeout=20)
+        finally:
+            for p in procs:
+                if p.poll() is None:
+                    p.kill()
+                p.wait(timeout=10)
+        assert_restored(urls)
+    result = json.loads((out / "result.json").read_text())
+    assert result["status"] == "finished" and result["flights_by_status"]["ok"] == result["flights"] > 0
+    assert journal_rounds(out) == result["rounds"]
+
+
+class _Pilot(threading.Thread):
+    """Another MAVLink client (on SERIAL0) that switches the vehicle to LOITER once `after_s` have passed."""
+
+    def __init__(self, url: str, after_s: float):
+        super().__init__(daemon=True)
+        self.url, self.after_s, self.done = url, after_s, threading.Event()
+
+    def run(self) -> None:
+        master = mavutil.mavlink_connection(self.url, source_system=251)
+        try:
+            master.wait_heartbeat(timeout=10)
+            time.sleep(self.after_s)
+            loiter = master.mode_mapping()["LOITER"]
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:
+                master.set_mode(loiter)
+                hb = master.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
+                if hb is not None and hb.custom_mode == loiter:
+                    self.done.set()
+                    return
+        finally:
+            master.close()
+
+
+@pytest.mark.slow
+def test_pilot_taking_over_gets_the_originals_and_the_run_goes_on(tmp_path):
+    with sitl_vehicles(2) as vehicles:
+        urls = [v.tuner_url for v in vehicles]
+        pilot = _Pilot(vehicles[0].pilot_url, after_s=15.0)
+        pilot.start()
+        result = tune_mavlink(urls, tmp_path, sitl_config(), vehicles=2, **SHORT)
+        pilot.join(timeout=15)
+        assert pilot.done.is_set()
+        assert_restored(urls)
+        master = mavutil.mavlink_connection(vehicles[0].pilot_url, source_system=251)
+        try:  # the pilot keeps the vehicle: mavtune never switched it back to GUIDED
+            hb = master.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+            assert hb is not None and hb.custom_mode == master.mode_mapping()["LOITER"]
+        finally:
+            master.close()
+    assert result["status"] == "finished" and result["restored"] is True
+    lost = [f for r in result["rounds_log"] for f in r["flights"] if f["status"] == "lost"]
+    assert lost and {f["vehicle"] for f in lost} == {urls[0]}
+    later = result["rounds_log"][-1]["flights"]
+    assert [f["vehicle"] for f in later if f["status"] == "ok"] == [urls[1]]
+
+
+@pytest.mark.slow
+def test_sitl_killed_mid_flight_the_run_goes_on_and_the_journal_keeps_every_round(tmp_path):
+    with sitl_vehicles(2) as vehicles:
+        urls = [v.tuner_url for v in vehicles]
+        killer = threading.Timer(15.0, vehicles[0].kill)
+        killer.start()
+        try:
+            result = tune_mavlink(urls, tmp_path, sitl_config(), vehicles=2, **SHORT)
+        finally:
+            killer.cancel()
+        assert_restored(urls[1:])  # the survivor; the killed process holds nothing any more
+    assert result["status"] == "finished"
+    assert result["restored"] is False  # the lost vehicle could not confirm its originals: said, not hidden
+    assert journal_rounds(tmp_path) == result["rounds"]
+    statuses = [f["status"] for r in result["rounds_log"] for f in r["flights"] if f["vehicle"] == urls[0]]
+    assert "lost" in statuses and statuses[0] == "ok"
+    assert all(f["status"] == "ok" for r in result["rounds_log"] for f in r["flights"] if f["vehicle"] == urls[1])
+
+
+@pytest.mark.slow
+def test_ctrl_c_mid_run_restores_and_resumes_from_the_journal(tmp_path):
+    out = tmp_path / "run"
+    with sitl_vehicles(1) as (sitl,):
+        cmd = [*MAVTUNE, "tune", "--fleet", "mavlink", "--mavlink", sitl.tuner_url, "--out", str(out),
+               "--epsilon", "0.25", "--bootstraps", "1", "--vehicles", "1", "--quiet"]
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            deadline = time.monotonic() + 120
+            while time.monotonic() < deadline and not (
+                    (out / "journal.sqlite").exists() and journal_rounds(out) >= 2):
+                time.sleep(0.5)
+            proc.send_signal(signal.SIGINT)
+            log, _ = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(timeout=10)
+        assert proc.returncode == 130 and "interrupted" in log, log[-2000:]  # 128 + SIGINT
+        assert_restored([sitl.tuner_url])
+        summary = json.loads((out / "result.json").read_text())
+        assert summary["status"] == "interrupted" and summary["restored"] is True
+        assert journal_rounds(out) == summary["rounds"] >= 2
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=200)
+        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+        assert_restored([sitl.tuner_url])
+    final = json.loads((out / "result.json").read_text())
+    assert final["status"] == "finished" and final["restored"] is True
+    assert sum(r["replayed"] for r in final["rounds_log"]) >= 2
