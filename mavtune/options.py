@@ -18,6 +18,8 @@ EpsilonOpt = typer.Option(None, "--epsilon", help="Tolerance as a fraction of ea
 BootstrapsOpt = typer.Option(None, "--bootstraps", help="Passes over the gains, or 'auto' for the paper's stop rule.")
 ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twice in one line search.")
 BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
+SchedulerOpt = typer.Option(None, "--scheduler", help="Run the campaign's chunks on the Dask cluster whose "
+                            "scheduler listens here (tcp://HOST:8786); default: in this process.")
 
 
 def bootstraps_flag(value: Optional[str]) -> int | str | None:
