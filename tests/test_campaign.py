@@ -32,11 +32,11 @@ def _square(x: int, y: int) -> tuple[int, int]:
 
 def test_chunks_come_back_in_order_here_and_on_the_cluster(cluster):
     chunks = [(i, 7) for i in range(20)]
-    seen: list[int] = []
+    seen: list[tuple[int, tuple[int, int]]] = []
     here = campaign.run_chunks(_square, chunks)
-    there = campaign.run_chunks(_square, chunks, cluster.scheduler_address, done=seen.append)
+    there = campaign.run_chunks(_square, chunks, cluster.scheduler_address, done=lambda i, r: seen.append((i, r)))
     assert here == there == [(i, i * i + 7) for i in range(20)]
-    assert sorted(seen) == list(range(20))
+    assert sorted(seen) == list(enumerate(here))
 
 
 def test_surface_on_the_cluster_is_the_local_surface(cluster, tmp_path):
@@ -73,6 +73,41 @@ def test_a_worker_killed_mid_campaign_leaves_the_same_csv(cluster, tmp_path):
         assert killed and killed[0] not in client.run(os.getpid).values()
     finally:
         client.close()
+
+
+@pytest.mark.slow
+def test_tuning_and_variant_runs_on_the_cluster_are_the_local_runs(cluster):
+    from mavtune.experiments import extensions as ext
+    from mavtune.experiments.reproduce import tuning_run
+
+    runs = [("avg", 0.0, 100, 10.0), ("split", 0.9, 102, 0.0)]
+    variants = [(ext.VARIANTS[3], 0, 5), (ext.VARIANTS[7], 1, 5)]  # split with speculation; 8 vehicles
+    for fn, chunks in ((tuning_run, runs), (ext.variant_run, variants)):
+        here = campaign.run_chunks(fn, chunks)
+        there = campaign.run_chunks(fn, chunks, cluster.scheduler_address)
+        if fn is tuning_run:
+            here = [(r.gains, [(rd.assignments, rd.costs) for rd in r.rounds], r.flights) for r in here]
+            there = [(r.gains, [(rd.assignments, rd.costs) for rd in r.rounds], r.flights) for r in there]
+        assert repr(here) == repr(there)  # repr: NaN costs compare equal as text
+
+
+@pytest.mark.slow
+def test_a_bank_built_on_the_cluster_is_the_local_bank(cluster, tmp_path):
+    import json
+
+    from mavtune.bank import build
+    from mavtune.config import load_config
+
+    def config_for(payload: float):
+        return load_config(None, {"tuning.seed": 3, "tuning.strategy": "split", "sim.payload_kg": payload})
+
+    here = build([0.0, 0.9], tmp_path / "here", config_for)
+    there = build([0.0, 0.9], tmp_path / "there", config_for, scheduler=cluster.scheduler_address)
+    assert [(e.mass_kg, e.gains) for e in here.entries] == [(e.mass_kg, e.gains) for e in there.entries]
+    for e in there.entries:  # the run folders came back from the workers, journal and result included
+        folder = tmp_path / "there" / e.source.split("/")[-1]
+        assert json.loads((folder / "result.json").read_text())["gains"] == e.gains
+        assert (folder / "journal.sqlite").stat().st_size > 0
 
 
 def test_an_unreachable_scheduler_is_a_one_line_error(monkeypatch):

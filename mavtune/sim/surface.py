@@ -73,7 +73,7 @@ def compute_surface(grid: int = 25, repeats: int = 20, scenario: Scenario | None
     chunks = [(sc, kx[a:b], kv[a:b], seed, rounds[a:b], parallel) for a, b in bounds]
     flown = 0
 
-    def done(i: int) -> None:
+    def done(i: int, _: object) -> None:
         nonlocal flown
         flown += bounds[i][1] - bounds[i][0]
         if progress is not None:
