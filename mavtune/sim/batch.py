@@ -31,8 +31,12 @@ def constants(scenario: Scenario) -> np.ndarray:
     cp[K.C_KF] = af.THRUST_COEFF_N_PER_RPM2
     cp[K.C_RPM_MIN] = af.RPM_MIN
     cp[K.C_RPM_MAX] = af.RPM_MAX
-    cp[K.C_JX], cp[K.C_JY], cp[K.C_JZ] = af.INERTIA_KGM2
-    cp[K.C_DRAG] = af.DRAG_N_PER_MPS2
+    cp[K.C_JX], cp[K.C_JY], cp[K.C_JZ] = af.INERTIA_KGM2  # the controller's model: no payload
+    cp[K.C_JPX], cp[K.C_JPY], cp[K.C_JPZ] = af.inertia_with_payload_kgm2(scenario.payload_kg)
+    cp[K.C_DRAG] = af.drag_with_payload_n_per_mps2(scenario.payload_kg)
+    cp[K.C_KZ_ROTOR] = af.AXIAL_INFLOW_N_PER_RPM_MPS
+    cp[K.C_KD_ROTOR] = af.ROTOR_DRAG_N_PER_RPM_MPS
+    cp[K.C_KH_ROTOR] = af.TRANSLATIONAL_LIFT_N_PER_MPS2
     cp[K.C_KX_XY] = af.KX_XY
     cp[K.C_KV_XY] = af.KV_XY
     cp[K.C_KIW] = af.KIW_XY
@@ -56,6 +60,7 @@ def constants(scenario: Scenario) -> np.ndarray:
     cp[K.C_SPREAD_MASS] = scenario.spread.mass
     cp[K.C_SPREAD_KF] = scenario.spread.motor_constant
     cp[K.C_PAYLOAD] = scenario.payload_kg
+    cp[K.C_PAYLOAD_NEW] = 0.0 if scenario.payload_known else scenario.payload_kg
     cp[K.C_LP_ALPHA] = lowpass_alpha(scenario.filter_hz, DT_S)
     cp[K.C_Z_GROUND] = 0.0
     cp[K.C_FAIL_ERR] = scenario.failure_error_m
@@ -92,7 +97,7 @@ def seed_array(seeds) -> np.ndarray:
 @dataclass
 class BatchResult:
     """Outcome of B flights: costs (B, 4) in COST_NAMES order, status codes (K.OK or K.FAIL_*), failure times,
-    traces (B, n_trace) of the filtered altitude, their times and the reference altitude at those times."""
+    traces (B, n_trace) of the low-passed altitude measurement the controller acted on (delayed, noisy), their times and the reference altitude at those times."""
 
     costs: np.ndarray
     status: np.ndarray
@@ -109,9 +114,9 @@ class BatchResult:
 def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0,
         parallel: bool | None = None) -> BatchResult:
     """Fly len(seeds) flights at once: flight i has physical gains (kx_z[i], kv_z[i]) and randomness (seeds[i],
-    round_ids[i]). trace_hz > 0 records the filtered altitude measurement at that rate (0: no trace).
-    `parallel`: spread the batch over numba's threads (True), fly it on this thread (False), or choose by size
-    (None: from PARALLEL_FROM flights on); the results are the same either way."""
+    round_ids[i]). trace_hz > 0 records, at that rate, the low-passed altitude measurement the controller acted on
+    (the signal of the cost; 0: no trace). `parallel`: spread the batch over numba's threads (True), fly it on
+    this thread (False), or choose by size (None: from PARALLEL_FROM flights on); the results are the same."""
     seeds = seed_array(seeds)
     b = seeds.shape[0]
     round_ids = np.ascontiguousarray(np.broadcast_to(np.asarray(round_ids, dtype=np.int64), (b,)))

@@ -6,7 +6,17 @@ Both call the same `_init_vehicle` and `_step`. All arrays are float64 SI; the a
 (w, x, y, z), renormalised every step, equivalent to the paper's R in SO(3). Per step: sense (lidar and vz noise
 every step, gusts and horizontal position error at 20 Hz, estimates delayed by the scenario's latency), control
 (SO(3) law at 100 Hz, rotor commands held for the step), integrate: rotors exactly (first-order lag with a held
-command), the rigid body by classical RK4 with the rotor thrust evaluated at the RK4 stage times.
+command), the rigid body by classical RK4 with the rotor forces evaluated at each RK4 stage's time and state.
+
+Rotor forces (RotorPy's model, coefficients in `airframe`): rotor i at hub position r_i meets the air at
+u_i = R^T (v - wind) + Omega x r_i (body frame); it gives thrust k_f w^2 + k_h (u_x^2 + u_y^2) - k_z w u_i,z along
+body z (axial inflow and translational lift) and in-plane drag -k_d w (u_x, u_y), plus quadratic body drag.
+
+The cost is the controller's own altitude error: at step k the SO(3) law acts on the lidar altitude measured
+`latency` steps earlier (noise included) against the tracker's reference ref[k]; that error e_k = ref_z[k] - z_fb[k]
+is what the gains act on, and what a real vehicle can log, so it is what the paper's cost sums: |e| after the
+first-order low-pass (cutoff `filter_hz`, started at 0), over the primitive. Equivalently the measurement and the
+reference each go through the low-pass started at the first reference altitude, as `cost.iae` computes it.
 
 Randomness is a splitmix64 stream per vehicle: the vehicle spread is drawn from the vehicle seed, everything else
 (wind, gusts, sensor noise) from (vehicle seed, round id), so a vehicle's flight does not depend on the batch.
@@ -29,7 +39,10 @@ FAST = {"contract", "arcp", "nsz", "afn"}
  C_SIG_LIDAR, C_SIG_VZ, C_SIG_POS, C_A_POS, C_WIND_MEAN, C_WIND_SPREAD, C_GUST_XY, C_GUST_Z, C_A_GUST,
  C_SPREAD_MASS, C_SPREAD_KF, C_PAYLOAD, C_LP_ALPHA, C_Z_GROUND, C_FAIL_ERR, C_EFFORT_W, C_DELAY,
  C_E_HALF,  # exp(-dt / (2 tau_motor)): the rotor lag over half a step
- NCP) = range(40)
+ C_KZ_ROTOR, C_KD_ROTOR, C_KH_ROTOR,  # rotor axial inflow, in-plane drag (N / (rpm m/s)), translational lift
+ C_JPX, C_JPY, C_JPZ,  # the plant's inertia, payload included (C_JX.. are the controller's nominal model)
+ C_PAYLOAD_NEW,  # the payload mass the estimator does not know yet at the start, kg
+ NCP) = range(47)
 
 # ---- per-vehicle parameters `vp` --------------------------------------------------------------------------------
 V_MASS, V_KF, V_KXZ, V_KVZ, V_WX, V_WY, NVP = range(7)
@@ -39,9 +52,11 @@ S_P, S_V, S_Q, S_W, S_R = 0, 3, 6, 10, 13
 NS = 19
 
 # ---- controller / disturbance state `a` -------------------------------------------------------------------------
-(A_DM, A_IWX, A_IWY, A_IBX, A_IBY, A_GX, A_GY, A_GZ, A_NX, A_NY, A_ZMEAS, A_FCMD) = range(12)
-A_RPMCMD = 12
-A_BUF = 18  # ring buffer of the last MAX_DELAY estimates (x, y, z, vx, vy, vz): the feedback latency
+(A_DM, A_IWX, A_IWY, A_IBX, A_IBY, A_GX, A_GY, A_GZ, A_NX, A_NY, A_ZMEAS, A_FCMD,
+ A_ZFB,  # the (delayed, noisy) altitude measurement the controller acted on this step
+ ) = range(13)
+A_RPMCMD = 13
+A_BUF = 19  # ring buffer of the last MAX_DELAY estimates (x, y, z, vx, vy, vz): the feedback latency
 MAX_DELAY = 10
 NA = A_BUF + 6 * MAX_DELAY
 
@@ -85,7 +100,14 @@ def _normal2(rs):
 
 @njit(cache=True)
 def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
-    """Hover at (x0, y0, z0) with a converged mass estimate; draw the vehicle spread and this flight's wind."""
+    """Hover at (x0, y0, z0); draw the vehicle spread and this flight's wind.
+
+    The mass estimate has converged to this vehicle hovering in this flight's mean wind (its own mass and rotor
+    spread, translational lift), but not to the payload: the payload is new to the estimator (the paper's payload
+    case), so its first estimate is the one it held before the payload was strapped on, and the vehicle sags
+    until the estimator catches up (unless the scenario says the payload is known). Without a payload the start is
+    converged.
+    """
     g = cp[C_G]
     rs[0] = _mix64(seed ^ _SALT_SPREAD)
     n1, n2 = _normal2(rs)
@@ -109,13 +131,16 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
     s[S_P + 1] = y0
     s[S_P + 2] = z0
     s[S_Q] = 1.0
-    rpm = math.sqrt(mass * g / (6.0 * kf))
+    lift = 6.0 * cp[C_KH_ROTOR] * speed * speed  # translational lift of the mean wind, all rotors
+    rpm = math.sqrt(max(mass * g - lift, 0.0) / (6.0 * kf))
     for i in range(6):
         s[S_R + i] = rpm
         a[A_RPMCMD + i] = rpm
     for i in range(A_RPMCMD):
         a[i] = 0.0
-    a[A_DM] = mass * cp[C_KF] / kf - cp[C_MNOM]  # what the estimator has converged to while hovering
+    # the estimator's hover equilibrium without the payload: commanded thrust (m_nom + dm) g through the nominal
+    # k_f gives (kf / kf_nom) (m_nom + dm) g of rotor thrust, plus the translational lift
+    a[A_DM] = ((mass - cp[C_PAYLOAD_NEW]) * g - lift) * cp[C_KF] / (kf * g) - cp[C_MNOM]
     n1, n2 = _normal2(rs)  # stationary start of the gust and position-error processes
     a[A_GX] = cp[C_GUST_XY] * n1
     a[A_GY] = cp[C_GUST_XY] * n2
@@ -125,6 +150,7 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
     n1, n2 = _normal2(rs)
     a[A_NY] = cp[C_SIG_POS] * n1
     a[A_ZMEAS] = z0
+    a[A_ZFB] = z0
     a[A_FCMD] = mass * g
     for j in range(MAX_DELAY):
         o = A_BUF + 6 * j
@@ -137,44 +163,58 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
 
 
 @njit(cache=True, fastmath=FAST)
-def _rigid(vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, f, mx, my, mz, airx, airy, airz, inv_m, g, drag,
-           jx, jy, jz, ijx, ijy, ijz):
-    """Paper eq. (1) with drag: derivatives of velocity, quaternion and body rates (all scalars, no arrays)."""
-    b3x = 2.0 * (qx * qz + qw * qy)  # body z axis in the world frame: R e3
-    b3y = 2.0 * (qy * qz - qw * qx)
-    b3z = 1.0 - 2.0 * (qx * qx + qy * qy)
-    ux = vx - airx  # air-relative velocity, quadratic drag against it
+def _rigid(s, a, vp, cp, mix, decay, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, airx, airy, airz):
+    """Paper eq. (1) with rotor and body aerodynamics: derivatives of velocity, quaternion and body rates at one
+    RK4 stage, the rotors having moved a fraction (1 - decay) from their speeds towards their commands."""
+    r00 = 1.0 - 2.0 * (qy * qy + qz * qz)
+    r01 = 2.0 * (qx * qy - qw * qz)
+    r02 = 2.0 * (qx * qz + qw * qy)
+    r10 = 2.0 * (qx * qy + qw * qz)
+    r11 = 1.0 - 2.0 * (qx * qx + qz * qz)
+    r12 = 2.0 * (qy * qz - qw * qx)
+    r20 = 2.0 * (qx * qz - qw * qy)
+    r21 = 2.0 * (qy * qz + qw * qx)
+    r22 = 1.0 - 2.0 * (qx * qx + qy * qy)
+    ux = vx - airx  # air-relative velocity, world frame
     uy = vy - airy
     uz = vz - airz
-    dk = drag * math.sqrt(ux * ux + uy * uy + uz * uz)
-    return ((f * b3x - dk * ux) * inv_m,
-            (f * b3y - dk * uy) * inv_m,
-            (f * b3z - dk * uz) * inv_m - g,
-            -0.5 * (qx * wx + qy * wy + qz * wz),
-            0.5 * (qw * wx + qy * wz - qz * wy),
-            0.5 * (qw * wy + qz * wx - qx * wz),
-            0.5 * (qw * wz + qx * wy - qy * wx),
-            (mx - (wy * jz * wz - wz * jy * wy)) * ijx,
-            (my - (wz * jx * wx - wx * jz * wz)) * ijy,
-            (mz - (wx * jy * wy - wy * jx * wx)) * ijz)
-
-
-@njit(cache=True, fastmath=FAST)
-def _wrench(s, a, kf, mix, decay):
-    """Collective thrust and moments when the rotors have moved a fraction (1 - decay) towards their commands."""
+    bx = r00 * ux + r10 * uy + r20 * uz  # ... and in the body frame: R^T u
+    by = r01 * ux + r11 * uy + r21 * uz
+    bz = r02 * ux + r12 * uy + r22 * uz
+    kf = vp[V_KF]
+    kz = cp[C_KZ_ROTOR]
+    lift = cp[C_KH_ROTOR] * (bx * bx + by * by)  # translational lift of each rotor (hub in-plane rates neglected)
     f = 0.0
     mx = 0.0
     my = 0.0
     mz = 0.0
+    wsum = 0.0
     for i in range(6):
         c = a[A_RPMCMD + i]
         r = c + (s[S_R + i] - c) * decay
-        t = kf * r * r
+        # axial air speed at the hub: body z speed plus (Omega x r_i)_z = wx y_i - wy x_i (mix rows 1, 2: y, -x)
+        t = kf * r * r + lift - kz * r * (bz + wx * mix[1, i] + wy * mix[2, i])
         f += t
         mx += mix[1, i] * t
         my += mix[2, i] * t
         mz += mix[3, i] * t
-    return f, mx, my, mz
+        wsum += r
+    hd = cp[C_KD_ROTOR] * wsum  # in-plane rotor drag of all rotors, body x and y
+    hx = -hd * bx
+    hy = -hd * by
+    dk = cp[C_DRAG] * math.sqrt(ux * ux + uy * uy + uz * uz)  # quadratic body drag against the air speed
+    inv_m = 1.0 / vp[V_MASS]
+    jx, jy, jz = cp[C_JPX], cp[C_JPY], cp[C_JPZ]
+    return ((r02 * f + r00 * hx + r01 * hy - dk * ux) * inv_m,
+            (r12 * f + r10 * hx + r11 * hy - dk * uy) * inv_m,
+            (r22 * f + r20 * hx + r21 * hy - dk * uz) * inv_m - cp[C_G],
+            -0.5 * (qx * wx + qy * wy + qz * wz),
+            0.5 * (qw * wx + qy * wz - qz * wy),
+            0.5 * (qw * wy + qz * wx - qx * wz),
+            0.5 * (qw * wz + qx * wy - qy * wx),
+            (mx - (wy * jz * wz - wz * jy * wy)) / jx,
+            (my - (wz * jx * wx - wx * jz * wz)) / jy,
+            (mz - (wx * jy * wy - wy * jx * wx)) / jz)
 
 
 @njit(cache=True, fastmath=FAST)
@@ -183,36 +223,23 @@ def _integrate(s, a, vp, cp, mix):
     h = cp[C_DT]
     e_half = cp[C_E_HALF]  # exp(-h / (2 tau))
     e_full = e_half * e_half
-    kf = vp[V_KF]
-    f0, mx0, my0, mz0 = _wrench(s, a, kf, mix, 1.0)
-    fh, mxh, myh, mzh = _wrench(s, a, kf, mix, e_half)
-    f1, mx1, my1, mz1 = _wrench(s, a, kf, mix, e_full)
     airx = vp[V_WX] + a[A_GX]
     airy = vp[V_WY] + a[A_GY]
     airz = a[A_GZ]
-    inv_m = 1.0 / vp[V_MASS]
-    g = cp[C_G]
-    drag = cp[C_DRAG]
-    jx, jy, jz = cp[C_JX], cp[C_JY], cp[C_JZ]
-    ijx, ijy, ijz = 1.0 / jx, 1.0 / jy, 1.0 / jz
     v0x, v0y, v0z = s[S_V], s[S_V + 1], s[S_V + 2]
     q0w, q0x, q0y, q0z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
     w0x, w0y, w0z = s[S_W], s[S_W + 1], s[S_W + 2]
-    k1 = _rigid(v0x, v0y, v0z, q0w, q0x, q0y, q0z, w0x, w0y, w0z, f0, mx0, my0, mz0, airx, airy, airz, inv_m, g,
-                drag, jx, jy, jz, ijx, ijy, ijz)
+    k1 = _rigid(s, a, vp, cp, mix, 1.0, v0x, v0y, v0z, q0w, q0x, q0y, q0z, w0x, w0y, w0z, airx, airy, airz)
     c = 0.5 * h
     v1x, v1y, v1z = v0x + c * k1[0], v0y + c * k1[1], v0z + c * k1[2]
-    k2 = _rigid(v1x, v1y, v1z, q0w + c * k1[3], q0x + c * k1[4], q0y + c * k1[5], q0z + c * k1[6],
-                w0x + c * k1[7], w0y + c * k1[8], w0z + c * k1[9], fh, mxh, myh, mzh, airx, airy, airz, inv_m, g,
-                drag, jx, jy, jz, ijx, ijy, ijz)
+    k2 = _rigid(s, a, vp, cp, mix, e_half, v1x, v1y, v1z, q0w + c * k1[3], q0x + c * k1[4], q0y + c * k1[5],
+                q0z + c * k1[6], w0x + c * k1[7], w0y + c * k1[8], w0z + c * k1[9], airx, airy, airz)
     v2x, v2y, v2z = v0x + c * k2[0], v0y + c * k2[1], v0z + c * k2[2]
-    k3 = _rigid(v2x, v2y, v2z, q0w + c * k2[3], q0x + c * k2[4], q0y + c * k2[5], q0z + c * k2[6],
-                w0x + c * k2[7], w0y + c * k2[8], w0z + c * k2[9], fh, mxh, myh, mzh, airx, airy, airz, inv_m, g,
-                drag, jx, jy, jz, ijx, ijy, ijz)
+    k3 = _rigid(s, a, vp, cp, mix, e_half, v2x, v2y, v2z, q0w + c * k2[3], q0x + c * k2[4], q0y + c * k2[5],
+                q0z + c * k2[6], w0x + c * k2[7], w0y + c * k2[8], w0z + c * k2[9], airx, airy, airz)
     v3x, v3y, v3z = v0x + h * k3[0], v0y + h * k3[1], v0z + h * k3[2]
-    k4 = _rigid(v3x, v3y, v3z, q0w + h * k3[3], q0x + h * k3[4], q0y + h * k3[5], q0z + h * k3[6],
-                w0x + h * k3[7], w0y + h * k3[8], w0z + h * k3[9], f1, mx1, my1, mz1, airx, airy, airz, inv_m, g,
-                drag, jx, jy, jz, ijx, ijy, ijz)
+    k4 = _rigid(s, a, vp, cp, mix, e_full, v3x, v3y, v3z, q0w + h * k3[3], q0x + h * k3[4], q0y + h * k3[5],
+                q0z + h * k3[6], w0x + h * k3[7], w0y + h * k3[8], w0z + h * k3[9], airx, airy, airz)
     h6 = h / 6.0
     s[S_P] += h6 * (v0x + 2.0 * (v1x + v2x) + v3x)
     s[S_P + 1] += h6 * (v0y + 2.0 * (v1y + v2y) + v3y)
@@ -353,6 +380,7 @@ def _step(s, a, vp, rs, cp, mix, alloc, ref, k):
     a[o + 4] = s[S_V + 1]
     a[o + 5] = s[S_V + 2] + cp[C_SIG_VZ] * n7
     o = A_BUF + 6 * ((slot - int(cp[C_DELAY]) + MAX_DELAY) % MAX_DELAY)
+    a[A_ZFB] = a[o + 2]
     _control(s, a, vp, cp, alloc, ref, a[o], a[o + 1], a[o + 2], a[o + 3], a[o + 4], a[o + 5])
     _integrate(s, a, vp, cp, mix)
     total = 0.0
@@ -390,8 +418,9 @@ def _fly_one(seed, round_id, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_ever
     k_fail = n
     for k in range(n):
         status = _step(s, a, vp, rs, cp, mix, alloc, ref[k], k)
-        # low-pass the measurement and the reference alike, so the filter lag is not counted as error
-        zf += alpha * (a[A_ZMEAS] - zf)
+        # the controller's own error (its delayed measurement against ref[k]), measurement and reference low-passed
+        # alike so that the filter lag is not counted as error
+        zf += alpha * (a[A_ZFB] - zf)
         rf += alpha * (ref[k, 2] - rf)
         if k >= n_settle:
             e = abs(zf - rf)

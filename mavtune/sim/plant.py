@@ -108,6 +108,12 @@ class Plant:
         return self._A[:, K.A_ZMEAS].copy()
 
     @property
+    def altitude_feedback_m(self) -> np.ndarray:
+        """The altitude measurement (B,) the controller acted on in the last step: the lidar reading of `latency_s`
+        ago, noise included. Its error against the reference is what the simulator's cost sums."""
+        return self._A[:, K.A_ZFB].copy()
+
+    @property
     def failed(self) -> np.ndarray:
         """(B,) bool: the vehicle diverged (non-finite, ground, tilt > 90 deg) and is frozen."""
         return self._status != K.OK

@@ -52,6 +52,9 @@ class Scenario(_Model):
     settle_s: float = Field(1.0, ge=0, le=60, description="hover after a gain change: flown, not in the cost, s")
     altitude_m: float = Field(2.0, gt=0.2, description="height of the primitive's first point, m")
     payload_kg: float = Field(0.0, ge=0, le=4.0, description="mass added to the vehicle (paper: 0.9 kg battery)")
+    payload_known: bool = Field(False, description="the mass estimate starts converged with the payload (a vehicle "
+                                "that has hovered with it for a while); False: the payload is new to the estimator, "
+                                "which starts at what it held without it (the paper's payload case)")
     wind: Wind = Wind()
     noise: Noise = Noise()
     spread: Spread = Spread()

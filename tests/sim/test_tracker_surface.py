@@ -64,7 +64,7 @@ def test_tracker_reference_is_not_delayed_by_a_step(monkeypatch):
 
     monkeypatch.setattr(tracker, "Q_ACC", 0.0)
     monkeypatch.setattr(tracker, "Q_JERK", 0.0)
-    monkeypatch.setattr(tracker, "W_SNAP", 1e-9)
+    monkeypatch.setattr(tracker, "W_SNAP", 1e-6)  # any smaller and the QP is ill-conditioned at eps 1e-5
     s = np.arange(300) / 299.0
     target = 2.0 + 0.5 * s**4 * (35 - 84 * s + 70 * s**2 - 20 * s**3)  # 0.5 m in 3 s; v, a, jerk 0 at both ends
     pva = tracker._axis(target, 2.0, tracker.VERTICAL_LIMITS)
@@ -118,3 +118,31 @@ def test_default_scenario_optimum_lies_inside_the_gain_square():
     s = surf.compute_surface(grid=9, repeats=4, scenario=Scenario.default(), seed=0)
     kp, kd = s.argmin()
     assert 0.0 < kp < 1.0 and 0.0 < kd < 1.0
+
+
+def test_tracker_is_a_receding_horizon_that_sees_only_its_40_steps():
+    """Re-planned every 0.01 s over 40 steps (0.01 s, then 0.2 s: 7.81 s ahead): changing the target later than
+    that leaves the reference up to then unchanged, and changes it once the change comes into view."""
+    from mavtune.sim import tracker
+
+    assert tracker.horizon_steps_s().size == 40 and tracker.horizon_steps_s().sum() == pytest.approx(7.81)
+    target = np.full(1200, 2.0)
+    changed = target.copy()
+    changed[1000:] = 2.5  # a step at t = 10 s
+    a = tracker._axis(target, 2.0, tracker.VERTICAL_LIMITS)
+    b = tracker._axis(changed, 2.0, tracker.VERTICAL_LIMITS)
+    seen_from = 1000 - 781  # the first step whose horizon reaches t = 10 s
+    np.testing.assert_array_equal(a[:seen_from], b[:seen_from])
+    assert np.abs(a[seen_from:1000, 0] - b[seen_from:1000, 0]).max() > 1e-3  # MPC anticipates within its horizon
+
+
+def test_circle_starts_at_rest_at_its_first_point_and_accelerates_within_the_limits():
+    """No velocity jump: the settle hover and the tracker start at the primitive's first point at rest, and every
+    step's change of velocity stays within the acceleration limit (the primitive itself starts at 0.79 m/s)."""
+    ref = flight_reference("circle", 8.0, 1.0, 2.0)
+    start = ref[100]
+    np.testing.assert_allclose(start[3:], 0.0, atol=1e-12)
+    dv = np.abs(np.diff(ref[:, 3:6], axis=0))
+    assert dv[:, :2].max() <= HORIZONTAL_LIMITS[1] * 0.01 + 1e-4
+    assert dv[:, 2].max() <= VERTICAL_LIMITS[1] * 0.01 + 1e-4
+    assert np.linalg.norm(ref[150, 3:5]) > 0.1  # it does get going within half a second
