@@ -12,15 +12,13 @@ Writes benchmarks/results/batch_crossover.{md,json}.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
+from common import write_results
 
-RESULTS = Path(__file__).parent / "results"
 
 
 def timed(fn) -> tuple[float, float]:
@@ -85,10 +83,7 @@ def main() -> None:
                      f"{r['parallel_wall_ms'] / r['serial_wall_ms']:.2f} | {r['auto']} |")
     lines += ["", f"Parallel is faster from {info['smallest_size_parallel_wins']} vehicles on in this run; "
               f"`batch.PARALLEL_FROM` = {batch.PARALLEL_FROM}.", ""]
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "batch_crossover.md").write_text("\n".join(lines))
-    (RESULTS / "batch_crossover.json").write_text(json.dumps({"info": info, "rows": rows}, indent=2))
-    print("\n".join(lines))
+    write_results("batch_crossover", lines, {"info": info, "rows": rows})
 
 
 if __name__ == "__main__":

@@ -14,25 +14,22 @@ Writes benchmarks/results/campaign_scaling.{md,json}.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import resource
 import statistics
 import time
-from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results"
+import common
+from common import cpu_s, write_results
+
 BIG_CAMPAIGN_FLIGHTS = 100 * 100 * 100 * 5 * 3  # the issue's 100 x 100 x 100 surface, 5 payloads, 3 winds
-
-
-def _cpu_s() -> float:
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
 
 
 def _worker_cpu(client) -> float:
     """Total CPU seconds of the cluster's worker processes so far."""
-    return sum(client.run(_cpu_s).values())
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(common)  # the workers need not find benchmarks/ on their path
+    return sum(client.run(cpu_s).values())
 
 
 def main() -> None:
@@ -52,10 +49,10 @@ def main() -> None:
     rows = []
     compute_surface(3, 1, sc)  # compile or load the kernels here first
     load0 = os.getloadavg()
-    w, c = time.perf_counter(), _cpu_s()
+    w, c = time.perf_counter(), cpu_s()
     reference = compute_surface(**size)
     rows.append({"setting": "in-process (numba threads)", "workers": 0, "wall_s": time.perf_counter() - w,
-                 "cpu_s": _cpu_s() - c, "load": os.getloadavg()[0]})
+                 "cpu_s": cpu_s() - c, "load": os.getloadavg()[0]})
     print(rows[-1], flush=True)
     for workers in (1, 2):
         with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -63,14 +60,14 @@ def main() -> None:
                 Client(cluster) as client:
             compute_surface(3, workers, sc, chunk=1, scheduler=cluster.scheduler_address)  # warm every worker
             cpu_workers0 = _worker_cpu(client)
-            w, c = time.perf_counter(), _cpu_s()
+            w, c = time.perf_counter(), cpu_s()
             with get_task_stream(client) as stream:
                 surface = compute_surface(**size, scheduler=cluster.scheduler_address)
             wall = time.perf_counter() - w
             chunk_s = [sum(ss["stop"] - ss["start"] for ss in t["startstops"] if ss["action"] == "compute")
                        for t in stream.data]
             row = {"setting": f"Dask LocalCluster, {workers} worker process(es) x 1 thread", "workers": workers,
-                   "wall_s": wall, "cpu_s": _cpu_s() - c, "worker_cpu_s": _worker_cpu(client) - cpu_workers0,
+                   "wall_s": wall, "cpu_s": cpu_s() - c, "worker_cpu_s": _worker_cpu(client) - cpu_workers0,
                    "load": os.getloadavg()[0], "chunks": len(chunk_s), "chunk_compute_s_sum": sum(chunk_s),
                    "chunk_compute_s_median": statistics.median(chunk_s), "chunk_compute_s_max": max(chunk_s),
                    "same_surface": bool((surface.mean == reference.mean).all())}
@@ -100,14 +97,11 @@ def main() -> None:
     lines += ["", f"2 workers vs 1: {info['speedup_2_vs_1_worker']:.2f}x faster in wall time on this 2-core machine.",
               f"A worker spends {per_flight_s * 1e3:.3f} CPU ms per 9 s flight (its getrusage over the 2-worker run "
               "/ flights, Dask's bookkeeping included).",
-              f"Projected from that, the issue's 15 M-flight campaign (100 x 100 x 100 x 5 payloads x 3 winds) on P "
+              "Projected from that, the issue's 15 M-flight campaign (100 x 100 x 100 x 5 payloads x 3 winds) on P "
               "idle single-thread workers: " + ", ".join(f"{p} workers {s / 60:.1f} min" for p, s in
                                                           projection.items()) +
               " (chunks split evenly; a real cluster adds its network: 9 bytes of results per flight).", ""]
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "campaign_scaling.md").write_text("\n".join(lines))
-    (RESULTS / "campaign_scaling.json").write_text(json.dumps({"info": info, "rows": rows}, indent=2))
-    print("\n".join(lines))
+    write_results("campaign_scaling", lines, {"info": info, "rows": rows})
 
 
 if __name__ == "__main__":

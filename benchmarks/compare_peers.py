@@ -27,33 +27,25 @@ import argparse
 import json
 import os
 import platform
-import resource
 import shutil
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
+from common import cpu_s, write_results
 
 STEPS = 800  # 8 s at 100 Hz
-RESULTS = Path(__file__).parent / "results"
 XLA_ONE_THREAD = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
-
-
-def _cpu_s() -> float:
-    """CPU seconds (user + system) of this process so far, all threads."""
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
 
 
 def _timed(fn, repeats: int) -> dict:
     """Best-of-`repeats` wall time of fn() and the CPU time of that same call."""
     best = (float("inf"), float("nan"))
     for _ in range(repeats):
-        w, c = time.perf_counter(), _cpu_s()
+        w, c = time.perf_counter(), cpu_s()
         fn()
-        w, c = time.perf_counter() - w, _cpu_s() - c
+        w, c = time.perf_counter() - w, cpu_s() - c
         best = min(best, (w, c))
     return {"wall_s": best[0], "cpu_s": best[1]}
 
@@ -213,7 +205,7 @@ def plan(quick: bool) -> list[tuple[str, int, int, int]]:
     rows = []
     for cores in (1, 2):
         for n in (2, 1000, big):
-            rows += [("mavtune", n, cores, 5), ("crazyflow", n, cores, 3)]
+            rows += [("mavtune", n, cores, 5 if n < big else 2), ("crazyflow", n, cores, 3 if n < big else 2)]
     rows += [("rotorpy", 2, 1, 2), ("rotorpy", 1000 if not quick else 100, 1, 1)]
     return list(dict.fromkeys(rows))
 
@@ -264,11 +256,7 @@ def main() -> None:
     rows = [measure(p, n, c, r, args.timeout_s) for p, n, c, r in plan(args.quick) if not only or p in only]
     info["load_end"] = os.getloadavg()[0]
     lines = report(rows, info)
-    RESULTS.mkdir(exist_ok=True)
-    name = "peers_quick" if args.quick else "peers"
-    (RESULTS / f"{name}.md").write_text("\n".join(lines))
-    (RESULTS / f"{name}.json").write_text(json.dumps({"info": info, "rows": rows}, indent=2))
-    print("\n".join(lines))
+    write_results("peers_quick" if args.quick else "peers", lines, {"info": info, "rows": rows})
 
 
 if __name__ == "__main__":
