@@ -11,7 +11,7 @@ import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Gains
@@ -100,3 +100,40 @@ class GainBank:
         except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise MavtuneError(f"gain bank {path} is not a mavtune bank file ({exc})") from None
         return bank
+
+
+def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float], Any], scheduler: str | None = None,
+          console: Any = None) -> GainBank:
+    """Tune the simulated vehicle at each payload (run folder `out/payload-<kg>kg`, resumed if it is there) and
+    keep the gains by total mass in `out/bank.json`, saved after each payload. With `scheduler` the payloads
+    are tuned at once on that Dask cluster, each run folder shipped to its worker and back (same gains)."""
+    from rich.console import Console
+
+    from mavtune.campaign import folder_files, run_chunks, run_in_folder, write_files
+    from mavtune.run import run
+    from mavtune.sim.airframe import MASS_KG
+
+    console = console or Console()
+    out = Path(out)
+    bank = GainBank.load(out / "bank.json", missing_ok=True)
+    folders = [out / f"payload-{p:g}kg" for p in payloads_kg]
+
+    def keep(i: int, gains: Gains) -> None:
+        bank.add(MASS_KG + payloads_kg[i], gains, str(folders[i]))
+        bank.save(out / "bank.json")
+
+    if not scheduler:
+        for i, payload in enumerate(payloads_kg):
+            console.rule(f"payload {payload:g} kg")
+            keep(i, run(config_for(payload), folders[i], console=console, quiet=True).gains)
+        return bank
+
+    def landed(i: int, done: tuple[dict[str, bytes], Any]) -> None:
+        files, result = done
+        write_files(folders[i], files)
+        keep(i, result.gains)
+        console.print(f"payload {payloads_kg[i]:g} kg tuned: {folders[i]}")
+
+    chunks = [(config_for(p), folder_files(f)) for p, f in zip(payloads_kg, folders)]
+    run_chunks(run_in_folder, chunks, scheduler, landed, name="bank")
+    return bank

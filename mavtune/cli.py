@@ -19,7 +19,7 @@ from mavtune import interrupts
 from mavtune.errors import Interrupted, MavtuneError
 from mavtune.options import (
     AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MaxRoundsOpt, MethodOpt, ReplicatesOpt, ReuseOpt,
-    StrategyOpt,
+    SchedulerOpt, StrategyOpt,
     VehiclesOpt, config_from_flags,
 )
 
@@ -187,27 +187,21 @@ def bank_build(
     out: Path = typer.Option(..., "--out", "-o", help="Folder for bank.json and one run folder per payload."),
     config: Optional[Path] = ConfigOpt, vehicles: Optional[int] = VehiclesOpt, strategy: Optional[str] = StrategyOpt,
     seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the simulated vehicles."),
+    scheduler: Optional[str] = SchedulerOpt,
 ) -> None:
     """Tune the simulated vehicle at each payload and collect the gains by mass (resumes like `tune`)."""
     from rich.console import Console
 
-    from mavtune.bank import GainBank
-    from mavtune.run import run
-    from mavtune.sim.airframe import MASS_KG
+    from mavtune.bank import build
 
     try:
         masses = [float(p) for p in payloads.split(",")]
     except ValueError:
         raise MavtuneError(f"--payloads must be numbers separated by commas, got {payloads!r}") from None
-    console, bank = Console(), GainBank.load(out / "bank.json", missing_ok=True)
-    for payload in masses:
-        cfg = config_from_flags(config, vehicles, strategy, None, None, None, None, None, None, tuning__seed=seed,
-                      sim__payload_kg=payload)
-        folder = out / f"payload-{payload:g}kg"
-        console.rule(f"payload {payload:g} kg")
-        result = run(cfg, folder, console=console, quiet=True)
-        bank.add(MASS_KG + payload, result.gains, str(folder))
-        bank.save(out / "bank.json")
+    console = Console()
+    bank = build(masses, out, lambda payload: config_from_flags(
+        config, vehicles, strategy, None, None, None, None, None, None, tuning__seed=seed, sim__payload_kg=payload),
+        scheduler=scheduler, console=console)
     _print_bank(console, bank)
 
 

@@ -22,6 +22,8 @@ AdaptiveOpt = typer.Option(None, "--adaptive/--no-adaptive", help="Fly close com
                            "the kept point is the best with probability [tuning] confidence.")
 MaxRoundsOpt = typer.Option(None, "--max-rounds", help="Refuse a plan of more rounds than this [2000]; raise it "
                             "to fly a longer plan anyway.")
+SchedulerOpt = typer.Option(None, "--scheduler", help="Run the campaign's chunks on the Dask cluster whose "
+                            "scheduler listens here (tcp://HOST:8786); default: in this process.")
 
 
 def bootstraps_flag(value: Optional[str]) -> int | str | None:

@@ -43,27 +43,33 @@ VARIANTS = (
 )
 
 
-def run_variants(runs: int, seed: int, advance: Callable[[], None] = lambda: None) -> list[dict[str, Any]]:
-    """Tune every variant `runs` times (no payload); one row per run with its noise-free final cost."""
+def run_variants(runs: int, seed: int, advance: Callable[[], None] = lambda: None,
+                 scheduler: str | None = None) -> list[dict[str, Any]]:
+    """Tune every variant `runs` times (no payload), here or on the Dask cluster at `scheduler`; one row per run
+    with its noise-free final cost."""
+    from mavtune.campaign import run_chunks
     from mavtune.sim import Scenario, SimFleet
-    from mavtune.tuner import run_tuning
 
-    rows = []
-    for v in VARIANTS:
-        for i in range(runs):
-            cfg = load_config(None, {"tuning.strategy": v.strategy, "tuning.vehicles": v.vehicles,
-                                     "tuning.reuse": v.reuse, "tuning.replicates": v.replicates})
-            fleet = SimFleet(v.vehicles, cfg.scenario(), seed=seed + SEED_OFFSET + 10 * i, trace_hz=0.0)
-            result = run_tuning(cfg.settings(), fleet)
-            rows.append({"variant": v.label, "run": i, "vehicles": v.vehicles, "kp": result.gains["kp"],
-                         "kd": result.gains["kd"], "rounds": len(result.rounds), "flights": result.flights,
-                         "true_cost": math.nan})
-            advance()
+    chunks = [(v, i, seed) for v in VARIANTS for i in range(runs)]
+    rows = run_chunks(variant_run, chunks, scheduler, lambda *_: advance(), name="variant-run")
     truth = SimFleet(len(rows), Scenario.noise_free(), seed=0, trace_hz=0.0).fly(
         [{"kp": r["kp"], "kd": r["kd"]} for r in rows], 0)
     for r, f in zip(rows, truth):
         r["true_cost"] = float(f.cost)
     return rows
+
+
+def variant_run(v: Variant, i: int, seed: int) -> dict[str, Any]:
+    """Run i of variant v (a campaign chunk): its row, the noise-free cost still to be filled in."""
+    from mavtune.sim import SimFleet
+    from mavtune.tuner import run_tuning
+
+    cfg = load_config(None, {"tuning.strategy": v.strategy, "tuning.vehicles": v.vehicles,
+                             "tuning.reuse": v.reuse, "tuning.replicates": v.replicates})
+    result = run_tuning(cfg.settings(), SimFleet(v.vehicles, cfg.scenario(), seed=seed + SEED_OFFSET + 10 * i,
+                                                  trace_hz=0.0))
+    return {"variant": v.label, "run": i, "vehicles": v.vehicles, "kp": result.gains["kp"], "kd": result.gains["kd"],
+            "rounds": len(result.rounds), "flights": result.flights, "true_cost": math.nan}
 
 
 def write_csv(rows: list[dict[str, Any]], path: Path) -> None:

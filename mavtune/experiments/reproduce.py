@@ -17,7 +17,7 @@ import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 import typer
 from rich.console import Console
@@ -25,6 +25,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from mavtune.config import Config, load_config
 from mavtune.experiments import extensions as ext
+from mavtune.options import SchedulerOpt
 from mavtune.report import claims as C
 from mavtune.report import markdown as md
 from mavtune.report.folders import out_folder
@@ -87,13 +88,23 @@ def _payload_tag(p: float) -> str:
     return f"{p:g}kg"
 
 
+def tuning_run(strategy: str, payload_kg: float, seed: int, trace_hz: float):
+    """One tuning run in the paper's setting on simulated vehicles seeded seed, seed + 1 (a campaign chunk)."""
+    from mavtune.sim import SimFleet
+    from mavtune.tuner import run_tuning
+
+    cfg = run_config(strategy, payload_kg, seed)
+    return run_tuning(cfg.settings(), SimFleet(VEHICLES, cfg.scenario(), seed=seed, trace_hz=trace_hz))
+
+
 def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: Console | None = None,
-              campaign: Campaign | None = None) -> Reproduction:
-    """Run the campaign (quick or full, or an explicit `campaign`) and write everything into `out_dir`."""
+              campaign: Campaign | None = None, scheduler: str | None = None) -> Reproduction:
+    """Run the campaign (quick or full, or an explicit `campaign`) and write everything into `out_dir`; the
+    surfaces and tuning runs go in chunks to the Dask cluster at `scheduler` if given (the same results)."""
+    from mavtune.campaign import run_chunks
     from mavtune.report.run_report import round_seconds, write_run_report
     from mavtune.sim import Scenario, SimFleet
     from mavtune.sim import surface as surf
-    from mavtune.tuner import run_tuning
 
     console = console or Console()
     camp = campaign or (Campaign.quick(seed) if quick else Campaign.full(seed))
@@ -116,27 +127,25 @@ def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: 
         for p in camp.payloads_kg:
             task = surface_tasks[p]
             surfaces[p] = surf.compute_surface(camp.grid, camp.repeats, Scenario(payload_kg=p), seed=camp.seed,
-                                               progress=lambda done, total, task=task: bar.update(task, completed=done))
+                                               progress=lambda done, total, task=task: bar.update(task, completed=done),
+                                               scheduler=scheduler)
             surf.write_csv(surfaces[p], out / f"surface_{_payload_tag(p)}.csv")
         timings["surfaces"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        for p in camp.payloads_kg:
-            for strategy in STRATEGIES:
-                for i in range(camp.runs):
-                    cfg = run_config(strategy, p, camp.run_seed(i))
-                    keep_trace = i == 0  # the first run of each configuration gets a timeline report
-                    fleet = SimFleet(VEHICLES, cfg.scenario(), seed=camp.run_seed(i), trace_hz=10.0 if keep_trace
-                                     else 0.0)
-                    result = run_tuning(cfg.settings(), fleet)
-                    results[(strategy, p, i)] = result
-                    runs.append({"strategy": strategy, "payload_kg": p, "run": i,
-                                 "kp": float(result.gains["kp"]), "kd": float(result.gains["kd"]),
-                                 "rounds": len(result.rounds), "flights": result.flights, "true_cost": math.nan})
-                    bar.advance(runs_task)
+        keys = [(strategy, p, i) for p in camp.payloads_kg for strategy in STRATEGIES for i in range(camp.runs)]
+        # the first run of each configuration keeps a trace for its timeline report
+        chunks = [(strategy, p, camp.run_seed(i), 10.0 if i == 0 else 0.0) for strategy, p, i in keys]
+        done = run_chunks(tuning_run, chunks, scheduler, lambda *_: bar.advance(runs_task), name="tuning-run")
+        for (strategy, p, i), result in zip(keys, done):
+            results[(strategy, p, i)] = result
+            runs.append({"strategy": strategy, "payload_kg": p, "run": i,
+                         "kp": float(result.gains["kp"]), "kd": float(result.gains["kd"]),
+                         "rounds": len(result.rounds), "flights": result.flights, "true_cost": math.nan})
         timings["tuning runs"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        variants = ext.run_variants(camp.runs, camp.seed, advance=lambda: bar.advance(variants_task))
+        variants = ext.run_variants(camp.runs, camp.seed, advance=lambda: bar.advance(variants_task),
+                                    scheduler=scheduler)
         ext.write_csv(variants, out / ext.EXTENSIONS_CSV)
         timings["beyond the paper"] = time.perf_counter() - t0
 
@@ -329,10 +338,11 @@ def reproduce_command(
     out: Path = typer.Option(..., "--out", "-o", help="Folder for the surfaces, runs.csv, figures and report.md."),
     quick: bool = typer.Option(False, "--quick", help="A CI-sized campaign (9×9×5 surfaces, 4 runs each, < 60 s)."),
     seed: int = typer.Option(0, "--seed", help="Base seed of the surfaces and the tuning runs."),
+    scheduler: Optional[str] = SchedulerOpt,
 ) -> None:
     """Regenerate the paper's experiments in the simulator, beside the paper's numbers and claims."""
     console = Console()
-    rep = reproduce(out, quick=quick, seed=seed, console=console)
+    rep = reproduce(out, quick=quick, seed=seed, console=console, scheduler=scheduler)
     for c in rep.claims:
         console.print(f"{'[green]holds[/]' if c.holds else '[red]does not hold[/]'}  {c.claim}: {c.measured}",
                       highlight=False)

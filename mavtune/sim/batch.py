@@ -14,6 +14,10 @@ from mavtune.sim.cost import lowpass_alpha
 from mavtune.sim.scenario import COST_NAMES, Scenario
 from mavtune.sim.tracker import DT_S, flight_reference
 
+# Batches smaller than this fly on the calling thread: below it numba's thread launch costs more than the second
+# core gains (benchmarks/batch_crossover.py measures the crossover; results in benchmarks/results/).
+PARALLEL_FROM = 16
+
 FAILURE_NAMES = {K.FAIL_NONFINITE: "non-finite state", K.FAIL_GROUND: "hit the ground", K.FAIL_TILT: "tilt > 90 deg"}
 
 
@@ -107,10 +111,12 @@ class BatchResult:
         return self.costs[:, COST_NAMES.index(name)]
 
 
-def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0) -> BatchResult:
+def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0,
+        parallel: bool | None = None) -> BatchResult:
     """Fly len(seeds) flights at once: flight i has physical gains (kx_z[i], kv_z[i]) and randomness (seeds[i],
     round_ids[i]). trace_hz > 0 records, at that rate, the low-passed altitude measurement the controller acted on
-    (the signal of the cost; 0: no trace)."""
+    (the signal of the cost; 0: no trace). `parallel`: spread the batch over numba's threads (True), fly it on
+    this thread (False), or choose by size (None: from PARALLEL_FROM flights on); the results are the same."""
     seeds = seed_array(seeds)
     b = seeds.shape[0]
     round_ids = np.ascontiguousarray(np.broadcast_to(np.asarray(round_ids, dtype=np.int64), (b,)))
@@ -125,9 +131,10 @@ def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0)
     status = np.empty(b, dtype=np.int64)
     t_fail = np.empty(b)
     mix, alloc = mixing()
+    kernel = K.fly_batch if (b >= PARALLEL_FROM if parallel is None else parallel) else K.fly_serial
     if b:
-        K.fly_batch(seeds, round_ids, kx, kv, ref, settle_steps(scenario), constants(scenario), mix, alloc, every,
-                    traces, costs, status, t_fail)
+        kernel(seeds, round_ids, kx, kv, ref, settle_steps(scenario), constants(scenario), mix, alloc, every, traces,
+               costs, status, t_fail)
     t_trace = np.arange(n_trace) * every * DT_S
     z_ref = ref[::every, 2].copy() if every else np.empty(0)
     return BatchResult(costs=costs, status=status, t_fail_s=t_fail, traces=traces[:, :n_trace], trace_t_s=t_trace,

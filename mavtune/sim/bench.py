@@ -1,4 +1,5 @@
-"""Throughput of the batched simulator: vehicle-steps per second, first call (compile or cache load) and warm."""
+"""Throughput of the batched simulator: vehicle-steps per second of wall and of CPU time, first call (compile or
+cache load) and warm, with the load average (the machine may be shared)."""
 
 from __future__ import annotations
 
@@ -26,15 +27,18 @@ def run(sizes: list[int], primitive_s: float = 8.0, repeats: int = 3) -> Iterato
     batch.fly(sc, KX, KV, [0], 0)
     cold = time.perf_counter() - t1
     steps = batch.reference_for(sc).shape[0]
-    yield (f"numba {numba.__version__}, {numba.get_num_threads()} threads, {os.cpu_count()} cpus; "
-           f"flight = {steps} steps of 0.01 s")
+    yield (f"numba {numba.__version__}, {numba.get_num_threads()} threads, {os.cpu_count()} cpus, load average "
+           f"{os.getloadavg()[0]:.2f}; flight = {steps} steps of 0.01 s; batches below {batch.PARALLEL_FROM} "
+           "vehicles fly on one thread")
     yield f"import + tracker reference: {t_ref:.3f} s; first flight (compile or load cache): {cold:.3f} s"
-    yield f"{'vehicles':>9} {'best wall s':>12} {'vehicle-steps/s':>16}"
+    yield f"{'vehicles':>9} {'best wall s':>12} {'its CPU s':>10} {'vehicle-steps/s':>16} {'per CPU s':>14}"
     for b in sizes:
         seeds = np.arange(b)
-        best = float("inf")
+        best = (float("inf"), float("nan"))
         for _ in range(repeats):
-            t = time.perf_counter()
+            w, c = time.perf_counter(), time.process_time()
             batch.fly(sc, KX, KV, seeds, 0)
-            best = min(best, time.perf_counter() - t)
-        yield f"{b:>9} {best:>12.4f} {b * steps / best:>16,.0f}"
+            best = min(best, (time.perf_counter() - w, time.process_time() - c))
+        wall, cpu = best
+        per_cpu = f"{b * steps / cpu:>14,.0f}" if cpu > 0 else f"{'-':>14}"
+        yield f"{b:>9} {wall:>12.4f} {cpu:>10.4f} {b * steps / wall:>16,.0f} {per_cpu}"

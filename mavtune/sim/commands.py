@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from mavtune.errors import MavtuneError
+from mavtune.options import SchedulerOpt
 from mavtune.report.folders import out_folder
 
 
@@ -33,6 +34,7 @@ def surface(
     primitive: str = typer.Option("circle", help="circle, step or figure8"),
     cost: str = typer.Option("iae", help="iae, ise, itae or effort"),
     out: Path = typer.Option(..., "--out", help="directory for surface.csv and surface.png"),
+    scheduler: Optional[str] = SchedulerOpt,
 ) -> None:
     """Map the cost over the normalised (kp, kd) square with the simulator (the paper's Fig. 2)."""
     import time
@@ -49,7 +51,7 @@ def surface(
     with Progress(TextColumn("surface"), BarColumn(), MofNCompleteColumn(), TextColumn("flights"),
                   TimeElapsedColumn()) as bar:
         task = bar.add_task("fly", total=grid * grid * repeats)
-        s = surf.compute_surface(grid, repeats, sc, seed=seed,
+        s = surf.compute_surface(grid, repeats, sc, seed=seed, scheduler=scheduler,
                                  progress=lambda done, total: bar.update(task, completed=done))
     wall = time.perf_counter() - t0
     surf.write_csv(s, out / "surface.csv")

@@ -444,15 +444,33 @@ def _fly_one(seed, round_id, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_ever
     return status, k_fail * dt
 
 
+@njit(cache=True, fastmath=FAST)
+def _fly_vehicle(i, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
+                 t_fail):
+    """Fly vehicle i of a batch into row i of the outputs: the one body of both batch entry points."""
+    st, tf = _fly_one(seeds[i], round_ids[i], kxz[i], kvz[i], ref, n_settle, cp, mix, alloc, trace_every, traces[i],
+                      costs[i])
+    status[i] = st
+    t_fail[i] = tf
+
+
 @njit(cache=True, parallel=True, fastmath=FAST)
 def fly_batch(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
               t_fail):
-    """Fly B vehicles (vehicle i: seeds[i], round_ids[i], gains kxz[i], kvz[i]) along `ref` (n, 9: p, v, a)."""
+    """Fly B vehicles (vehicle i: seeds[i], round_ids[i], gains kxz[i], kvz[i]) along `ref` (n, 9: p, v, a),
+    spread over numba's threads (worth its thread launch from a few vehicles on: `batch.PARALLEL_FROM`)."""
     for i in prange(seeds.shape[0]):
-        st, tf = _fly_one(seeds[i], round_ids[i], kxz[i], kvz[i], ref, n_settle, cp, mix, alloc, trace_every,
-                          traces[i], costs[i])
-        status[i] = st
-        t_fail[i] = tf
+        _fly_vehicle(i, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
+                     t_fail)
+
+
+@njit(cache=True, fastmath=FAST)
+def fly_serial(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
+               t_fail):
+    """`fly_batch` on the calling thread alone: no thread launch, for the small batches of a tuning round."""
+    for i in range(seeds.shape[0]):
+        _fly_vehicle(i, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
+                     t_fail)
 
 
 @njit(cache=True)

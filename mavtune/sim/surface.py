@@ -49,15 +49,17 @@ def check_size(grid: int, repeats: int) -> None:
 
 
 def compute_surface(grid: int = 25, repeats: int = 20, scenario: Scenario | None = None, seed: int = 0,
-                    chunk: int = 2500, progress: Callable[[int, int], None] | None = None) -> Surface:
+                    chunk: int = 2500, progress: Callable[[int, int], None] | None = None,
+                    scheduler: str | None = None) -> Surface:
     """Fly every (kp, kd) of a grid x grid lattice on [0, 1]^2 `repeats` times on one vehicle (seed) and average.
 
     Repeat r is round r at every grid point (common random numbers: the same wind and noise everywhere), so
-    neighbouring points differ by their gains, not by luck. `progress(done, total)` is called after each chunk.
+    neighbouring points differ by their gains, not by luck. The flights go in chunks of `chunk`, in this process
+    or on the Dask cluster at `scheduler` (`mavtune.campaign`: the same surface either way);
+    `progress(done, total)` is called after each chunk with the flights done so far.
     """
     check_size(grid, repeats)
-    from mavtune.sim import batch  # loads numba: not needed to read or draw a surface
-    from mavtune.sim import kernel as K
+    from mavtune.campaign import run_chunks
 
     sc = scenario if scenario is not None else Scenario.default()
     axis = np.linspace(0.0, 1.0, grid)
@@ -65,19 +67,35 @@ def compute_surface(grid: int = 25, repeats: int = 20, scenario: Scenario | None
     kx, kv = to_physical(np.repeat(kp.ravel(), repeats), np.repeat(kd.ravel(), repeats))
     rounds = np.tile(np.arange(repeats), grid * grid)
     total = rounds.size
-    costs = np.empty(total)
-    failed = np.empty(total, dtype=bool)
-    for start in range(0, total, chunk):
-        stop = min(total, start + chunk)
-        res = batch.fly(sc, kx[start:stop], kv[start:stop], [seed] * (stop - start), rounds[start:stop])
-        costs[start:stop] = res.cost(sc.cost)
-        failed[start:stop] = res.status != K.OK
+    bounds = [(start, min(total, start + chunk)) for start in range(0, total, chunk)]
+    # on a cluster each chunk flies on its worker's thread: Dask's workers are the parallelism there
+    parallel = None if not scheduler else False
+    chunks = [(sc, kx[a:b], kv[a:b], seed, rounds[a:b], parallel) for a, b in bounds]
+    flown = 0
+
+    def done(i: int, _: object) -> None:
+        nonlocal flown
+        flown += bounds[i][1] - bounds[i][0]
         if progress is not None:
-            progress(stop, total)
+            progress(flown, total)
+
+    parts = run_chunks(fly_chunk, chunks, scheduler, done, name="surface")
+    costs = np.concatenate([c for c, _ in parts])
+    failed = np.concatenate([f for _, f in parts])
     c = costs.reshape(grid, grid, repeats)
     return Surface(kp=axis, kd=axis.copy(), mean=c.mean(-1), std=c.std(-1, ddof=1) if repeats > 1 else
                    np.zeros((grid, grid)), n=np.full((grid, grid), repeats),
                    failed=failed.reshape(grid, grid, repeats).sum(-1), scenario=sc)
+
+
+def fly_chunk(scenario: Scenario, kx_z: np.ndarray, kv_z: np.ndarray, seed: int, rounds: np.ndarray,
+              parallel: bool | None) -> tuple[np.ndarray, np.ndarray]:
+    """One chunk of a surface: the flights' costs (the scenario's cost) and whether each failed."""
+    from mavtune.sim import batch  # loads numba: not needed to read or draw a surface
+    from mavtune.sim import kernel as K
+
+    res = batch.fly(scenario, kx_z, kv_z, [seed] * len(kx_z), rounds, parallel=parallel)
+    return res.cost(scenario.cost), res.status != K.OK
 
 
 def write_csv(surface: Surface, path: str | Path) -> None:

@@ -1,0 +1,23 @@
+"""What every benchmark here shares: CPU time of this process, and writing a result as markdown + JSON."""
+
+from __future__ import annotations
+
+import json
+import resource
+from pathlib import Path
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def cpu_s() -> float:
+    """CPU seconds (user + system) of this process so far, all its threads."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def write_results(name: str, lines: list[str], data: dict) -> None:
+    """benchmarks/results/NAME.md (the lines) and NAME.json (the data); the lines are printed too."""
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f"{name}.md").write_text("\n".join(lines))
+    (RESULTS / f"{name}.json").write_text(json.dumps(data, indent=2))
+    print("\n".join(lines))
