@@ -27,12 +27,13 @@ def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPE
            duration: float = 120.0):
     """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT); kills it afterwards."""
     port = free_udp_port()
-    with mavsim_on(port, *args, autopilot=autopilot, seed=seed, speed=speed, sysid=sysid):
+    with mavsim_on(port, *args, autopilot=autopilot, seed=seed, speed=speed, sysid=sysid, duration=duration):
         yield f"udpin:127.0.0.1:{port}"
 
 
 @contextmanager
-def mavsim_on(port: int, *args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1):
+def mavsim_on(port: int, *args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1,
+              duration: float = 120.0):
     """Run `mavtune mavsim` sending to 127.0.0.1:port until the block ends."""
     cmd = [sys.executable, "-c", "from mavtune.cli import main; main()", "mavsim", "--port", str(port),
            "--autopilot", autopilot, "--seed", str(seed), "--speed", str(speed), "--sysid", str(sysid),

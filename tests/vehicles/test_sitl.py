@@ -46,6 +46,7 @@ def journal_rounds(out) -> int:
         return len(j.rounds())
 
 
+@pytest.mark.slow
 def test_one_vehicle_avg_tunes_and_restores(tmp_path):
     with sitl_vehicles(1) as (sitl,):
         started = time.monotonic()
