@@ -8,6 +8,7 @@ import json
 import pytest
 
 from mavtune.fleet import Status
+from mavtune.vehicles.mavlink.config import SafetyConfig
 from mavtune.vehicles.mavlink import MavlinkFleet, MavlinkVehicle
 
 from mavlink_harness import fast_config, mavsim, read_params
@@ -19,11 +20,16 @@ GOOD = {"kp": 0.3, "kd": 0.5}
 DIVERGING = {"kp": 0.9, "kd": 0.5}  # MPC_Z_P = 1.36 > 1.0 with the diverge fault below
 
 
+def realtime_config():
+    """fast_config for a vehicle flying in real time: heartbeats come at 1 Hz, as PX4 and ArduPilot send them."""
+    return fast_config(safety=SafetyConfig(heartbeat_timeout_s=3.0, position_timeout_s=1.0, max_altitude_error_m=1.0))
+
+
 def test_connecting_to_a_vehicle_already_streaming_in_real_time_waits_for_its_position():
     """The readiness check needs a LOCAL_POSITION_NED; it used to run before the first one arrived."""
     with mavsim(autopilot="px4", speed=1.0) as url:
         read_params(url, ["MPC_Z_P"])  # the vehicle is up and streaming before the fleet connects
-        fleet = MavlinkFleet([url], fast_config())
+        fleet = MavlinkFleet([url], realtime_config())
         try:
             assert fleet.size == 1
         finally:
