@@ -122,7 +122,7 @@ class MavlinkFleet:
                 v.link.close()
             raise errors[0] if isinstance(errors[0], MavtuneError) else MavtuneError(str(errors[0]))
         if check_ready:
-            problems = [f"{v.name}: {p}" for v in self.vehicles if (p := v.ready_problem())]
+            problems = self._start_problems()
             if problems:
                 for v in self.vehicles:
                     v.link.close()
@@ -131,6 +131,16 @@ class MavlinkFleet:
             write_originals(self.out_dir, self.original_params)
         self._undo_sigterm = sigterm_as_interrupt()
         self._event("connected", vehicles=[v.name for v in self.vehicles])
+
+    def _start_problems(self) -> list[str]:
+        """Why vehicles cannot start, after waiting up to safety.ready_wait_s: a first sensor reading may arrive
+        a moment after the heartbeat and parameters on a busy link, so only a problem that lasts refuses the run."""
+        deadline = time.monotonic() + self.config.safety.ready_wait_s
+        while True:
+            problems = [f"{v.name}: {p}" for v in self.vehicles if (p := v.ready_problem())]
+            if not problems or time.monotonic() >= deadline:
+                return problems
+            time.sleep(0.05)
 
     def _event(self, kind: str, **data: Any) -> None:
         self.events.append({"t": time.time(), "event": kind, **data})
