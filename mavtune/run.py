@@ -24,7 +24,6 @@ from rich.table import Table
 
 from mavtune import interrupts
 from mavtune.config import Config
-from mavtune.edges import range_edges
 from mavtune.errors import Interrupted, MavtuneError
 from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal
@@ -361,18 +360,13 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
 
 
 def tuned_outcome(fleet: Fleet, gains: dict[str, float], settings, out_dir: Path) -> dict[str, Any]:
-    """What a finished run says beyond the gains: the range edges they lie at and, for MAVLink vehicles, the gains
-    as each vehicle's parameters (± the search tolerance) and the ground-station parameter files written."""
-    edges = range_edges(gains, settings.space, settings.epsilon)
-    outcome: dict[str, Any] = {}
-    if hasattr(fleet, "explain_edge"):
-        edges = [fleet.explain_edge(e) for e in edges]
-        tolerance = {n: settings.epsilon * (hi - lo) for n, (lo, hi) in settings.space.items()}
-        outcome["tuned_params"] = fleet.parameters(gains)
-        outcome["tuned_params_tolerance"] = fleet.parameter_tolerances(tolerance)
-        outcome["param_files"] = [p.name for p in fleet.write_param_files(gains, out_dir)]
-    outcome["range_edges"] = [e.to_dict() for e in edges]
-    return outcome
+    """What a finished run says beyond the gains: the range edges they lie at and, for vehicles that map the gains
+    to autopilot parameters (MAVLink, directly or behind swarm agents), the gains as each vehicle's parameters
+    (± the search tolerance) and the ground-station parameter files written."""
+    from mavtune.vehicles.tuned import tuned_outcome as outcome
+
+    maps = fleet.param_maps() if hasattr(fleet, "param_maps") else {}
+    return outcome(maps, gains, settings.space, settings.epsilon, out_dir)
 
 
 def print_outcome(console: Console, outcome: dict[str, Any]) -> None:

@@ -214,7 +214,9 @@ class Agent:
                 self._runs.popitem(last=False)
             self.run_id, self._nonce, self._latest, self._armed = msg.run, secrets.token_hex(16), -1, None
             log.info("agent %s: joined run %s", self.id, msg.run[:8])
-        self._send(Hello, backend=self.vehicle.backend, state=self.state, envelope=self.config.envelope)
+        param_map = getattr(self.vehicle, "param_map", None)  # a Vehicle of another make may not have one
+        self._send(Hello, backend=self.vehicle.backend, state=self.state, envelope=self.config.envelope,
+                   params=param_map() if param_map is not None else None)
 
     def _on_finish(self, msg: Finish) -> None:
         """The run is over: release the vehicle (onto the tuned gains only if they pass the envelope)."""

@@ -23,6 +23,7 @@ from mavtune.swarm.messages import (Ack, AgentState, Assignment, Codec, Finish, 
                                     State)
 from mavtune.swarm.ratelog import RateLimitedLog
 from mavtune.swarm.transport import Keys, Link, open_router
+from mavtune.vehicles.parammap import ParamMap
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +82,7 @@ class ZenohFleet:
         self._inbox: queue.Queue[tuple[str, str, Any]] = queue.Queue(maxsize=INBOX_SIZE)
         self._alive: dict[str, float] = {}  # vehicle → when it was last probed
         self._hello: dict[str, Hello] = {}
+        self._param_maps: dict[str, ParamMap] = {}  # vehicle → its parameter map, from its latest hello in this run
         self._late: set[tuple[int, str]] = set()  # (round, vehicle) of late results already kept
         self._answered: set[tuple[int, str]] = set()  # (round, vehicle) whose result a round took
         self._round: _Round | None = None
@@ -117,6 +119,11 @@ class ZenohFleet:
         """What result.json keeps of this fleet: the session, every drop-out event, the dropped messages."""
         return {"session": self.config.session, "listen": self.listen, "swarm_run": self.run, "events": self.events,
                 "dropped_messages": self.dropped}
+
+    def param_maps(self) -> dict[str, ParamMap]:
+        """{vehicle: which autopilot parameter each gain drives}, for every agent that said so in this run, sorted by
+        id (agents on a simulator send none)."""
+        return {v: self._param_maps[v] for v in sorted(self._param_maps, key=vehicle_order)}
 
     def wait_for(self, n: int, timeout_s: float | None = None) -> list[str]:
         """Block until at least n vehicles are present; MavtuneError after timeout_s (default presence_timeout_s)."""
@@ -362,6 +369,8 @@ class ZenohFleet:
             log.info("hello from %s before its liveliness token; waiting for the token", sender)
         new = sender not in self._hello
         self._hello[sender] = msg
+        if msg.params is not None:  # kept when the vehicle leaves: it may have flown, its parameters still count
+            self._param_maps[sender] = msg.params
         if new and sender in self._alive:
             self._event("joined", None if self._round is None else self._round.id, sender,
                         f"backend {msg.backend or '?'}")

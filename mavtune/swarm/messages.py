@@ -19,8 +19,9 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
 from mavtune.fleet import Flight, Status, Trace
+from mavtune.vehicles.parammap import ParamMap
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 """Bumped on any incompatible change of the messages below; other versions are dropped."""
 
 MAX_MESSAGE_BYTES = 1_000_000
@@ -62,7 +63,7 @@ class _Message(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")
 
-    v: Literal[2] = PROTOCOL_VERSION
+    v: Literal[3] = PROTOCOL_VERSION
     session: Annotated[str, Field(pattern=SESSION_PATTERN)]
     run: Nonce
     round: Annotated[int, Field(ge=-1)] = -1
@@ -82,12 +83,15 @@ class Probe(_Message):
 
 
 class Hello(_Bound):
-    """Agent → coordinator, answering a Probe of run `run`: 'I am vehicle X, my nonce for this run is `agent`'."""
+    """Agent → coordinator, answering a Probe of run `run`: 'I am vehicle X, my nonce for this run is `agent`'; a
+    vehicle with autopilot parameters (MAVLink) says which parameter each gain drives (`params`), so the run can give
+    its tuned gains as that vehicle's parameters and write its parameter files."""
 
     kind: Literal["hello"] = "hello"
     backend: Annotated[str, Field(max_length=64)] = ""
     state: AgentState = AgentState.IDLE
     envelope: dict[GainName, tuple[float, float]] = {}
+    params: ParamMap | None = None
 
 
 class Assignment(_Bound):

@@ -11,6 +11,7 @@ import numpy as np
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
+from mavtune.vehicles.parammap import ParamMap
 
 
 @runtime_checkable
@@ -29,6 +30,10 @@ class Vehicle(Protocol):
 
     def release(self, tuned: Gains | None = None) -> None:
         """The run is over: leave the vehicle on safe gains (its originals, or `tuned` where configured to keep)."""
+        ...
+
+    def param_map(self) -> ParamMap | None:
+        """Which autopilot parameter each gain drives (a MAVLink vehicle), or None (a simulator has none)."""
         ...
 
     def close(self) -> None:
@@ -65,6 +70,11 @@ class FleetVehicle:
         if self._gains is None:
             raise MavtuneError("fly() before any gains were applied")
         return self._fleet.fly([self._gains], round_id)[0]
+
+    def param_map(self) -> ParamMap | None:
+        """The fleet's one vehicle's parameter map, when its fleet has one (MAVLink)."""
+        maps = getattr(self._fleet, "param_maps", None)
+        return next(iter(maps().values()), None) if maps is not None else None
 
     def release(self, tuned: Gains | None = None) -> None:
         """The run is over: a MAVLink vehicle goes back to its original gains (or `tuned`, if its config keeps
@@ -164,6 +174,9 @@ class PacedVehicle:
 
     def release(self, tuned: Gains | None = None) -> None:
         self.inner.release(tuned)
+
+    def param_map(self) -> ParamMap | None:
+        return self.inner.param_map()
 
     def fly(self, round_id: int) -> Flight:
         t0 = time.monotonic()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
@@ -44,7 +45,7 @@ def _sealed(body: bytes) -> bytes:
     (CODEC.encode(Start(**KW, round=1))[:-1] + b" ", "authenticated"),  # tampered body
     (_sealed(b"null"), "invalid"), (_sealed(b"not json"), "invalid"), (_sealed(b'{"kind": "assignment"}'), "invalid"),
     (CODEC.encode(Start(**{**KW, "session": "other"}, round=1)), "not ours"),
-    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":2', b'"v":1')), "invalid"),
+    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":3', b'"v":2')), "invalid"),
     (_sealed(Hello(**KW).model_dump_json().encode().replace(b'"vehicle":"v0"', b'"vehicle":"a/b"')), "invalid"),
     (_sealed(Hello(**KW).model_dump_json().encode().replace(b"}", b',"extra":1}', 1)), "invalid"),
     (b"{" + b" " * MAX_MESSAGE_BYTES + b"}", "limit"),
@@ -123,3 +124,33 @@ def test_the_tag_covers_the_whole_body():
     assert len(payload) > MAC_BYTES and CODEC.authentic(payload)
     forged = payload.replace(b"0.25", b"0.95")
     assert not CODEC.authentic(forged)
+
+
+PARAMS = {"stack": "ardupilot", "system_id": 3, "component_id": 1, "gains": {
+    "kp": {"param": "PSC_POSZ_P", "lo": 1.0, "hi": 3.0, "limit_lo": 1.0, "limit_hi": 3.0},
+    "kd": {"param": "PSC_VELZ_P", "lo": 1.0, "hi": 8.0}}}
+
+
+def test_a_hello_carries_the_vehicles_parameter_map():
+    msg = Hello(**KW, backend="mavlink", params=PARAMS)
+    back = CODEC.decode(CODEC.encode(msg))
+    assert back == msg and back.params.values({"kp": 0.5, "kd": 0.0}) == {"PSC_POSZ_P": 2.0, "PSC_VELZ_P": 1.0}
+
+
+@pytest.mark.parametrize("change", [
+    {"stack": "px4\nFENCE_ENABLE 0"}, {"system_id": 0},
+    {"gains": {"kp": {"param": "PSC_POSZ_P\nX", "lo": 1.0, "hi": 3.0}}},
+    {"gains": {"kp": {"param": "PSC_POSZ_P", "lo": 3.0, "hi": 1.0}}},
+    {"gains": {"kp": {"param": "PSC_POSZ_P", "lo": 1.0, "hi": 4.0, "limit_hi": 3.0}}},
+    {"gains": {"kp": {"param": "PSC_POSZ_P", "lo": 1.0, "hi": 3.0, "extra": 1}}},
+])
+def test_a_hello_with_a_parameter_map_that_could_write_a_wrong_file_is_rejected(change):
+    body = json.dumps(Hello(**KW).model_dump(mode="json") | {"params": PARAMS | change})
+    with pytest.raises(Rejected, match=r"invalid message .* at hello\.params\."):
+        CODEC.decode(_sealed(body.encode()))
+
+
+def test_a_hello_with_a_non_finite_range_is_rejected():
+    body = Hello(**KW, params=PARAMS).model_dump_json().replace('"hi":8.0', '"hi":Infinity')
+    with pytest.raises(Rejected, match=r"finite number at hello\.params\.gains\.kd\.hi"):
+        CODEC.decode(_sealed(body.encode()))

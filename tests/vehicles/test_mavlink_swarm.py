@@ -1,5 +1,7 @@
-"""The swarm path to a real autopilot: coordinator → `mavtune agent --vehicle mavlink` → `mavtune mavsim` (PX4),
-all real processes on 127.0.0.1; the run completes and the vehicle ends with its original gains."""
+"""The swarm path to a real autopilot: coordinator → `mavtune agent --vehicle mavlink` → `mavtune mavsim`, all real
+processes on 127.0.0.1. Two agents, one on a PX4 and one on an ArduCopter vehicle: the run completes, every vehicle
+ends with its original gains, and the coordinator gives the tuned gains as each vehicle's own parameters (console,
+result.json, report, a parameter file per vehicle) as a `--fleet mavlink` run does."""
 
 from __future__ import annotations
 
@@ -9,12 +11,16 @@ import subprocess
 import sys
 
 import pytest
+from pymavlink import mavparm
+
+from mavtune.edges import range_edges
 
 from mavlink_harness import mavsim, read_params
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
 
 PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
+ARDU_ORIGINALS = {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}
 MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
 
 
@@ -24,7 +30,7 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-def test_coordinator_tunes_a_mavlink_vehicle_through_its_agent(tmp_path):
+def test_coordinator_tunes_mavlink_vehicles_through_their_agents_and_gives_their_parameters(tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     (tmp_path / "agent.toml").write_text(
         f"[swarm]\nsession = \"mv\"\nkey_file = \"{tmp_path / 'swarm.key'}\"\nresult_timeout_s = 60.0\n"
@@ -32,25 +38,52 @@ def test_coordinator_tunes_a_mavlink_vehicle_through_its_agent(tmp_path):
         "[mavlink.safety]\nheartbeat_timeout_s = 0.5\nposition_timeout_s = 1.0\nmax_altitude_error_m = 1.0\n")
     out = tmp_path / "run"
     (tmp_path / "swarm.key").write_text("mavlink swarm test key\n")
-    with mavsim(autopilot="px4") as url:
+    with mavsim(autopilot="ardupilot", sysid=1) as ardu, mavsim(autopilot="px4", seed=1, sysid=2) as px4:
         coordinator = subprocess.Popen(
-            [*MAVTUNE, "coordinator", "--listen", endpoint, "--vehicles", "1", "--out", str(out), "--session", "mv",
-             "--key-file", str(tmp_path / "swarm.key"), "--settle-s", "0", "--result-timeout-s", "60", "--bootstraps", "1", "--epsilon",
-             "0.25"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        agent = subprocess.Popen(
-            [*MAVTUNE, "agent", "--id", "m0", "--connect", endpoint, "--vehicle", "mavlink", "--mavlink", url,
-             "--config", str(tmp_path / "agent.toml"), "--state-dir", str(tmp_path / "state")],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            [*MAVTUNE, "coordinator", "--listen", endpoint, "--vehicles", "2", "--out", str(out), "--session", "mv",
+             "--key-file", str(tmp_path / "swarm.key"), "--settle-s", "0", "--result-timeout-s", "60",
+             "--bootstraps", "1", "--epsilon", "0.25"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        agents = [subprocess.Popen(
+            [*MAVTUNE, "agent", "--id", f"m{i}", "--connect", endpoint, "--vehicle", "mavlink", "--mavlink", url,
+             "--config", str(tmp_path / "agent.toml"), "--state-dir", str(tmp_path / f"state{i}")],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i, url in enumerate([ardu, px4])]
         try:
-            log, _ = coordinator.communicate(timeout=100)
+            log, _ = coordinator.communicate(timeout=120)
         finally:
-            for p in (coordinator, agent):
+            for p in (coordinator, *agents):
                 p.kill()
                 p.wait(timeout=10)
-        agent_log = agent.stdout.read()
-        agent.stdout.close()
-        assert coordinator.returncode == 0, log[-2000:] + "\nagent:\n" + agent_log[-3000:]
-        assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS, agent_log[-3000:]
+        agent_logs = "".join(a.stdout.read()[-3000:] for a in agents)
+        for a in agents:
+            a.stdout.close()
+        assert coordinator.returncode == 0, log[-2000:] + "\nagents:\n" + agent_logs
+        assert read_params(ardu, list(ARDU_ORIGINALS)) == ARDU_ORIGINALS, agent_logs
+        assert read_params(px4, list(PX4_ORIGINALS)) == PX4_ORIGINALS, agent_logs
     result = json.loads((out / "result.json").read_text())
     assert result["status"] == "finished" and set(result["gains"]) == {"kp", "kd"}
-    assert result["flights_by_status"]["ok"] == result["flights"] == result["rounds"] > 0
+    assert result["flights_by_status"]["ok"] == result["flights"] == 2 * result["rounds"] > 0
+    kp, kd = result["gains"]["kp"], result["gains"]["kd"]
+    assert result["tuned_params"] == {  # each vehicle's own names and units, from the map its agent sent
+        "m0": pytest.approx({"PSC_POSZ_P": 1.0 + 2.0 * kp, "PSC_VELZ_P": 1.0 + 7.0 * kd}),
+        "m1": pytest.approx({"MPC_Z_P": 0.1 + 1.4 * kp, "MPC_Z_VEL_P_ACC": 2.0 + 13.0 * kd})}
+    assert result["tuned_params_tolerance"]["m1"] == pytest.approx({"MPC_Z_P": 0.35, "MPC_Z_VEL_P_ACC": 3.25})
+    assert result["param_file_vehicles"] == {"tuned-1.parm": ["m0"], "tuned-1.params": ["m0"],
+                                             "tuned-2.parm": ["m1"], "tuned-2.params": ["m1"]}
+    for k, vehicle in ((1, "m0"), (2, "m1")):  # the autopilots differ: a file each, that reads back exactly
+        parm = mavparm.MAVParmDict()
+        assert parm.load(str(out / f"tuned-{k}.parm"), use_excludes=False)
+        assert dict(parm) == pytest.approx(result["tuned_params"][vehicle], rel=1e-6)
+        rows = [r.split("\t") for r in (out / f"tuned-{k}.params").read_text().splitlines() if r[:1] != "#"]
+        assert {r[0] for r in rows} == {str(k)}  # the vehicle's own system id (QGroundControl checks it)
+    assert f"m0: PSC_POSZ_P = {result['tuned_params']['m0']['PSC_POSZ_P']:.4g} ± 0.5" in log
+    assert "parameter files" in log and "tuned-2.params" in log
+    report = (out / "report.md").read_text()
+    assert "## Tuned parameters" in report and "`MPC_Z_VEL_P_ACC`" in report and "`tuned-1.parm`" in report
+    # a gain within ε of an edge (on mavsim kd usually ends near the top) is said once per vehicle parameter
+    at_edge = {e.gain for e in range_edges(result["gains"], {"kp": (0, 1), "kd": (0, 1)}, 0.25)}
+    named = {(e["gain"], e["param"]) for e in result["range_edges"]}
+    params = {"kp": ("PSC_POSZ_P", "MPC_Z_P"), "kd": ("PSC_VELZ_P", "MPC_Z_VEL_P_ACC")}
+    assert named == {(g, p) for g in at_edge for p in params[g]}
+    for edge in result["range_edges"]:
+        assert f"range edge: {edge['message']}" in " ".join(log.split()) and edge["message"] in report
+        assert "documented limit" in edge["hint"]  # the default ranges span each autopilot's limits

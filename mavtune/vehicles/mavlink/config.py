@@ -11,6 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from mavtune.config import read_toml, validated
 from mavtune.errors import MavtuneError
 from mavtune.vehicles.mavlink.profiles import Autopilot
+from mavtune.vehicles.parammap import PARAM_PATTERN, GainBinding
 
 
 class GainParam(BaseModel):
@@ -18,7 +19,7 @@ class GainParam(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    param: str = Field(min_length=1, max_length=16)  # MAVLink parameter ids are at most 16 characters
+    param: str = Field(pattern=PARAM_PATTERN)  # MAVLink parameter ids: at most 16 letters, digits and '_' 
     min: float
     max: float
 
@@ -30,11 +31,7 @@ class GainParam(BaseModel):
 
     def physical(self, normalised: float) -> float:
         """The parameter value (this model's units) for a normalised gain; refuses NaN and values outside [0, 1]."""
-        g = float(normalised)
-        if not math.isfinite(g) or g < -1e-9 or g > 1 + 1e-9:
-            raise MavtuneError(f"normalised gain for {self.param} must be a finite number in [0, 1], got {normalised!r}")
-        g = min(max(g, 0.0), 1.0)
-        return self.min + g * (self.max - self.min)
+        return GainBinding(param=self.param, lo=self.min, hi=self.max).value(normalised)
 
 
 DEFAULT_GAINS: dict[Autopilot, dict[str, GainParam]] = {

@@ -9,15 +9,14 @@ import signal
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from mavtune.edges import RangeEdge
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
 from mavtune.vehicles.mavlink.config import MavlinkConfig, load_mavlink_config
 from mavtune.vehicles.mavlink.vehicle import MavlinkVehicle
+from mavtune.vehicles.parammap import ParamMap
 
 log = logging.getLogger(__name__)
 
@@ -217,47 +216,9 @@ class MavlinkFleet:
                 "link_delay_ms": {v.name: None if v.link_delay_s is None else round(1e3 * v.link_delay_s, 2)
                                   for v in self.vehicles}}
 
-    def parameters(self, gains: Gains) -> dict[str, dict[str, float]]:
-        """{vehicle name: {parameter: value}} of normalised gains, in each autopilot's own units."""
-        return {v.name: v.param_values(gains) for v in self.vehicles}
-
-    def parameter_tolerances(self, tolerances: Gains) -> dict[str, dict[str, float]]:
-        """{vehicle name: {parameter: ± value}}: a normalised tolerance per gain in each parameter's units."""
-        return {v.name: {rg.vehicle_param: tolerances[g] * (rg.hi - rg.lo) for g, rg in v.gains.items()}
-                for v in self.vehicles}
-
-    def write_param_files(self, gains: Gains, out_dir: str | Path) -> list[Path]:
-        """The tuned gains as ground-station parameter files in out_dir: `tuned.parm` (Mission Planner, MAVProxy)
-        and `tuned.params` (QGroundControl); `tuned-K.*` per vehicle K (from 1) when there are several."""
-        from mavtune.vehicles.mavlink.paramfile import write_param_files
-
-        paths = []
-        for k, v in enumerate(self.vehicles, 1):
-            st = v.link.snapshot()
-            stem = "tuned" if len(self.vehicles) == 1 else f"tuned-{k}"
-            paths += write_param_files(out_dir, stem, v.param_values(gains), system_id=st.system or 1,
-                                       component_id=st.component or 1, stack=v.profile.autopilot.value,
-                                       comment=f"mavtune: tuned altitude gains of {v.name}")
-        return paths
-
-    def explain_edge(self, edge: RangeEdge) -> RangeEdge:
-        """The edge with the parameter it drives (first vehicle's) and what to widen, within the autopilot's
-        documented limits."""
-        v = self.vehicles[0]
-        rg = v.gains[edge.gain]
-        upper = edge.side == "upper"
-        bound = rg.value(edge.bound)
-        spec = v.profile.spec(rg.vehicle_param)
-        limit = None if spec is None else (spec.max if upper else spec.min)
-        key = f"[mavlink.gains.{edge.gain}] {'max' if upper else 'min'}"
-        if 0.0 < edge.bound < 1.0:  # the tuning space, not the parameter's range, ends here
-            hint = f"widen tuning.space.{edge.gain} (the parameter's range goes on to {rg.hi if upper else rg.lo:g})"
-        elif limit is not None and abs(limit - bound) <= 1e-9 * max(1.0, abs(limit)):
-            hint = f"the range already ends at {rg.vehicle_param}'s documented limit {limit:g} ({v.profile.autopilot.value})"
-        else:
-            reach = f" (as far as {limit / rg.scale:g}, the autopilot's limit)" if limit is not None else ""
-            hint = f"widen {key}{reach}"
-        return replace(edge, param=rg.vehicle_param, param_value=rg.value(edge.value), param_bound=bound, hint=hint)
+    def param_maps(self) -> dict[str, ParamMap]:
+        """{vehicle name: its gains as its autopilot's parameters}, for the run's tuned parameters and files."""
+        return {v.name: v.param_map() for v in self.vehicles}
 
     def finish(self, tuned: Gains | None = None) -> bool:
         """Leave every vehicle with its originals (or `tuned`, normalised) and release it; True if all confirmed."""

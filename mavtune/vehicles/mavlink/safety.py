@@ -12,6 +12,7 @@ from mavtune.errors import MavtuneError
 from mavtune.vehicles.mavlink.config import GainParam, SafetyConfig
 from mavtune.vehicles.mavlink.link import VehicleState
 from mavtune.vehicles.mavlink.profiles import AutopilotProfile
+from mavtune.vehicles.parammap import GainBinding
 
 # Abort reasons. Those caused by the gains make the flight FAILED; the others say nothing about the gains
 # (the pilot or the link intervened) and make it LOST, so the tuner flies the point again. "not_settled": the
@@ -79,17 +80,28 @@ class ResolvedGain:
 
     gain: str
     config: GainParam
-    vehicle_param: str  # the name found on the vehicle (e.g. PSC_D_VEL_P on Copter 4.7)
-    scale: float  # on-vehicle value = config value × scale
-    lo: float  # envelope, on-vehicle units
-    hi: float
+    binding: GainBinding  # the parameter found on the vehicle (e.g. PSC_D_VEL_P on Copter 4.7), its range and limits
+
+    @property
+    def vehicle_param(self) -> str:
+        return self.binding.param
+
+    @property
+    def scale(self) -> float:
+        """On-vehicle value = config value × scale."""
+        return self.binding.scale
+
+    @property
+    def lo(self) -> float:
+        return self.binding.lo
+
+    @property
+    def hi(self) -> float:
+        return self.binding.hi
 
     def value(self, normalised: float) -> float:
         """The on-vehicle value for a normalised gain, inside the envelope; MavtuneError for NaN or outside [0, 1]."""
-        v = self.config.physical(normalised) * self.scale
-        if not (math.isfinite(v) and self.lo - 1e-9 * max(1.0, abs(self.lo)) <= v <= self.hi + 1e-9 * max(1.0, abs(self.hi))):
-            raise MavtuneError(f"{self.vehicle_param}={v!r} is outside the envelope [{self.lo:g}, {self.hi:g}]")
-        return min(max(v, self.lo), self.hi)
+        return self.binding.value(normalised)
 
 
 def resolve_gain(gain: str, cfg: GainParam, profile: AutopilotProfile, present: dict[str, float]) -> ResolvedGain:
@@ -108,4 +120,6 @@ def resolve_gain(gain: str, cfg: GainParam, profile: AutopilotProfile, present: 
         raise MavtuneError(
             f"gain {gain!r}: range [{lo:g}, {hi:g}] of {name} exceeds the autopilot's limits [{spec.min:g}, {spec.max:g}]"
         )
-    return ResolvedGain(gain, cfg, name, scale, lo, hi)
+    limits = (None, None) if spec is None else (spec.min, spec.max)
+    return ResolvedGain(gain, cfg, GainBinding(param=name, lo=lo, hi=hi, scale=scale, limit_lo=limits[0],
+                                               limit_hi=limits[1]))

@@ -27,6 +27,7 @@ from mavtune.vehicles.mavlink.safety import (
     resolve_gain,
 )
 from mavtune.vehicles.mavlink.setpoints import SetpointStreamer, require_mode_known, set_mode
+from mavtune.vehicles.parammap import ParamMap
 
 log = logging.getLogger(__name__)
 
@@ -154,15 +155,19 @@ class MavlinkVehicle:
         """True when the vehicle can fly the next primitive."""
         return self.ready_problem() is None
 
+    def param_map(self) -> ParamMap:
+        """This vehicle's gains as its autopilot's parameters: names, ranges, documented limits, MAVLink ids."""
+        st = self.link.snapshot()
+        return ParamMap(stack=self.profile.autopilot.value, system_id=st.system or 1,
+                        component_id=st.component if st.component is not None else 1,
+                        gains={g: rg.binding for g, rg in self.gains.items()})
+
     def param_values(self, normalised: Gains) -> dict[str, float]:
         """The on-vehicle parameter values of a normalised gain vector, inside the envelope (MavtuneError otherwise)."""
-        missing = sorted(set(self.gains) - set(normalised))
-        extra = sorted(set(normalised) - set(self.gains))
-        if missing or extra:
-            raise MavtuneError(
-                f"{self.name}: gains {sorted(normalised)} do not match the configured gains {sorted(self.gains)}"
-            )
-        return {rg.vehicle_param: rg.value(normalised[g]) for g, rg in self.gains.items()}
+        try:
+            return self.param_map().values(normalised)
+        except MavtuneError as exc:
+            raise MavtuneError(f"{self.name}: {exc}") from None
 
     # ---- parameters ------------------------------------------------------------------------------------------
     def _set_params(self, values: Mapping[str, float]) -> None:

@@ -1,0 +1,112 @@
+"""Which autopilot parameter each tuning gain drives, and in what units: all a run needs to give its tuned gains as
+each vehicle's parameters (value ± tolerance, the range edge named by parameter, ground-station files).
+
+A MAVLink vehicle knows its map once connected; a swarm agent sends it to the coordinator in its Hello, so every
+field is validated here: parameter and autopilot names that cannot break a parameter file's lines, finite numbers,
+a range inside the autopilot's documented limits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Annotated, Mapping
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from mavtune.edges import RangeEdge
+from mavtune.errors import MavtuneError
+
+PARAM_PATTERN = r"^[A-Za-z0-9_]{1,16}$"
+"""A MAVLink parameter id: at most 16 characters, letters, digits and '_' (no space or line break)."""
+
+STACK_PATTERN = r"^[a-z0-9_.\-]{1,32}$"
+"""The autopilot's name as mavtune writes it ('px4', 'ardupilot')."""
+
+MAX_GAINS = 64
+"""A map binds at most this many gains."""
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+GainName = Annotated[str, Field(min_length=1, max_length=64)]
+_SLACK = 1e-9  # relative slack for comparisons of values that went through float32 or a unit scale
+
+
+def _near(a: float, b: float) -> bool:
+    return abs(a - b) <= _SLACK * max(1.0, abs(a), abs(b))
+
+
+class GainBinding(BaseModel):
+    """One gain g ∈ [0, 1] driving parameter `param` = lo + g·(hi − lo), in the autopilot's units."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    param: Annotated[str, Field(pattern=PARAM_PATTERN)]
+    lo: Finite
+    hi: Finite
+    scale: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1.0  # on-vehicle units per configured unit
+    limit_lo: Finite | None = None  # the autopilot's documented limits of `param`, when known
+    limit_hi: Finite | None = None
+
+    @model_validator(mode="after")
+    def _check(self) -> "GainBinding":
+        if not self.lo < self.hi:
+            raise ValueError(f"{self.param}: range [{self.lo}, {self.hi}] is empty")
+        if self.limit_lo is not None and self.lo < self.limit_lo and not _near(self.lo, self.limit_lo):
+            raise ValueError(f"{self.param}: range starts at {self.lo}, below the autopilot's limit {self.limit_lo}")
+        if self.limit_hi is not None and self.hi > self.limit_hi and not _near(self.hi, self.limit_hi):
+            raise ValueError(f"{self.param}: range ends at {self.hi}, above the autopilot's limit {self.limit_hi}")
+        return self
+
+    def value(self, normalised: float) -> float:
+        """The parameter's value for a normalised gain; MavtuneError for NaN or a gain outside [0, 1]."""
+        g = float(normalised)
+        if not math.isfinite(g) or g < -_SLACK or g > 1 + _SLACK:
+            raise MavtuneError(f"normalised gain for {self.param} must be a finite number in [0, 1], got {normalised!r}")
+        return self.lo + min(max(g, 0.0), 1.0) * (self.hi - self.lo)
+
+    def limit(self, upper: bool) -> float | None:
+        """The autopilot's documented limit on that side, if known."""
+        return self.limit_hi if upper else self.limit_lo
+
+
+class ParamMap(BaseModel):
+    """One vehicle's gains as its autopilot's parameters, with what a ground-station file names it by."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    stack: Annotated[str, Field(pattern=STACK_PATTERN)]
+    system_id: Annotated[int, Field(ge=1, le=255)] = 1
+    component_id: Annotated[int, Field(ge=0, le=255)] = 1
+    gains: Annotated[dict[GainName, GainBinding], Field(min_length=1, max_length=MAX_GAINS)]
+
+    def covers(self, gains: Mapping[str, float]) -> bool:
+        """True when this map binds exactly these gains."""
+        return set(self.gains) == set(gains)
+
+    def values(self, gains: Mapping[str, float]) -> dict[str, float]:
+        """{parameter: value} of normalised gains; MavtuneError unless the gains are exactly the bound ones."""
+        if not self.covers(gains):
+            raise MavtuneError(f"gains {sorted(gains)} do not match the configured gains {sorted(self.gains)}")
+        return {b.param: b.value(gains[g]) for g, b in self.gains.items()}
+
+    def tolerances(self, tolerance: Mapping[str, float]) -> dict[str, float]:
+        """{parameter: ± value}: a normalised tolerance per gain in each parameter's units."""
+        return {b.param: tolerance[g] * (b.hi - b.lo) for g, b in self.gains.items()}
+
+    def explain_edge(self, edge: RangeEdge) -> RangeEdge:
+        """The edge with the parameter it drives and what to widen: the tuning space when it ends inside the
+        parameter's range, else the parameter's range — up to the autopilot's documented limit, or nothing to
+        widen when the range already ends there."""
+        b = self.gains.get(edge.gain)
+        if b is None:
+            return edge
+        upper = edge.side == "upper"
+        bound, limit = b.value(edge.bound), b.limit(upper)
+        if 0.0 < edge.bound < 1.0:
+            hint = f"widen tuning.space.{edge.gain} (the parameter's range goes on to {b.hi if upper else b.lo:g})"
+        elif limit is not None and _near(limit, bound):
+            hint = f"the range already ends at {b.param}'s documented limit {limit:g} ({self.stack})"
+        else:
+            reach = f" (as far as {limit / b.scale:g}, the autopilot's limit)" if limit is not None else ""
+            hint = f"widen [mavlink.gains.{edge.gain}] {'max' if upper else 'min'}{reach}"
+        return replace(edge, param=b.param, param_value=b.value(edge.value), param_bound=bound, hint=hint)

@@ -1,0 +1,75 @@
+"""A finished run's gains as each vehicle's own parameters: the values ± the search's tolerance, the range edges
+named by parameter, and the ground-station parameter files — one implementation for MAVLink vehicles flown
+directly (`--fleet mavlink`) and behind swarm agents (`--fleet zenoh`, the maps carried in their Hello)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+from mavtune.edges import range_edges
+from mavtune.vehicles.parammap import ParamMap
+
+STEM = "tuned"
+
+
+def file_groups(maps: Mapping[str, ParamMap], gains: Mapping[str, float]) -> dict[str, list[str]]:
+    """{file stem: vehicles it is for}: one `tuned` for all when their files would be the same (autopilot, MAVLink
+    ids, parameters and values), else `tuned-K` for the K-th vehicle (from 1). QGroundControl refuses a `.params`
+    file saved from another system id, so vehicles with different ids get a file each."""
+    def content(m: ParamMap) -> tuple:
+        return m.stack, m.system_id, m.component_id, tuple(m.values(gains).items())
+
+    if len({content(m) for m in maps.values()}) == 1:
+        return {STEM: list(maps)}
+    return {f"{STEM}-{k}": [name] for k, name in enumerate(maps, 1)}
+
+
+def write_tuned_files(maps: Mapping[str, ParamMap], gains: Mapping[str, float], out_dir: str | Path
+                      ) -> dict[str, list[str]]:
+    """Write the tuned parameters as `.parm` (Mission Planner, MAVProxy) and `.params` (QGroundControl) files in
+    out_dir, grouped as `file_groups` says; returns {file name: vehicles it is for}."""
+    from mavtune.vehicles.mavlink.paramfile import write_param_files
+
+    written: dict[str, list[str]] = {}
+    for stem, vehicles in file_groups(maps, gains).items():
+        m = maps[vehicles[0]]
+        paths = write_param_files(out_dir, stem, m.values(gains), system_id=m.system_id,
+                                  component_id=m.component_id, stack=m.stack,
+                                  comment=f"mavtune: tuned altitude gains of {', '.join(vehicles)}")
+        written |= {p.name: list(vehicles) for p in paths}
+    return written
+
+
+def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
+                  space: Mapping[str, tuple[float, float]], epsilon: float, out_dir: str | Path) -> dict[str, Any]:
+    """What result.json says of a finished run beyond the gains: the range edges they lie at and, for vehicles
+    with a parameter map, the gains as each vehicle's parameters (± ε of the range) and the files written.
+
+    An edge is said once per parameter it names (vehicles of different autopilots or ranges each get theirs).
+    A vehicle whose map binds other gains than those tuned
+    gets no parameters (`tuned_params_missing` says why) rather than a wrong file."""
+    usable = {v: m for v, m in maps.items() if m.covers(gains)}
+    outcome: dict[str, Any] = {}
+    if missing := {v: f"its parameters bind gains {sorted(m.gains)}, not the tuned {sorted(gains)}"
+                   for v, m in maps.items() if v not in usable}:
+        outcome["tuned_params_missing"] = missing
+    edges = range_edges(gains, space, epsilon)
+    if usable:
+        edges = [x for e in edges for x in _unique(m.explain_edge(e) for m in usable.values())]
+        tolerance = {n: epsilon * (hi - lo) for n, (lo, hi) in space.items()}
+        files = write_tuned_files(usable, gains, out_dir)
+        outcome |= {"tuned_params": {v: m.values(gains) for v, m in usable.items()},
+                    "tuned_params_tolerance": {v: m.tolerances(tolerance) for v, m in usable.items()},
+                    "param_files": list(files), "param_file_vehicles": files}
+    outcome["range_edges"] = [e.to_dict() for e in edges]
+    return outcome
+
+
+def _unique(items: Iterable[Any]) -> list[Any]:
+    """The items without repeats, in order."""
+    out: list[Any] = []
+    for item in items:
+        if item not in out:
+            out.append(item)
+    return out
