@@ -90,17 +90,19 @@ def _free_tcp_port() -> int:
 
 
 @pytest.mark.slow
-def test_two_agents_under_the_zenoh_coordinator(tmp_path):
+def test_two_agents_under_the_zenoh_coordinator_give_each_vehicles_parameters(tmp_path):
     endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
+    key = tmp_path / "swarm.key"
+    key.write_text("sitl swarm test key\n")
     (tmp_path / "agent.toml").write_text(
-        "[swarm]\nsession = \"sitl\"\ntoken = \"t\"\nresult_timeout_s = 60.0\n"
+        f"[swarm]\nsession = \"sitl\"\nkey_file = \"{key}\"\nresult_timeout_s = 60.0\n"
         "[mavlink]\nparam_timeout_s = 0.5\nheartbeat_wait_s = 20.0\n")
     out = tmp_path / "run"
     with sitl_vehicles(2) as vehicles:
         urls = [v.tuner_url for v in vehicles]
         procs = [subprocess.Popen(
             [*MAVTUNE, "coordinator", "--listen", endpoint, "--vehicles", "2", "--out", str(out), "--session",
-             "sitl", "--token", "t", "--settle-s", "0", "--result-timeout-s", "60", "--bootstraps", "1",
+             "sitl", "--key-file", str(key), "--settle-s", "0", "--result-timeout-s", "60", "--bootstraps", "1",
              "--epsilon", "0.25"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
         try:
             for i, url in enumerate(urls):
@@ -122,6 +124,26 @@ def test_two_agents_under_the_zenoh_coordinator(tmp_path):
     result = json.loads((out / "result.json").read_text())
     assert result["status"] == "finished" and result["flights_by_status"]["ok"] == result["flights"] > 0
     assert journal_rounds(out) == result["rounds"]
+    kp, kd = result["gains"]["kp"], result["gains"]["kd"]
+    expected = pytest.approx({"PSC_POSZ_P": 1.0 + 2.0 * kp, "PSC_VELZ_P": 1.0 + 7.0 * kd})
+    assert result["tuned_params"] == {"s0": expected, "s1": expected}  # from the maps the agents sent
+    # the harness gives the SITLs system ids 1 and 2, and QGroundControl checks it: a file each
+    assert result["param_file_vehicles"] == {"tuned-1.parm": ["s0"], "tuned-1.params": ["s0"],
+                                             "tuned-2.parm": ["s1"], "tuned-2.params": ["s1"]}
+    for k in (1, 2):
+        parm = mavparm.MAVParmDict()
+        assert parm.load(str(out / f"tuned-{k}.parm"), use_excludes=False)
+        assert dict(parm) == expected
+        rows = [r.split("\t") for r in (out / f"tuned-{k}.params").read_text().splitlines() if r[:1] != "#"]
+        assert {(r[0], r[2]) for r in rows} == {(str(k), "PSC_POSZ_P"), (str(k), "PSC_VELZ_P")}
+    tuned = result["tuned_params"]["s1"]
+    assert f"s1: PSC_POSZ_P = {tuned['PSC_POSZ_P']:.4g} ± 0.5, PSC_VELZ_P = {tuned['PSC_VELZ_P']:.4g} ± 1.8" in log
+    report = (out / "report.md").read_text()
+    for edge in result["range_edges"]:  # on SITL the cost falls toward the top corner: usually at the edge
+        assert edge["param"] in ORIGINALS and "documented limit" in edge["hint"]
+        assert f"range edge: {edge['message']}" in " ".join(log.split()) and edge["message"] in report
+    print(f"SITL agents ×10: {result['rounds']} rounds in {result['wall_s']:.1f} s wall, gains {result['gains']}, "
+          f"params {result['tuned_params']['s0']}, edges {[e['param'] for e in result['range_edges']]}")
 
 
 class _Pilot(threading.Thread):
