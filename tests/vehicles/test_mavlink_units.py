@@ -42,7 +42,7 @@ def test_ardupilot_47_names_are_found_and_acc_values_scaled():
     cfg = GainParam(param="PSC_ACCZ_P", min=0.2, max=1.0)
     rg = resolve_gain("ka", cfg, ARDUPILOT, {"PSC_D_ACC_P": 0.05})
     assert rg.vehicle_param == "PSC_D_ACC_P"
-    assert (rg.lo, rg.hi) == pytest.approx((0.02, 0.1))
+    assert (rg.binding.lo, rg.binding.hi) == pytest.approx((0.02, 0.1))
     assert rg.value(0.5) == pytest.approx(0.06)
     legacy = resolve_gain("ka", cfg, ARDUPILOT, {"PSC_ACCZ_P": 0.5})
     assert legacy.vehicle_param == "PSC_ACCZ_P" and legacy.value(0.5) == pytest.approx(0.6)

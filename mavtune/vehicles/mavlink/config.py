@@ -9,7 +9,6 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mavtune.config import read_toml, validated
-from mavtune.errors import MavtuneError
 from mavtune.vehicles.mavlink.profiles import Autopilot
 from mavtune.vehicles.parammap import PARAM_PATTERN, GainBinding
 

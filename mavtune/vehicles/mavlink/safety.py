@@ -84,20 +84,8 @@ class ResolvedGain:
 
     @property
     def vehicle_param(self) -> str:
+        """The name found on the vehicle."""
         return self.binding.param
-
-    @property
-    def scale(self) -> float:
-        """On-vehicle value = config value × scale."""
-        return self.binding.scale
-
-    @property
-    def lo(self) -> float:
-        return self.binding.lo
-
-    @property
-    def hi(self) -> float:
-        return self.binding.hi
 
     def value(self, normalised: float) -> float:
         """The on-vehicle value for a normalised gain, inside the envelope; MavtuneError for NaN or outside [0, 1]."""
