@@ -100,7 +100,11 @@ def tuned_params_section(summary: dict) -> list[str]:
         parts += ["## Tuned parameters", "", md.table(["vehicle", "parameter", "value", "±"], rows, ["l", "l", "r", "r"]),
                   ""]
         if summary.get("param_files"):
-            parts += ["Load them with a ground station: " + ", ".join(f"`{f}`" for f in summary["param_files"])
+            whose = summary.get("param_file_vehicles") or {}
+            several = len({tuple(v) for v in whose.values()}) > 1  # a file per vehicle: say whose
+            files = [f"`{f}`" + (f" ({', '.join(whose[f])})" if several and f in whose else "")
+                     for f in summary["param_files"]]
+            parts += ["Load them with a ground station: " + ", ".join(files)
                       + " (`.parm`: Mission Planner, MAVProxy; `.params`: QGroundControl).", ""]
     edges = summary.get("range_edges") or []
     if edges:

@@ -16,5 +16,13 @@ def test_lists_each_vehicles_parameters_files_and_edges():
     assert "## Range edges" in text and "- kd = 0.812" in text
 
 
+def test_says_whose_file_is_whose_when_each_vehicle_has_its_own():
+    summary = {"tuned_params": {"m0": {"PSC_POSZ_P": 2.0}, "m1": {"MPC_Z_P": 0.8}},
+               "param_files": ["tuned-1.parm", "tuned-2.parm"],
+               "param_file_vehicles": {"tuned-1.parm": ["m0"], "tuned-2.parm": ["m1"]}}
+    text = "\n".join(tuned_params_section(summary))
+    assert "`tuned-1.parm` (m0), `tuned-2.parm` (m1)" in text and "| `m1` | `MPC_Z_P` | 0.8 |" in text
+
+
 def test_says_nothing_for_a_simulated_run_without_edges():
     assert tuned_params_section({"range_edges": []}) == []
