@@ -18,7 +18,7 @@ class GainParam(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    param: str = Field(pattern=PARAM_PATTERN)  # MAVLink parameter ids: at most 16 letters, digits and '_' 
+    param: str = Field(pattern=PARAM_PATTERN)  # a MAVLink parameter id: at most 16 letters, digits, '_'
     min: float
     max: float
 
