@@ -27,7 +27,7 @@ from mavtune.config import Config
 from mavtune.edges import range_edges
 from mavtune.errors import Interrupted, MavtuneError
 from mavtune.fleet import Fleet, Status
-from mavtune.journal import Journal
+from mavtune.journal import Journal, blank
 from mavtune.plan import Plan, clock as _clock_s, counted, make_plan
 from mavtune.tuner import Round, StageDone, Tuner, TuningResult
 
@@ -112,7 +112,7 @@ def prepare_folder(out_dir: Path) -> None:
         raise MavtuneError(f"run folder {out_dir} cannot be written ({exc.strerror or exc}); choose another --out") \
             from None
     journal = out_dir / JOURNAL
-    if journal.is_file() and journal.stat().st_size > 0:
+    if not blank(journal):
         return
     recorded = _recorded_rounds(out_dir / "result.json")
     if recorded:
