@@ -209,6 +209,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
         book.bind(config.fingerprint())
         book.check_writable()
         if recorded := len(book):
+            book.rounds()  # every recorded round read and its checksum checked before a file here is written
             console.print(f"resuming {out_dir / JOURNAL}: {counted(recorded, 'round')} recorded will not be flown "
                           "again")
         ignored = warn(console, config)
@@ -254,8 +255,10 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                     result = tuner.snapshot() if tuner is not None else None
                     summary = _summary(config, plan, result, fleet, status, error, time.time() - started, ignored,
                                        outcome)
-                    (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
-                    _write_json(out_dir / "result.json", summary)
+                    if tuner is not None or not (out_dir / "result.json").exists():  # else nothing was flown or
+                        # replayed: the folder's result.json and report still describe its journal
+                        (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
+                        _write_json(out_dir / "result.json", summary)
             if report and result is not None:
                 _report(console, out_dir, result, config, surface, status, summary)
         recorded = len(book)
