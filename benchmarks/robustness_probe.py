@@ -124,7 +124,7 @@ CASES = [
           ("a garbage round record", garbage_round, "round 1"),
           ("a journal without tables beside result.json", no_tables, "is empty"),
           ("another program's database as the journal", foreign, "not a mavtune journal"),
-          ("the journal is a folder", lambda j: (j.unlink(), j.mkdir()), "directory")]],
+          ("the journal is a folder", lambda j: (j.unlink(), j.mkdir()), "is a folder")]],
     # run folder
     Case("folder", "--out ''", lambda t: [*R, ""], "error", "--out is empty"),
     Case("folder", "--out under a file", lambda t: [*R, str(t / "notes.txt" / "run")], "error", "cannot be written",
@@ -141,7 +141,7 @@ CASES = [
         (["--epsilon", "0.7"], "epsilon"), (["-n", "1000000"], "vehicles"), (["-n", "0"], "vehicles"),
         (["--bootstraps", "1000000"], "bootstraps"), (["--bootstraps", "two"], "bootstraps"),
         (["--battery-s", "1"], "battery"), (["--battery-s", "inf"], "battery_s"),
-        (["--strategy", "groups", "-n", "4", "--replicates", "3"], "replicates"),
+        (["--strategy", "groups", "-n", "4", "--replicates", "3"], "do not divide"),
         (["--epsilon", "0.001", "--bootstraps", "100"], "max_rounds"), (["--strategy", "best"], "strategy"),
         (["--method", "newton"], "method")]],
     *[Case("bounds", f"config: {text.strip()}", lambda t, x=text: ["plan", "--config", toml(t, x)], "error", says)
@@ -149,7 +149,7 @@ CASES = [
           ("[tuning]\nmethod = \"nsection\"\npoints = 100000\n", "points"), ("[tuning]\nvehicles = true\n",
                                                                             "vehicles"),
           ("[flight]\nbattery_s = inf\n", "battery_s"), ("[flight]\nprimitive_s = nan\n", "primitive_s"),
-          ("[tuning]\nspace = { kp = [1.0, 0.0] }\n", "space"), ("[tuning]\nspace = { ki = [0.0, 1.0] }\n", "ki"),
+          ("[tuning]\nspace = { kp = [1.0, 0.0] }\n", "range of gain"), ("[tuning]\nspace = { ki = [0.0, 1.0] }\n", "ki"),
           ("[tuning]\nepsilon = \"small\"\n", "epsilon"), ("[tuning\n", "not valid TOML"),
           ("[tuning]\ninitial = { kd = 2.0 }\n", "initial")]],
     Case("bounds", "config file missing", lambda t: ["plan", "--config", str(t / "none.toml")], "error",
@@ -178,7 +178,7 @@ CASES = [
     Case("cli", "agent -c (as the README)", lambda t: ["agent", "--help"], "warning", "-c"),
     Case("cli", "unknown command", lambda t: ["tunes"], "error", "tunes"),
     Case("cli", "unknown flag", lambda t: ["plan", "--vehicle", "3"], "error", "--vehicle"),
-    Case("cli", "a bad number", lambda t: ["plan", "-n", "three"], "error", "three"),
+    Case("cli", "a bad number", lambda t: ["plan", "-n", "three"], "error", "--vehicles"),
     Case("cli", "1 vehicle", lambda t: ["plan", "-n", "1"], "warning", "1 sim vehicle "),
     Case("cli", "`mavtune tune | head -3` still finishes", lambda t: [], "ok", shell="{mavtune} tune --bootstraps 1 "
          "--out {tmp}/run | head -3 > /dev/null; grep -q '\"status\": \"finished\"' {tmp}/run/result.json"),

@@ -118,7 +118,7 @@ def prepare_folder(out_dir: Path) -> None:
         return
     recorded = _recorded_rounds(out_dir / "result.json")
     if recorded:
-        state = "empty" if journal.exists() else "missing"
+        state = "a folder" if journal.is_dir() else "empty" if journal.exists() else "missing"
         raise MavtuneError(f"{out_dir / 'result.json'} records {recorded} rounds but {journal} is {state}: restore "
                            "the journal, or use a new run folder (nothing was changed)")
 

@@ -167,6 +167,23 @@ def test_a_lost_journal_beside_a_result_is_refused(staged, tmp_path, damage):
     assert folder_bytes(folder) == before
 
 
+def test_a_damaged_round_is_refused_before_any_file_of_the_folder_changes(staged, tmp_path):
+    """Not only the journal: result.json and report.md still describe the rounds recorded (the probe found a
+    refused resume deleting report.md and rewriting result.json as an error with no rounds)."""
+    import shutil
+
+    folder = tmp_path / "run"
+    shutil.copytree(staged, folder)
+    db = sqlite3.connect(folder / "journal.sqlite")
+    with db:
+        db.execute("UPDATE rounds SET record = '{\"assignments\": 7}' WHERE idx = 1")
+    db.close()  # its write-ahead log folded into the file: what is compared is what is stored
+    before = folder_bytes(folder)
+    code, err = run_cli("tune", "-q", "--out", str(folder))
+    assert code == 2 and "round 1 does not match its checksum" in err, err
+    assert folder_bytes(folder) == before and "report.md" in before
+
+
 def test_a_journal_cut_short_as_it_was_created_is_begun(tmp_path):
     """Ctrl-C (or a crash) while the journal's first page was written leaves an SQLite file without tables and no
     result.json: nothing was recorded, so the next run in the folder begins it (benchmarks/ctrl_c_exit.py)."""
