@@ -18,6 +18,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -65,9 +66,14 @@ def toml(tmp: Path, text: str) -> str:
     return str(path)
 
 
+def sql(journal: Path, statement: str) -> None:
+    """Run one statement on a database and close it: no write-ahead log left to be folded in by the next reader."""
+    with closing(sqlite3.connect(journal)) as db, db:
+        db.execute(statement)
+
+
 def garbage_round(journal: Path) -> None:
-    with sqlite3.connect(journal) as db:
-        db.execute("UPDATE rounds SET record = '{\"assignments\": 7}' WHERE idx = 1")
+    sql(journal, "UPDATE rounds SET record = '{\"assignments\": 7}' WHERE idx = 1")
 
 
 def random_bytes(journal: Path) -> None:
@@ -78,14 +84,12 @@ def random_bytes(journal: Path) -> None:
 
 def no_tables(journal: Path) -> None:
     journal.unlink()
-    with sqlite3.connect(journal) as db:
-        db.execute("PRAGMA user_version = 1")
+    sql(journal, "PRAGMA user_version = 1")
 
 
 def foreign(journal: Path) -> None:
     journal.unlink()
-    with sqlite3.connect(journal) as db:
-        db.execute("CREATE TABLE notes (text TEXT)")
+    sql(journal, "CREATE TABLE notes (text TEXT)")
 
 
 def a_file(tmp: Path) -> Path:
