@@ -245,7 +245,7 @@ def main() -> None:
             tmp.mkdir()
             verdict, seen, took = probe(case, tmp)
             tally[verdict] = tally.get(verdict, 0) + 1
-            rows.append(f"| {case.group} | {case.what.replace(chr(10), ' ')} | {verdict} | {took:.1f} | {seen.replace('|', '/')} |")
+            rows.append(f"| {case.group} | {case.what.replace(chr(10), ' ').replace('|', chr(92) + '|')} | {verdict} | {took:.1f} | {seen.replace('|', '/')} |")
             print(verdict, case.what, seen, flush=True)
     counts = ", ".join(f"{n} {v}" for v, n in sorted(tally.items(), key=lambda kv: -kv[1]))
     lines = ["# Issue 10 re-probed", "", f"`python benchmarks/robustness_probe.py`; {len(CASES)} cases, "
