@@ -2,9 +2,12 @@
 
 Each command runs REPEATS times, interleaved so that load drifts hit all of them alike; reported: the median
 wall time and the median CPU time (user + sys of the child, from resource.getrusage), with the load average.
-The slowest imports of `mavtune plan` come from `python -X importtime`. Writes benchmarks/results/cli_startup.md.
+The slowest imports of `mavtune plan` come from `python -X importtime`. With `--before DIR` (a folder holding
+another version's `mavtune/` package, e.g. `git archive BASE mavtune | tar -x -C DIR`) that version's `--help` and
+`plan` are timed in the same interleaved rounds, so the comparison shares the load. Writes
+benchmarks/results/cli_startup.md.
 
-    .venv/bin/python benchmarks/cli_startup.py [REPEATS]
+    .venv/bin/python benchmarks/cli_startup.py [REPEATS] [--before DIR]
 """
 
 from __future__ import annotations
@@ -24,6 +27,14 @@ COMMANDS = {
     "mavtune plan": [PYTHON, "-m", "mavtune", "plan"],
     "mavtune --version": [PYTHON, "-m", "mavtune", "--version"],
 }
+
+
+def from_folder(folder: str, *args: str) -> list[str]:
+    """argv running `mavtune ARGS` from the package in `folder` instead of the installed (editable) one."""
+    code = ("import runpy, sys; sys.meta_path = [f for f in sys.meta_path if 'editable' not in repr(f).lower()]; "
+            f"sys.path.insert(0, {folder!r}); sys.argv = ['mavtune', *sys.argv[1:]]; "
+            "runpy.run_module('mavtune', run_name='__main__')")
+    return [PYTHON, "-c", code, *args]
 
 
 def timed(argv: list[str]) -> tuple[float, float]:
@@ -48,7 +59,9 @@ def slowest_imports(argv: list[str], n: int = 12) -> list[tuple[int, str]]:
     return sorted(rows, reverse=True)[:n]
 
 
-def main(repeats: int = 15) -> None:
+def main(repeats: int = 15, before: str | None = None) -> None:
+    if before:
+        COMMANDS.update({f"before: mavtune {a}": from_folder(before, a) for a in ("--help", "plan")})
     load_before = os.getloadavg()
     samples: dict[str, list[tuple[float, float]]] = {name: [] for name in COMMANDS}
     for name, argv in COMMANDS.items():
@@ -76,4 +89,7 @@ def main(repeats: int = 15) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 15)
+    argv = sys.argv[1:]
+    folder = argv[argv.index("--before") + 1] if "--before" in argv else None
+    numbers = [a for a in argv if a.isdigit()]
+    main(int(numbers[0]) if numbers else 15, folder)

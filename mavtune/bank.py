@@ -30,6 +30,15 @@ def _mass(mass_kg: float) -> float:
     return round(mass, MASS_DECIMALS)
 
 
+def _finite(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def standard_errors(uncertainty: dict[str, dict[str, float]] | None) -> dict[str, float]:
+    """The standard error of each gain from a result's `uncertainty` (gain -> value, se, lo, hi, level)."""
+    return {k: u["se"] for k, u in (uncertainty or {}).items() if isinstance(u, dict) and _finite(u.get("se"))}
+
+
 @dataclass(frozen=True)
 class BankEntry:
     """Gains tuned at one vehicle mass."""
@@ -37,6 +46,7 @@ class BankEntry:
     mass_kg: float
     gains: Gains
     source: str = ""  # the run folder (or note) the gains come from
+    se: dict[str, float] = field(default_factory=dict)  # standard error of each gain, where the run measured one
 
 
 @dataclass(frozen=True)
@@ -46,6 +56,7 @@ class Lookup:
     gains: Gains
     inside: bool
     between: tuple[float, float]  # the tuned masses interpolated between (equal at the ends)
+    se: dict[str, float] = field(default_factory=dict)  # interpolated like the gains (an upper bound between)
 
 
 @dataclass
@@ -54,16 +65,17 @@ class GainBank:
 
     entries: list[BankEntry] = field(default_factory=list)
 
-    def add(self, mass_kg: float, gains: Gains, source: str = "") -> None:
-        """Add (or replace) the gains tuned at `mass_kg`."""
+    def add(self, mass_kg: float, gains: Gains, source: str = "", se: dict[str, float] | None = None) -> None:
+        """Add (or replace) the gains tuned at `mass_kg`, with their standard errors `se` where known."""
         mass_kg = _mass(mass_kg)
-        if not isinstance(gains, dict) or not gains or not all(math.isfinite(float(v)) for v in gains.values()):
+        if not isinstance(gains, dict) or not gains or not all(_finite(v) for v in gains.values()):
             raise MavtuneError(f"bank gains at {mass_kg:g} kg must be finite numbers, got {gains}")
         if self.entries and set(gains) != set(self.entries[0].gains):
             raise MavtuneError(f"bank holds gains {sorted(self.entries[0].gains)}, not {sorted(gains)}")
+        known = {k: float(v) for k, v in (se or {}).items() if k in gains and _finite(v) and float(v) >= 0}
         kept = [e for e in self.entries if e.mass_kg != mass_kg]
-        self.entries = sorted(kept + [BankEntry(mass_kg, {k: float(v) for k, v in gains.items()}, source)],
-                              key=lambda e: e.mass_kg)
+        entry = BankEntry(mass_kg, {k: float(v) for k, v in gains.items()}, source, known)
+        self.entries = sorted(kept + [entry], key=lambda e: e.mass_kg)
 
     def lookup(self, mass_kg: float) -> Lookup:
         """Gains for `mass_kg`: linear between the nearest tuned masses, the end values outside them."""
@@ -72,14 +84,15 @@ class GainBank:
         mass_kg = _mass(mass_kg)
         first, last = self.entries[0], self.entries[-1]
         if exact := next((e for e in self.entries if e.mass_kg == mass_kg), None):
-            return Lookup(dict(exact.gains), True, (exact.mass_kg, exact.mass_kg))
+            return Lookup(dict(exact.gains), True, (exact.mass_kg, exact.mass_kg), dict(exact.se))
         if mass_kg < first.mass_kg or mass_kg > last.mass_kg:
             end = first if mass_kg < first.mass_kg else last
-            return Lookup(dict(end.gains), False, (end.mass_kg, end.mass_kg))
+            return Lookup(dict(end.gains), False, (end.mass_kg, end.mass_kg), dict(end.se))
         upper = next(i for i, e in enumerate(self.entries) if e.mass_kg > mass_kg)
         a, b = self.entries[upper - 1], self.entries[upper]
         w = (mass_kg - a.mass_kg) / (b.mass_kg - a.mass_kg)
-        return Lookup({k: (1 - w) * a.gains[k] + w * b.gains[k] for k in a.gains}, True, (a.mass_kg, b.mass_kg))
+        se = {k: (1 - w) * a.se[k] + w * b.se[k] for k in a.gains if k in a.se and k in b.se}
+        return Lookup({k: (1 - w) * a.gains[k] + w * b.gains[k] for k in a.gains}, True, (a.mass_kg, b.mass_kg), se)
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps({"entries": [asdict(e) for e in self.entries]}, indent=2))
@@ -96,7 +109,7 @@ class GainBank:
             data: dict[str, Any] = json.loads(path.read_text())
             bank = cls()
             for e in data["entries"]:
-                bank.add(e["mass_kg"], e["gains"], e.get("source", ""))
+                bank.add(e["mass_kg"], e["gains"], e.get("source", ""), e.get("se"))
         except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise MavtuneError(f"gain bank {path} is not a mavtune bank file ({exc})") from None
         return bank
@@ -118,20 +131,20 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
     bank = GainBank.load(out / "bank.json", missing_ok=True)
     folders = [out / f"payload-{p:g}kg" for p in payloads_kg]
 
-    def keep(i: int, gains: Gains) -> None:
-        bank.add(MASS_KG + payloads_kg[i], gains, str(folders[i]))
+    def keep(i: int, result: Any) -> None:
+        bank.add(MASS_KG + payloads_kg[i], result.gains, str(folders[i]), standard_errors(result.uncertainty))
         bank.save(out / "bank.json")
 
     if not scheduler:
         for i, payload in enumerate(payloads_kg):
             console.rule(f"payload {payload:g} kg")
-            keep(i, run(config_for(payload), folders[i], console=console, quiet=True).gains)
+            keep(i, run(config_for(payload), folders[i], console=console, quiet=True))
         return bank
 
     def landed(i: int, done: tuple[dict[str, bytes], Any]) -> None:
         files, result = done
         write_files(folders[i], files)
-        keep(i, result.gains)
+        keep(i, result)
         console.print(f"payload {payloads_kg[i]:g} kg tuned: {folders[i]}")
 
     chunks = [(config_for(p), folder_files(f)) for p, f in zip(payloads_kg, folders)]

@@ -216,7 +216,7 @@ def bank_add(
 
     from rich.console import Console
 
-    from mavtune.bank import GainBank
+    from mavtune.bank import GainBank, standard_errors
 
     path = run_dir / "result.json"
     try:
@@ -226,7 +226,7 @@ def bank_add(
     if summary.get("status", "finished") != "finished":
         raise MavtuneError(f"the run in {run_dir} did not finish ({summary.get('status')}): resume it first")
     bank = GainBank.load(bank_file, missing_ok=True)
-    bank.add(mass_kg, summary["gains"], str(run_dir))
+    bank.add(mass_kg, summary["gains"], str(run_dir), standard_errors(summary.get("uncertainty")))
     bank.save(bank_file)
     _print_bank(Console(), bank)
 
@@ -243,11 +243,18 @@ def bank_lookup(
     lo, hi = found.between
     where = (f"between {lo:g} and {hi:g} kg" if lo != hi else f"at {lo:g} kg") + (
         "" if found.inside else " (outside the tuned masses: held, not extrapolated)")
-    typer.echo(" ".join(f"{k}={v:.5g}" for k, v in found.gains.items()) + f"  # {where}")
+    errors = ", ".join(f"{k} {se:.2g}" for k, se in found.se.items())
+    typer.echo(" ".join(f"{k}={v:.5g}" for k, v in found.gains.items()) + f"  # {where}"
+               + (f"; standard error {errors}" if errors else ""))
 
 
 def _print_bank(console, bank) -> None:
+    """The bank as a table: each gain ± its standard error ('± ?' where the run did not measure one)."""
+    import math
+
     from rich.table import Table
+
+    from mavtune.run import plus_minus
 
     table = Table(title="gain bank")
     table.add_column("mass, kg", justify="right")
@@ -255,7 +262,7 @@ def _print_bank(console, bank) -> None:
         table.add_column(name, justify="right")
     table.add_column("from")
     for e in bank.entries:
-        table.add_row(f"{e.mass_kg:g}", *(f"{v:.5g}" for v in e.gains.values()), e.source)
+        table.add_row(f"{e.mass_kg:g}", *(plus_minus(v, e.se.get(k, math.nan)) for k, v in e.gains.items()), e.source)
     console.print(table)
 
 

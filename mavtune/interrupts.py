@@ -9,16 +9,19 @@ from __future__ import annotations
 
 import signal
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _received: list[int] = []
+_first_at: list[float] = []  # time.monotonic() of the first
 
 
-class TimeLimit(Exception):
-    """Raised inside a `time_limit` block whose time is up."""
+class TimeLimit(BaseException):
+    """Raised inside a `time_limit` block whose time is up. Like KeyboardInterrupt it is no `Exception`, so code
+    that carries on past its own failures (a report section that could not be drawn) cannot carry on past it."""
 
 
 def received() -> bool:
@@ -26,8 +29,15 @@ def received() -> bool:
     return bool(_received)
 
 
+def since_first() -> float:
+    """Seconds since the first SIGINT/SIGTERM arrived (0 when none has): the clock of "exit within 2 s"."""
+    return time.monotonic() - _first_at[0] if _first_at else 0.0
+
+
 def _interrupt(signum: int, frame: object) -> None:
     first = not _received
+    if first:
+        _first_at.append(time.monotonic())
     _received.append(signum)
     if first:  # a second signal while the first one is being handled is only counted
         raise KeyboardInterrupt

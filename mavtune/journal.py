@@ -16,7 +16,7 @@ import math
 import sqlite3
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -55,6 +55,7 @@ class Journal:
         with self._sqlite("is not a readable SQLite journal"):
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._db = sqlite3.connect(self.path, isolation_level=None)
+            fresh = fresh or blank(self.path)  # creation cut short (Ctrl-C, a crash): nothing in it to keep
             if not fresh:
                 self._check_tables()  # never add tables to somebody else's database
             else:
@@ -190,6 +191,19 @@ class Journal:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def blank(path: str | Path) -> bool:
+    """Whether a journal holds nothing: missing, zero bytes, or an SQLite database without a single table (its
+    creation was cut short). Another file — damaged, foreign, or holding rounds — is not blank."""
+    path = Path(path)
+    if not path.is_file() or path.stat().st_size == 0:
+        return True
+    try:
+        with closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)) as db:
+            return db.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()[0] == 0
+    except (sqlite3.DatabaseError, OSError):
+        return False
 
 
 def _digest(row: tuple) -> str:

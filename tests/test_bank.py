@@ -46,6 +46,18 @@ def test_adding_a_mass_again_replaces_it_and_names_must_match():
         GainBank().lookup(2.0)
 
 
+def test_standard_errors_are_kept_interpolated_and_saved(tmp_path):
+    b = GainBank()
+    b.add(2.3, {"kp": 0.6, "kd": 0.4}, "light", se={"kp": 0.05, "kd": float("nan")})  # kd's error unknown
+    b.add(3.2, {"kp": 0.8, "kd": 0.2}, "heavy", se={"kp": 0.09, "kd": 0.1})
+    assert b.entries[0].se == {"kp": 0.05}
+    found = b.lookup(2.75)
+    assert found.se == pytest.approx({"kp": 0.07})  # linear, like the gains; kd unknown at one end: unknown
+    assert b.lookup(9.0).se == {"kp": 0.09, "kd": 0.1}
+    b.save(tmp_path / "bank.json")
+    assert GainBank.load(tmp_path / "bank.json").entries == b.entries
+
+
 def test_save_and_load_round_trip(tmp_path):
     path = tmp_path / "bank.json"
     bank().save(path)
@@ -66,6 +78,14 @@ def test_bank_commands_add_a_finished_run_and_look_up(tmp_path):
     assert runner.invoke(app, ["bank", "add", str(path), str(run), "--mass-kg", "3.2"]).exit_code == 0
     out = runner.invoke(app, ["bank", "lookup", str(path), "--mass-kg", "2.75"])
     assert out.exit_code == 0 and out.output.startswith("kp=0.7 kd=0.3  # between 2.3 and 3.2 kg")
+    assert "standard error" not in out.output  # these runs measured none
+    uncertainty = {"kp": {"value": 0.8, "se": 0.04, "lo": 0.7, "hi": 0.9, "level": 0.9}}
+    (run / "result.json").write_text(json.dumps({"status": "finished", "gains": {"kp": 0.8, "kd": 0.2},
+                                                 "uncertainty": uncertainty}))
+    added = runner.invoke(app, ["bank", "add", str(path), str(run), "--mass-kg", "3.2"])
+    assert added.exit_code == 0 and "0.800 ± 0.040" in added.output
+    out = runner.invoke(app, ["bank", "lookup", str(path), "--mass-kg", "3.2"])
+    assert out.output.strip() == "kp=0.8 kd=0.2  # at 3.2 kg; standard error kp 0.04"
     (run / "result.json").write_text(json.dumps({"status": "stage", "gains": {"kp": 0.1, "kd": 0.1}}))
     refused = runner.invoke(app, ["bank", "add", str(path), str(run), "--mass-kg", "2.8"])
     assert isinstance(refused.exception, MavtuneError) and "did not finish" in str(refused.exception)
@@ -77,7 +97,9 @@ def test_bank_build_tunes_each_payload_in_the_simulator(tmp_path):
     built = GainBank.load(tmp_path / "bank.json")
     assert [e.mass_kg for e in built.entries] == pytest.approx([2.3, 3.2])
     for e in built.entries:
-        assert json.loads((tmp_path / e.source.split("/")[-1] / "result.json").read_text())["gains"] == e.gains
+        result = json.loads((tmp_path / e.source.split("/")[-1] / "result.json").read_text())
+        assert result["gains"] == e.gains
+        assert e.se == {k: u["se"] for k, u in result["uncertainty"].items()} and set(e.se) == {"kp", "kd"}
 
 
 def test_a_tuned_mass_is_looked_up_as_itself_not_as_an_end_of_a_bracket():

@@ -142,18 +142,57 @@ def test_resume_with_another_config_file_is_refused_naming_the_field(staged, tmp
     assert folder_bytes(staged) == before
 
 
-@pytest.mark.parametrize("damage", ["empty", "deleted"])
+def blank_database(path: Path) -> None:
+    """An SQLite file without a single table: what a journal is when its creation is cut short."""
+    path.unlink(missing_ok=True)
+    with sqlite3.connect(path) as db:
+        db.execute("PRAGMA user_version = 1")  # writes the header page, and nothing else
+    assert path.stat().st_size > 0
+
+
+@pytest.mark.parametrize("damage", ["empty", "deleted", "no tables"])
 def test_a_lost_journal_beside_a_result_is_refused(staged, tmp_path, damage):
     import shutil
 
     folder = tmp_path / "run"
     shutil.copytree(staged, folder)
     journal = folder / "journal.sqlite"
-    journal.write_bytes(b"") if damage == "empty" else journal.unlink()
+    if damage == "deleted":
+        journal.unlink()
+    else:
+        journal.write_bytes(b"") if damage == "empty" else blank_database(journal)
     before = folder_bytes(folder)
     code, err = run_cli("tune", "-q", "--out", str(folder))
-    assert code == 2 and "records 2 rounds" in err and ("is empty" if damage == "empty" else "is missing") in err
+    assert code == 2 and "records 2 rounds" in err and ("is missing" if damage == "deleted" else "is empty") in err
     assert folder_bytes(folder) == before
+
+
+def test_a_damaged_round_is_refused_before_any_file_of_the_folder_changes(staged, tmp_path):
+    """Not only the journal: result.json and report.md still describe the rounds recorded (the probe found a
+    refused resume deleting report.md and rewriting result.json as an error with no rounds)."""
+    import shutil
+
+    folder = tmp_path / "run"
+    shutil.copytree(staged, folder)
+    db = sqlite3.connect(folder / "journal.sqlite")
+    with db:
+        db.execute("UPDATE rounds SET record = '{\"assignments\": 7}' WHERE idx = 1")
+    db.close()  # its write-ahead log folded into the file: what is compared is what is stored
+    before = folder_bytes(folder)
+    code, err = run_cli("tune", "-q", "--out", str(folder))
+    assert code == 2 and "round 1 does not match its checksum" in err, err
+    assert folder_bytes(folder) == before and "report.md" in before
+
+
+def test_a_journal_cut_short_as_it_was_created_is_begun(tmp_path):
+    """Ctrl-C (or a crash) while the journal's first page was written leaves an SQLite file without tables and no
+    result.json: nothing was recorded, so the next run in the folder begins it (benchmarks/ctrl_c_exit.py)."""
+    folder = tmp_path / "run"
+    folder.mkdir()
+    blank_database(folder / "journal.sqlite")
+    code, err = run_cli("tune", "-q", "--stage-rounds", "1", "--out", str(folder))
+    assert code == 0, err
+    assert rounds_in(folder / "journal.sqlite") == 1
 
 
 @pytest.mark.parametrize("out, says", [("", "--out is empty"), ("{file}/run", "cannot be written"),

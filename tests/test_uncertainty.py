@@ -31,6 +31,18 @@ def test_the_probabilities_that_each_point_is_best_add_up_to_one(points):
     assert total == pytest.approx(1.0, abs=2e-3)
 
 
+@given(st.lists(st.tuples(st.floats(-5, 5), st.sampled_from([0.0, 0.0, 0.1, 1.0])), min_size=3, max_size=5,
+                unique_by=lambda t: t[0]))
+@settings(max_examples=60)
+def test_points_known_exactly_take_the_closed_form_and_still_add_up_to_one(points):
+    """A point with se = 0 (a plan's rehearsal, a noise-free cost) is judged without the numerical integral."""
+    means, se = [m for m, _ in points], [s for _, s in points]
+    total = sum(p_best(means, se, i) for i in range(len(points)))
+    assert total == pytest.approx(1.0, abs=2e-3)
+    if not any(se):
+        assert [p_best(means, se, i) for i in range(len(points))].count(1.0) == 1
+
+
 def test_p_correct_of_clear_close_and_undecidable_comparisons():
     assert p_best([1.0, 10.0], [0.1, 0.1], 0) > 0.999
     assert p_best([1.0, 1.0], [0.5, 0.5], 0) == pytest.approx(0.5)

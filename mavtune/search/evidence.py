@@ -11,13 +11,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cache
 from typing import Hashable, Sequence
 
-import numpy as np
-from scipy.special import ndtr
-
 PRIOR_DOF = 4.0  # how many degrees of freedom the run's pooled noise counts for in a point's own variance
-_GRID = np.linspace(-8.0, 8.0, 4001)  # standard-normal abscissae for comparisons of three points or more
 
 
 @dataclass(frozen=True)
@@ -101,23 +98,47 @@ def p_best(means: Sequence[float], se: Sequence[float], best: int) -> float:
 
     Infinite means lose to any finite one for certain; exact ties with zero error split the probability.
     """
-    m = np.asarray(means, dtype=float)
-    s = np.asarray(se, dtype=float)
-    if not np.isfinite(m[best]):
+    m = [float(v) for v in means]
+    s = [float(v) for v in se]
+    if not math.isfinite(m[best]):
         return math.nan
-    rivals = [j for j in range(len(m)) if j != best and np.isfinite(m[j])]
+    rivals = [j for j in range(len(m)) if j != best and math.isfinite(m[j])]
     if not rivals:
         return 1.0
-    if np.isnan(s[best]) or any(np.isnan(s[j]) for j in rivals):
+    if math.isnan(s[best]) or any(math.isnan(s[j]) for j in rivals):
         return math.nan
     if len(rivals) == 1 and s[best] + s[rivals[0]] > 0:  # two points: the difference is normal
         j = rivals[0]
         return 0.5 * math.erfc(-(m[j] - m[best]) / math.hypot(s[best], s[j]) / math.sqrt(2.0))
-    if s[best] > 0:  # integrate over the best point's true mean, on a grid fine against every error
-        x = m[best] + s[best] * _GRID
-        weight = np.exp(-0.5 * _GRID**2)
-    else:
-        x, weight = np.array([m[best]]), np.array([1.0])
+    if s[best] == 0:  # the best point's mean is known: each rival is above it independently
+        return math.prod(_above(m[j], s[j], m[best]) for j in rivals)
+    return _p_best_integrated(m, s, best, rivals)
+
+
+def _above(mean: float, se: float, x: float) -> float:
+    """Probability that a true mean measured as `mean` ± `se` lies above `x` (a tie at se = 0 counts half)."""
+    if se > 0:
+        return 0.5 * math.erfc(-(mean - x) / se / math.sqrt(2.0))
+    return 1.0 if x < mean else 0.5 if x == mean else 0.0
+
+
+@cache
+def _grid():
+    """Standard-normal abscissae and weights for three points or more with uncertain means (numpy only then:
+    `mavtune plan` rehearses comparisons on exact costs and stays free of numpy and scipy)."""
+    import numpy as np
+
+    x = np.linspace(-8.0, 8.0, 4001)
+    return x, np.exp(-0.5 * x**2)
+
+
+def _p_best_integrated(m: list[float], s: list[float], best: int, rivals: list[int]) -> float:
+    """p_best by integrating over the best point's true mean (se > 0), on a grid fine against every error."""
+    import numpy as np
+    from scipy.special import ndtr
+
+    grid, weight = _grid()
+    x = m[best] + s[best] * grid
     prob = np.ones_like(x)
     for j in rivals:
         if s[j] > 0:

@@ -16,8 +16,6 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-import numpy as np
-
 from mavtune.search.base import LineSearch
 from mavtune.search.evidence import NoisePool, point_stats
 
@@ -68,6 +66,8 @@ class _Curve:
         near = min((j for j in (i - 1, i) if 0 <= j < len(self.xs)), key=lambda j: abs(self.xs[j] - x))
         if not math.isfinite(self.ys[near]):
             return math.inf
+        import numpy as np  # here, not at the top: `mavtune plan` imports this module but never resamples
+
         return float(np.interp(x, self.fx, self.fy))
 
 
@@ -86,6 +86,8 @@ def resample(make: Callable[[NoisePool], LineSearch], assign: Callable[[LineSear
     finite = [s for s in stats if math.isfinite(s.mean)]
     if draws < 1 or not math.isfinite(cv) or len(finite) < 2 or any(math.isnan(s.se) for s in finite):
         return Interval.unknown(value, level)
+    import numpy as np  # see _Curve._at
+
     rng = np.random.default_rng(seed)
     ends = []
     search = make(NoisePool())

@@ -20,8 +20,6 @@ from __future__ import annotations
 
 from typing import Mapping
 
-import numpy as np
-
 from mavtune.errors import MavtuneError
 
 KX_RANGE = (0.0, 250.0)  # k_x(z), 1/s^2
@@ -33,6 +31,8 @@ GAIN_NAMES = ("kp", "kd")
 
 def to_physical(kp, kd):
     """Normalised (kp, kd) -> physical (k_x(z) in 1/s^2, k_v(z) in 1/s); scalars or arrays."""
+    import numpy as np  # here, so that the config (which needs GAIN_NAMES) and `mavtune plan` do without numpy
+
     kp = np.asarray(kp, dtype=float)
     kd = np.asarray(kd, dtype=float)
     kx = KX_RANGE[0] + kp * (KX_RANGE[1] - KX_RANGE[0])
@@ -42,6 +42,8 @@ def to_physical(kp, kd):
 
 def to_normalised(kx, kv):
     """Physical (k_x(z), k_v(z)) -> normalised (kp, kd); the inverse of `to_physical`."""
+    import numpy as np  # see to_physical
+
     kx = np.asarray(kx, dtype=float)
     kv = np.asarray(kv, dtype=float)
     kp = (kx - KX_RANGE[0]) / (KX_RANGE[1] - KX_RANGE[0])
@@ -49,7 +51,8 @@ def to_normalised(kx, kv):
     return (float(kp), float(kd)) if kp.ndim == 0 and kd.ndim == 0 else (kp, kd)
 
 
-MRS_DEFAULT_NORMALISED = dict(zip(GAIN_NAMES, to_normalised(MRS_DEFAULT_KX, MRS_DEFAULT_KV)))
+MRS_DEFAULT_NORMALISED = {"kp": (MRS_DEFAULT_KX - KX_RANGE[0]) / (KX_RANGE[1] - KX_RANGE[0]),
+                          "kd": (MRS_DEFAULT_KV - KV_RANGE[0]) / (KV_RANGE[1] - KV_RANGE[0])}
 """The MRS default gains in the normalised space; used for a gain an assignment leaves out."""
 
 
