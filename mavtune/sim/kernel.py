@@ -84,6 +84,22 @@ def _sqrt(typingctx, x):
     return types.float64(types.float64), codegen
 
 
+@intrinsic
+def _f64_from_bits(typingctx, u):
+    """The float64 whose IEEE 754 bit pattern is the uint64 u (a bit cast, no conversion)."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+    return types.float64(types.uint64), codegen
+
+
+@intrinsic
+def _bits_of_f64(typingctx, x):
+    """The IEEE 754 bit pattern (uint64) of the float64 x."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+    return types.uint64(types.float64), codegen
+
+
 _GOLD = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
@@ -92,9 +108,15 @@ _SALT_FLIGHT = np.uint64(0x2545F4914F6CDD1D)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 _INV53 = 1.0 / 9007199254740992.0
 _ONE = np.uint64(1)
+_S2, _S12, _S52, _S62 = np.uint64(2), np.uint64(12), np.uint64(52), np.uint64(62)
+_EXP_ONE = np.uint64(0x3FF0000000000000)  # the exponent bits of 1.0: OR-ed onto 52 mantissa bits, a float in [1, 2)
+_EXP_2_52 = np.uint64(0x4330000000000000)  # ... of 2^52: OR-ed onto a small integer n, the float 2^52 + n
+_MANTISSA = np.uint64(0x000FFFFFFFFFFFFF)
+_Q0, _Q1 = np.uint64(0), np.uint64(1)
+_SIGN = np.uint64(0x8000000000000000)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mix64(z):
     """splitmix64 finaliser: a bijective hash of a uint64."""
     z = (z ^ (z >> _S30)) * _M1
@@ -109,12 +131,83 @@ def _uniform(rs):
     return float((_mix64(rs[0]) >> _S11) + _ONE) * _INV53
 
 
+@njit(cache=True, fastmath=FAST, inline="always")
+def _log_unit(u):
+    """Natural log of u in (0, 1], branch-free so that it vectorises: u = 2^e m with m in [sqrt(1/2), sqrt(2)),
+    ln m = 2 atanh(f), f = (m - 1) / (m + 1), |f| <= 0.172, by its series to f^17 (truncation < 3e-16)."""
+    bits = _bits_of_f64(u)
+    e = _f64_from_bits(_EXP_2_52 | (bits >> _S52)) - 4503599627370496.0 - 1023.0  # the exponent, exactly
+    m = _f64_from_bits((bits & _MANTISSA) | _EXP_ONE)
+    big = m > 1.4142135623730951
+    m = 0.5 * m if big else m
+    e = e + 1.0 if big else e
+    f = (m - 1.0) / (m + 1.0)
+    s = f * f
+    p = 1.0 / 17.0
+    p = 1.0 / 15.0 + s * p
+    p = 1.0 / 13.0 + s * p
+    p = 1.0 / 11.0 + s * p
+    p = 1.0 / 9.0 + s * p
+    p = 1.0 / 7.0 + s * p
+    p = 1.0 / 5.0 + s * p
+    p = 1.0 / 3.0 + s * p
+    p = 1.0 + s * p
+    return e * 0.6931471805599453 + 2.0 * f * p
+
+
+@njit(cache=True, fastmath=FAST, inline="always")
+def _normal_pair(z1, z2):
+    """Two independent standard normals from two random uint64 words, by Box-Muller with a radius from z1 and an
+    angle from z2, in branch-free arithmetic (no libm call) so that a loop over lanes vectorises.
+
+    Radius sqrt(-2 ln u), u = 1 - k 2^-52 in (0, 1] from z1's top 52 bits (|n| <= 8.5). Angle: a quadrant from z2's
+    top 2 bits and x uniform in [-pi/4, pi/4) from its next 52; cos x and sin x by their Taylor series to x^16 and
+    x^15 (truncation < 1e-16 on that interval); the quadrant turns (cos, sin) by a multiple of pi/2.
+    """
+    u = 2.0 - _f64_from_bits((z1 >> _S12) | _EXP_ONE)
+    r = _sqrt(-2.0 * _log_unit(u))
+    x = 1.5707963267948966 * (_f64_from_bits(((z2 << _S2) >> _S12) | _EXP_ONE) - 1.5)
+    x2 = x * x
+    c = 1.0 / 20922789888000.0  # 1/16!
+    c = -1.0 / 87178291200.0 + x2 * c
+    c = 1.0 / 479001600.0 + x2 * c
+    c = -1.0 / 3628800.0 + x2 * c
+    c = 1.0 / 40320.0 + x2 * c
+    c = -1.0 / 720.0 + x2 * c
+    c = 1.0 / 24.0 + x2 * c
+    c = -0.5 + x2 * c
+    c = 1.0 + x2 * c
+    sn = -1.0 / 1307674368000.0  # -1/15!
+    sn = 1.0 / 6227020800.0 + x2 * sn
+    sn = -1.0 / 39916800.0 + x2 * sn
+    sn = 1.0 / 362880.0 + x2 * sn
+    sn = -1.0 / 5040.0 + x2 * sn
+    sn = 1.0 / 120.0 + x2 * sn
+    sn = -1.0 / 6.0 + x2 * sn
+    sn = x + x * x2 * sn
+    # (cos, sin) of x + q pi / 2, q = z2's top two bits: the lower turns by pi / 2, the upper by pi (its sign bit
+    # on 1.0 gives -1 or 1)
+    turn = ((z2 >> _S62) & _Q1) != _Q0
+    cq = -sn if turn else c
+    sq = c if turn else sn
+    r = r * _f64_from_bits((z2 & _SIGN) | _EXP_ONE)
+    return r * cq, r * sq
+
+
+@njit(cache=True, fastmath=FAST, inline="always")
+def _normal2_at(RS, v):
+    """Two independent standard normals from stream v, RS[v] (splitmix64: two words into `_normal_pair`)."""
+    st = RS[v] + _GOLD
+    z1 = _mix64(st)
+    st = st + _GOLD
+    RS[v] = st
+    return _normal_pair(z1, _mix64(st))
+
+
 @njit(cache=True, fastmath=FAST)
 def _normal2(rs):
-    """Two independent standard normals (Box-Muller)."""
-    r = math.sqrt(-2.0 * math.log(_uniform(rs)))
-    th = 6.283185307179586 * _uniform(rs)
-    return r * math.cos(th), r * math.sin(th)
+    """Two independent standard normals from the stream rs[0]."""
+    return _normal2_at(rs, 0)
 
 
 @njit(cache=True)
@@ -368,18 +461,17 @@ def _control(X, v, cp, alloc, ref, px, py, pz, vx, vy, vz):
     X[A_FCMD, v] = f
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, inline="always")
 def _draw_normals(RS, X, k, lanes):
     """This step's standard normals of lanes 0..lanes-1 into rows Z_N.. of X, each from its lane's own stream: lidar and
     vz noise every step (rows 5, 6), gust and position-error innovations every SLOW_EVERY steps (rows 0-4)."""
-    slow = k % SLOW_EVERY == 0
     for v in range(lanes):
-        rs = RS[v:v + 1]
-        X[Z_N + 5, v], X[Z_N + 6, v] = _normal2(rs)
-        if slow:
-            X[Z_N + 0, v], X[Z_N + 1, v] = _normal2(rs)
-            X[Z_N + 2, v], X[Z_N + 3, v] = _normal2(rs)
-            X[Z_N + 4, v], _ = _normal2(rs)
+        X[Z_N + 5, v], X[Z_N + 6, v] = _normal2_at(RS, v)
+    if k % SLOW_EVERY == 0:
+        for v in range(lanes):
+            X[Z_N + 0, v], X[Z_N + 1, v] = _normal2_at(RS, v)
+            X[Z_N + 2, v], X[Z_N + 3, v] = _normal2_at(RS, v)
+            X[Z_N + 4, v], _ = _normal2_at(RS, v)
 
 
 @njit(cache=True, fastmath=FAST, error_model="numpy")
