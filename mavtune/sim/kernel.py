@@ -1,13 +1,21 @@
 """Numba kernels of the batched plant: hexarotor dynamics (RK4, 100 Hz), SO(3) controller, disturbances, costs.
 
-One implementation, used two ways: `fly_batch` flies whole flights of B vehicles (prange over vehicles, the time
-loop inside), `step_batch` advances B vehicles by one step for closed loops driven from outside (`Plant`).
-Both call the same `_init_vehicle` and `_act`. All arrays are float64 SI; the attitude is a unit quaternion
-(w, x, y, z), renormalised every step, equivalent to the paper's R in SO(3). Per step: sense (lidar and vz noise
-every step, gusts and horizontal position error at 20 Hz, estimates delayed by the scenario's latency), control
-(SO(3) law at 100 Hz, rotor commands held for the step), integrate: rotors exactly (first-order lag with a held
-command), the rigid body by classical RK4 with the rotor forces evaluated at each RK4 stage's time and state.
+One implementation, used two ways: `fly_batch` / `fly_serial` fly whole flights of B vehicles, `step_batch`
+advances B vehicles by one step for closed loops driven from outside (`Plant`). Both call the same
+`_init_vehicle`, `_draw_normals`, `_disturb`, `_push_estimates` and `_act`. All arrays are float64 SI; the attitude
+is a unit quaternion (w, x, y, z), renormalised every step, equivalent to the paper's R in SO(3). Per step: sense
+(lidar and vz noise every step, gusts and horizontal position error at 20 Hz, estimates delayed by the scenario's
+latency), control (SO(3) law at 100 Hz, rotor commands held for the step), integrate: rotors exactly (first-order
+lag with a held command), the rigid body by classical RK4 with the rotor forces evaluated at each RK4 stage's time
+and state.
 
+Layout, for speed (issue 11): a struct of arrays. A vehicle is a lane, a column of X (NX, lanes) holding its state,
+parameters, normals and cost accumulators, plus its column of the latency buffer L; `fly_*` fly chunks of LANES
+vehicles, the time loop outside and loops over the lanes inside, so LLVM vectorises them (4 float64 lanes per AVX2
+instruction: branch-free bodies, selects instead of min/max, sqrt as LLVM's intrinsic, one written array per loop
+where a row offset is known only at run time). Chunks go over numba's threads. fastmath here allows contraction
+to FMA, reciprocal and approximate-function rewrites and ignores the sign of zero, never NaN or inf (the divergence
+checks need them).
 Rotor forces (RotorPy's model, coefficients in `airframe`): rotor i at hub position r_i meets the air at
 u_i = R^T (v - wind) + Omega x r_i (body frame); it gives thrust k_f w^2 + k_h (u_x^2 + u_y^2) - k_z w u_i,z along
 body z (axial inflow and translational lift) and in-plane drag -k_d w (u_x, u_y), plus quadratic body drag.
@@ -19,7 +27,11 @@ first-order low-pass (cutoff `filter_hz`, started at 0), over the primitive. Equ
 reference each go through the low-pass started at the first reference altitude, as `cost.iae` computes it.
 
 Randomness is a splitmix64 stream per vehicle: the vehicle spread is drawn from the vehicle seed, everything else
-(wind, gusts, sensor noise) from (vehicle seed, round id), so a vehicle's flight does not depend on the batch.
+(wind, gusts, sensor noise) from (vehicle seed, round id), so a vehicle's flight does not depend on the batch (nor
+on its lane: chunks are padded to a multiple of SIMD lanes, so every vehicle takes the same vector code). Normals
+come from `_normal_pair`, a Box-Muller of our own in branch-free arithmetic that vectorises (the libm one did not:
+it took 45 % of a step); the stream changed with it in 0e924a6, its cost statistics did not
+(benchmarks/results/noise_stream.md).
 Everything lives in this one file so numba's on-disk cache is invalidated whenever any of it changes.
 """
 
