@@ -128,7 +128,7 @@ _Q0, _Q1 = np.uint64(0), np.uint64(1)
 _SIGN = np.uint64(0x8000000000000000)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always")
 def _mix64(z):
     """splitmix64 finaliser: a bijective hash of a uint64."""
     z = (z ^ (z >> _S30)) * _M1
@@ -143,7 +143,7 @@ def _uniform(rs):
     return float((_mix64(rs[0]) >> _S11) + _ONE) * _INV53
 
 
-@njit(cache=True, fastmath=FAST, error_model="numpy")
+@njit(cache=True, fastmath=FAST, inline="always")
 def _log_unit(u):
     """Natural log of u in (0, 1], branch-free so that it vectorises: u = 2^e m with m in [sqrt(1/2), sqrt(2)),
     ln m = 2 atanh(f), f = (m - 1) / (m + 1), |f| <= 0.172, by its series to f^17 (truncation < 3e-16)."""
@@ -167,7 +167,7 @@ def _log_unit(u):
     return e * 0.6931471805599453 + 2.0 * f * p
 
 
-@njit(cache=True, fastmath=FAST, error_model="numpy")
+@njit(cache=True, fastmath=FAST, inline="always")
 def _normal_pair(z1, z2):
     """Two independent standard normals from two random uint64 words, by Box-Muller with a radius from z1 and an
     angle from z2, in branch-free arithmetic (no libm call) so that a loop over lanes vectorises.
@@ -286,14 +286,14 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, x, lat, rs):
         lat[o + 5] = 0.0
 
 
-@njit(cache=True, fastmath=FAST, error_model="numpy")
+@njit(cache=True, fastmath=FAST, inline="always")
 def _clip(x, lo, hi):
     """x limited to [lo, hi] by two selects (numba's min/max keep the lane loop from vectorising)."""
     x = lo if x < lo else x
     return hi if x > hi else x
 
 
-@njit(cache=True, fastmath=FAST, error_model="numpy")
+@njit(cache=True, fastmath=FAST, error_model="numpy", inline="always")
 def _rotation(qw, qx, qy, qz):
     """Rotation matrix (row-major r00 .. r22, body to world) of the unit quaternion (w, x, y, z)."""
     return (1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy),
