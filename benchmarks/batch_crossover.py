@@ -2,8 +2,9 @@
 
 A tuning round flies N = 2-8 vehicles for 9 s (900 steps). `batch.fly` flies batches below `PARALLEL_FROM` on the
 calling thread (`kernel.fly_serial`) and larger ones over numba's threads (`kernel.fly_batch`, prange); both run
-the same `_fly_vehicle`. This measures both entry points at each batch size, interleaved in one process so machine
-load hits them alike, and reports the median wall and CPU time per call and the size from which parallel wins.
+the same `_fly_chunk` (chunks of `kernel.LANES` vehicles, one chunk per thread). This measures both entry points
+at each batch size, interleaved in one process so machine load hits them alike, and reports the median wall and
+CPU time per call and the size from which parallel wins.
 
 Run:  .venv/bin/python benchmarks/batch_crossover.py [--sizes 1,2,4,...] [--repeats 41]
 Writes benchmarks/results/batch_crossover.{md,json}.
@@ -30,7 +31,7 @@ def timed(fn) -> tuple[float, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", default="1,2,3,4,6,8,12,16,24,32,48,64")
+    ap.add_argument("--sizes", default="1,2,4,8,16,32,48,64,96,128")
     ap.add_argument("--repeats", type=int, default=41)
     args = ap.parse_args()
     import numba

@@ -166,9 +166,15 @@ def write_markdown() -> None:
     if len(runs) >= 2 and {"before", "after"} <= {r["label"] for r in runs}:
         b = next(r for r in runs if r["label"] == "before")["throughput"]
         a = next(r for r in runs if r["label"] == "after")["throughput"]
-        lines += [f"The new physics costs {b['vehicle_steps_per_s_cpu'] / a['vehicle_steps_per_s_cpu']:.2f}× "
+        lines += [f"The new physics of `after` costs {b['vehicle_steps_per_s_cpu'] / a['vehicle_steps_per_s_cpu']:.2f}× "
                   "CPU time per vehicle-step (ratio of CPU-time throughputs; the two runs were at different "
-                  "times on a shared machine, so wall-time ratios are less reliable).", ""]
+                  "times on a shared machine, so wall-time ratios are less reliable) against `before`.", ""]
+    if any(r["label"] == "simd_kernel" for r in runs):
+        lines += ["`simd_kernel`: the same physics as `after` in the vectorised kernel, whose random stream is new "
+                  "(benchmarks/results/noise_stream.md: the cost statistics agree with the old stream's within "
+                  "their standard errors); the noise-free surfaces are unchanged to rounding, the noisy ones are "
+                  "another draw of the same distribution (20 rounds per point: their optimum moves within the flat "
+                  "valley).", ""]
     (RESULTS / "simulator_fidelity.md").write_text("\n".join(lines))
 
 

@@ -14,9 +14,10 @@ from mavtune.sim.cost import lowpass_alpha
 from mavtune.sim.scenario import COST_NAMES, Scenario
 from mavtune.sim.tracker import DT_S, flight_reference
 
-# Batches smaller than this fly on the calling thread: below it numba's thread launch costs more than the second
-# core gains (benchmarks/batch_crossover.py measures the crossover; results in benchmarks/results/).
-PARALLEL_FROM = 16
+# Batches smaller than this fly on the calling thread: the kernel flies chunks of K.LANES vehicles, one chunk per
+# thread, so a second thread has work from two full chunks on, and below that numba's thread launch costs more than
+# it gains (benchmarks/batch_crossover.py measures the crossover; results in benchmarks/results/).
+PARALLEL_FROM = 2 * K.LANES
 
 FAILURE_NAMES = {K.FAIL_NONFINITE: "non-finite state", K.FAIL_GROUND: "hit the ground", K.FAIL_TILT: "tilt > 90 deg"}
 

@@ -1,13 +1,21 @@
 """Numba kernels of the batched plant: hexarotor dynamics (RK4, 100 Hz), SO(3) controller, disturbances, costs.
 
-One implementation, used two ways: `fly_batch` flies whole flights of B vehicles (prange over vehicles, the time
-loop inside), `step_batch` advances B vehicles by one step for closed loops driven from outside (`Plant`).
-Both call the same `_init_vehicle` and `_step`. All arrays are float64 SI; the attitude is a unit quaternion
-(w, x, y, z), renormalised every step, equivalent to the paper's R in SO(3). Per step: sense (lidar and vz noise
-every step, gusts and horizontal position error at 20 Hz, estimates delayed by the scenario's latency), control
-(SO(3) law at 100 Hz, rotor commands held for the step), integrate: rotors exactly (first-order lag with a held
-command), the rigid body by classical RK4 with the rotor forces evaluated at each RK4 stage's time and state.
+One implementation, used two ways: `fly_batch` / `fly_serial` fly whole flights of B vehicles, `step_batch`
+advances B vehicles by one step for closed loops driven from outside (`Plant`). Both call the same
+`_init_vehicle`, `_draw_normals`, `_disturb`, `_push_estimates` and `_act`. All arrays are float64 SI; the attitude
+is a unit quaternion (w, x, y, z), renormalised every step, equivalent to the paper's R in SO(3). Per step: sense
+(lidar and vz noise every step, gusts and horizontal position error at 20 Hz, estimates delayed by the scenario's
+latency), control (SO(3) law at 100 Hz, rotor commands held for the step), integrate: rotors exactly (first-order
+lag with a held command), the rigid body by classical RK4 with the rotor forces evaluated at each RK4 stage's time
+and state.
 
+Layout, for speed (issue 11): a struct of arrays. A vehicle is a lane, a column of X (NX, lanes) holding its state,
+parameters, normals and cost accumulators, plus its column of the latency buffer L; `fly_*` fly chunks of LANES
+vehicles, the time loop outside and loops over the lanes inside, so LLVM vectorises them (4 float64 lanes per AVX2
+instruction: branch-free bodies, selects instead of min/max, sqrt as LLVM's intrinsic, one written array per loop
+where a row offset is known only at run time). Chunks go over numba's threads. fastmath here allows contraction
+to FMA, reciprocal and approximate-function rewrites and ignores the sign of zero, never NaN or inf (the divergence
+checks need them).
 Rotor forces (RotorPy's model, coefficients in `airframe`): rotor i at hub position r_i meets the air at
 u_i = R^T (v - wind) + Omega x r_i (body frame); it gives thrust k_f w^2 + k_h (u_x^2 + u_y^2) - k_z w u_i,z along
 body z (axial inflow and translational lift) and in-plane drag -k_d w (u_x, u_y), plus quadratic body drag.
@@ -19,7 +27,11 @@ first-order low-pass (cutoff `filter_hz`, started at 0), over the primitive. Equ
 reference each go through the low-pass started at the first reference altitude, as `cost.iae` computes it.
 
 Randomness is a splitmix64 stream per vehicle: the vehicle spread is drawn from the vehicle seed, everything else
-(wind, gusts, sensor noise) from (vehicle seed, round id), so a vehicle's flight does not depend on the batch.
+(wind, gusts, sensor noise) from (vehicle seed, round id), so a vehicle's flight does not depend on the batch (nor
+on its lane: chunks are padded to a multiple of SIMD lanes, so every vehicle takes the same vector code). Normals
+come from `_normal_pair`, a Box-Muller of our own in branch-free arithmetic that vectorises (the libm one did not:
+it took 45 % of a step); the stream changed with it in 0e924a6, its cost statistics did not
+(benchmarks/results/noise_stream.md).
 Everything lives in this one file so numba's on-disk cache is invalidated whenever any of it changes.
 """
 
@@ -28,7 +40,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.extending import intrinsic
 
 # fastmath without nnan/ninf: divergence checks rely on NaN/inf being seen
 FAST = {"contract", "arcp", "nsz", "afn"}
@@ -44,26 +58,59 @@ FAST = {"contract", "arcp", "nsz", "afn"}
  C_PAYLOAD_NEW,  # the payload mass the estimator does not know yet at the start, kg
  NCP) = range(47)
 
-# ---- per-vehicle parameters `vp` --------------------------------------------------------------------------------
-V_MASS, V_KF, V_KXZ, V_KVZ, V_WX, V_WY, NVP = range(7)
-
-# ---- rigid-body state `s`: position, velocity (world), quaternion, body rates, rotor rpm ------------------------
+# ---- one vehicle's state, a column of X (NX, lanes): the struct of arrays that a lane loop vectorises over --------
+# rigid body: position, velocity (world), quaternion, body rates, rotor rpm
 S_P, S_V, S_Q, S_W, S_R = 0, 3, 6, 10, 13
 NS = 19
-
-# ---- controller / disturbance state `a` -------------------------------------------------------------------------
+# controller and disturbances
 (A_DM, A_IWX, A_IWY, A_IBX, A_IBY, A_GX, A_GY, A_GZ, A_NX, A_NY, A_ZMEAS, A_FCMD,
  A_ZFB,  # the (delayed, noisy) altitude measurement the controller acted on this step
- ) = range(13)
-A_RPMCMD = 13
-A_BUF = 19  # ring buffer of the last MAX_DELAY estimates (x, y, z, vx, vy, vz): the feedback latency
+ ) = range(NS, NS + 13)
+A_RPMCMD = NS + 13
+# the vehicle's own parameters (spread, gains, mean wind)
+V_MASS, V_KF, V_KXZ, V_KVZ, V_WX, V_WY = range(A_RPMCMD + 6, A_RPMCMD + 12)
+Z_N = V_WY + 1  # this step's 7 standard normals (gusts x, y, z, position error x, y; lidar, vz)
+# a flight's accumulators: low-passed measurement, IAE, ISE, ITAE, effort, hover thrust, status, failure step
+F_ZF, F_IAE, F_ISE, F_ITAE, F_EFF, F_MG, F_ST, F_KF = range(Z_N + 7, Z_N + 15)
+E_EST = F_KF + 1  # this step's estimate (x, y, z, vx, vy, vz), before it joins the latency buffer
+NX = E_EST + 6
+# the feedback latency: a ring buffer L (6 MAX_DELAY, lanes) of the last MAX_DELAY estimates (x, y, z, vx, vy, vz),
+# an array of its own: its rows move with the step, and a row offset unknown at compile time into X would cost the
+# lane loop its vectorisation (LLVM cannot prove such a store and X's other rows apart)
 MAX_DELAY = 10
-NA = A_BUF + 6 * MAX_DELAY
+NL = 6 * MAX_DELAY
 
 # ---- outputs ----------------------------------------------------------------------------------------------------
 SLOW_EVERY = 5  # gusts and the horizontal position error are updated every 5 steps (20 Hz)
 OK, FAIL_NONFINITE, FAIL_GROUND, FAIL_TILT = 0, 1, 2, 3
 COST_IAE, COST_ISE, COST_ITAE, COST_EFFORT, NCOST = range(5)
+
+
+
+@intrinsic
+def _sqrt(typingctx, x):
+    """IEEE square root as LLVM's intrinsic: vectorisable, unlike math.sqrt (a libm call that may set errno)."""
+    def codegen(context, builder, signature, args):
+        fn = builder.module.declare_intrinsic("llvm.sqrt", [ir.DoubleType()])
+        return builder.call(fn, args)
+    return types.float64(types.float64), codegen
+
+
+@intrinsic
+def _f64_from_bits(typingctx, u):
+    """The float64 whose IEEE 754 bit pattern is the uint64 u (a bit cast, no conversion)."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+    return types.float64(types.uint64), codegen
+
+
+@intrinsic
+def _bits_of_f64(typingctx, x):
+    """The IEEE 754 bit pattern (uint64) of the float64 x."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+    return types.uint64(types.float64), codegen
+
 
 _GOLD = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -73,9 +120,15 @@ _SALT_FLIGHT = np.uint64(0x2545F4914F6CDD1D)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 _INV53 = 1.0 / 9007199254740992.0
 _ONE = np.uint64(1)
+_S2, _S12, _S52, _S62 = np.uint64(2), np.uint64(12), np.uint64(52), np.uint64(62)
+_EXP_ONE = np.uint64(0x3FF0000000000000)  # the exponent bits of 1.0: OR-ed onto 52 mantissa bits, a float in [1, 2)
+_EXP_2_52 = np.uint64(0x4330000000000000)  # ... of 2^52: OR-ed onto a small integer n, the float 2^52 + n
+_MANTISSA = np.uint64(0x000FFFFFFFFFFFFF)
+_Q0, _Q1 = np.uint64(0), np.uint64(1)
+_SIGN = np.uint64(0x8000000000000000)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mix64(z):
     """splitmix64 finaliser: a bijective hash of a uint64."""
     z = (z ^ (z >> _S30)) * _M1
@@ -90,17 +143,88 @@ def _uniform(rs):
     return float((_mix64(rs[0]) >> _S11) + _ONE) * _INV53
 
 
+@njit(cache=True, fastmath=FAST, inline="always")
+def _log_unit(u):
+    """Natural log of u in (0, 1], branch-free so that it vectorises: u = 2^e m with m in [sqrt(1/2), sqrt(2)),
+    ln m = 2 atanh(f), f = (m - 1) / (m + 1), |f| <= 0.172, by its series to f^17 (truncation < 3e-16)."""
+    bits = _bits_of_f64(u)
+    e = _f64_from_bits(_EXP_2_52 | (bits >> _S52)) - 4503599627370496.0 - 1023.0  # the exponent, exactly
+    m = _f64_from_bits((bits & _MANTISSA) | _EXP_ONE)
+    big = m > 1.4142135623730951
+    m = 0.5 * m if big else m
+    e = e + 1.0 if big else e
+    f = (m - 1.0) / (m + 1.0)
+    s = f * f
+    p = 1.0 / 17.0
+    p = 1.0 / 15.0 + s * p
+    p = 1.0 / 13.0 + s * p
+    p = 1.0 / 11.0 + s * p
+    p = 1.0 / 9.0 + s * p
+    p = 1.0 / 7.0 + s * p
+    p = 1.0 / 5.0 + s * p
+    p = 1.0 / 3.0 + s * p
+    p = 1.0 + s * p
+    return e * 0.6931471805599453 + 2.0 * f * p
+
+
+@njit(cache=True, fastmath=FAST, inline="always")
+def _normal_pair(z1, z2):
+    """Two independent standard normals from two random uint64 words, by Box-Muller with a radius from z1 and an
+    angle from z2, in branch-free arithmetic (no libm call) so that a loop over lanes vectorises.
+
+    Radius sqrt(-2 ln u), u = 1 - k 2^-52 in (0, 1] from z1's top 52 bits (|n| <= 8.5). Angle: a quadrant from z2's
+    top 2 bits and x uniform in [-pi/4, pi/4) from its next 52; cos x and sin x by their Taylor series to x^16 and
+    x^15 (truncation < 1e-16 on that interval); the quadrant turns (cos, sin) by a multiple of pi/2.
+    """
+    u = 2.0 - _f64_from_bits((z1 >> _S12) | _EXP_ONE)
+    r = _sqrt(-2.0 * _log_unit(u))
+    x = 1.5707963267948966 * (_f64_from_bits(((z2 << _S2) >> _S12) | _EXP_ONE) - 1.5)
+    x2 = x * x
+    c = 1.0 / 20922789888000.0  # 1/16!
+    c = -1.0 / 87178291200.0 + x2 * c
+    c = 1.0 / 479001600.0 + x2 * c
+    c = -1.0 / 3628800.0 + x2 * c
+    c = 1.0 / 40320.0 + x2 * c
+    c = -1.0 / 720.0 + x2 * c
+    c = 1.0 / 24.0 + x2 * c
+    c = -0.5 + x2 * c
+    c = 1.0 + x2 * c
+    sn = -1.0 / 1307674368000.0  # -1/15!
+    sn = 1.0 / 6227020800.0 + x2 * sn
+    sn = -1.0 / 39916800.0 + x2 * sn
+    sn = 1.0 / 362880.0 + x2 * sn
+    sn = -1.0 / 5040.0 + x2 * sn
+    sn = 1.0 / 120.0 + x2 * sn
+    sn = -1.0 / 6.0 + x2 * sn
+    sn = x + x * x2 * sn
+    # (cos, sin) of x + q pi / 2, q = z2's top two bits: the lower turns by pi / 2, the upper by pi (its sign bit
+    # on 1.0 gives -1 or 1)
+    turn = ((z2 >> _S62) & _Q1) != _Q0
+    cq = -sn if turn else c
+    sq = c if turn else sn
+    r = r * _f64_from_bits((z2 & _SIGN) | _EXP_ONE)
+    return r * cq, r * sq
+
+
+@njit(cache=True, fastmath=FAST, inline="always")
+def _normal2_at(RS, v):
+    """Two independent standard normals from stream v, RS[v] (splitmix64: two words into `_normal_pair`)."""
+    st = RS[v] + _GOLD
+    z1 = _mix64(st)
+    st = st + _GOLD
+    RS[v] = st
+    return _normal_pair(z1, _mix64(st))
+
+
 @njit(cache=True, fastmath=FAST)
 def _normal2(rs):
-    """Two independent standard normals (Box-Muller)."""
-    r = math.sqrt(-2.0 * math.log(_uniform(rs)))
-    th = 6.283185307179586 * _uniform(rs)
-    return r * math.cos(th), r * math.sin(th)
+    """Two independent standard normals from the stream rs[0]."""
+    return _normal2_at(rs, 0)
 
 
 @njit(cache=True)
-def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
-    """Hover at (x0, y0, z0); draw the vehicle spread and this flight's wind.
+def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, x, lat, rs):
+    """Hover at (x0, y0, z0) in the state column x (NX,) and latency column lat (NL,); draw the vehicle spread and this flight's wind.
 
     The mass estimate has converged to this vehicle hovering in this flight's mean wind (its own mass and rotor
     spread, translational lift), but not to the payload: the payload is new to the estimator (the paper's payload
@@ -119,50 +243,57 @@ def _init_vehicle(seed, round_id, kxz, kvz, x0, y0, z0, cp, s, a, vp, rs):
     n1, n2 = _normal2(rs)
     speed = max(0.0, cp[C_WIND_MEAN] * (1.0 + cp[C_WIND_SPREAD] * n1))
     heading = 6.283185307179586 * _uniform(rs)
-    vp[V_MASS] = mass
-    vp[V_KF] = kf
-    vp[V_KXZ] = kxz
-    vp[V_KVZ] = kvz
-    vp[V_WX] = speed * math.cos(heading)
-    vp[V_WY] = speed * math.sin(heading)
+    x[V_MASS] = mass
+    x[V_KF] = kf
+    x[V_KXZ] = kxz
+    x[V_KVZ] = kvz
+    x[V_WX] = speed * math.cos(heading)
+    x[V_WY] = speed * math.sin(heading)
     for i in range(NS):
-        s[i] = 0.0
-    s[S_P] = x0
-    s[S_P + 1] = y0
-    s[S_P + 2] = z0
-    s[S_Q] = 1.0
+        x[i] = 0.0
+    x[S_P] = x0
+    x[S_P + 1] = y0
+    x[S_P + 2] = z0
+    x[S_Q] = 1.0
     lift = 6.0 * cp[C_KH_ROTOR] * speed * speed  # translational lift of the mean wind, all rotors
     rpm = math.sqrt(max(mass * g - lift, 0.0) / (6.0 * kf))
     for i in range(6):
-        s[S_R + i] = rpm
-        a[A_RPMCMD + i] = rpm
-    for i in range(A_RPMCMD):
-        a[i] = 0.0
+        x[S_R + i] = rpm
+        x[A_RPMCMD + i] = rpm
+    for i in range(A_DM, A_RPMCMD):
+        x[i] = 0.0
     # the estimator's hover equilibrium without the payload: commanded thrust (m_nom + dm) g through the nominal
     # k_f gives (kf / kf_nom) (m_nom + dm) g of rotor thrust, plus the translational lift
-    a[A_DM] = ((mass - cp[C_PAYLOAD_NEW]) * g - lift) * cp[C_KF] / (kf * g) - cp[C_MNOM]
+    x[A_DM] = ((mass - cp[C_PAYLOAD_NEW]) * g - lift) * cp[C_KF] / (kf * g) - cp[C_MNOM]
     n1, n2 = _normal2(rs)  # stationary start of the gust and position-error processes
-    a[A_GX] = cp[C_GUST_XY] * n1
-    a[A_GY] = cp[C_GUST_XY] * n2
+    x[A_GX] = cp[C_GUST_XY] * n1
+    x[A_GY] = cp[C_GUST_XY] * n2
     n1, n2 = _normal2(rs)
-    a[A_GZ] = cp[C_GUST_Z] * n1
-    a[A_NX] = cp[C_SIG_POS] * n2
+    x[A_GZ] = cp[C_GUST_Z] * n1
+    x[A_NX] = cp[C_SIG_POS] * n2
     n1, n2 = _normal2(rs)
-    a[A_NY] = cp[C_SIG_POS] * n1
-    a[A_ZMEAS] = z0
-    a[A_ZFB] = z0
-    a[A_FCMD] = mass * g
+    x[A_NY] = cp[C_SIG_POS] * n1
+    x[A_ZMEAS] = z0
+    x[A_ZFB] = z0
+    x[A_FCMD] = mass * g
     for j in range(MAX_DELAY):
-        o = A_BUF + 6 * j
-        a[o] = x0
-        a[o + 1] = y0
-        a[o + 2] = z0
-        a[o + 3] = 0.0
-        a[o + 4] = 0.0
-        a[o + 5] = 0.0
+        o = 6 * j
+        lat[o] = x0
+        lat[o + 1] = y0
+        lat[o + 2] = z0
+        lat[o + 3] = 0.0
+        lat[o + 4] = 0.0
+        lat[o + 5] = 0.0
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, inline="always")
+def _clip(x, lo, hi):
+    """x limited to [lo, hi] by two selects (numba's min/max keep the lane loop from vectorising)."""
+    x = lo if x < lo else x
+    return hi if x > hi else x
+
+
+@njit(cache=True, fastmath=FAST, error_model="numpy", inline="always")
 def _rotation(qw, qx, qy, qz):
     """Rotation matrix (row-major r00 .. r22, body to world) of the unit quaternion (w, x, y, z)."""
     return (1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy),
@@ -170,10 +301,10 @@ def _rotation(qw, qx, qy, qz):
             2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy))
 
 
-@njit(cache=True, fastmath=FAST)
-def _rigid(s, a, vp, cp, mix, decay, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, airx, airy, airz):
-    """Paper eq. (1) with rotor and body aerodynamics: derivatives of velocity, quaternion and body rates at one
-    RK4 stage, the rotors having moved a fraction (1 - decay) from their speeds towards their commands."""
+@njit(cache=True, fastmath=FAST, inline="always", error_model="numpy")
+def _rigid(X, v, cp, mix, decay, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, airx, airy, airz):
+    """Paper eq. (1) with rotor and body aerodynamics: derivatives of velocity, quaternion and body rates of lane v
+    at one RK4 stage, the rotors having moved a fraction (1 - decay) from their speeds towards their commands."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation(qw, qx, qy, qz)
     ux = vx - airx  # air-relative velocity, world frame
     uy = vy - airy
@@ -181,7 +312,7 @@ def _rigid(s, a, vp, cp, mix, decay, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, air
     bx = r00 * ux + r10 * uy + r20 * uz  # ... and in the body frame: R^T u
     by = r01 * ux + r11 * uy + r21 * uz
     bz = r02 * ux + r12 * uy + r22 * uz
-    kf = vp[V_KF]
+    kf = X[V_KF, v]
     kz = cp[C_KZ_ROTOR]
     lift = cp[C_KH_ROTOR] * (bx * bx + by * by)  # translational lift of each rotor (hub in-plane rates neglected)
     f = 0.0
@@ -190,8 +321,8 @@ def _rigid(s, a, vp, cp, mix, decay, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, air
     mz = 0.0
     wsum = 0.0
     for i in range(6):
-        c = a[A_RPMCMD + i]
-        r = c + (s[S_R + i] - c) * decay
+        c = X[A_RPMCMD + i, v]
+        r = c + (X[S_R + i, v] - c) * decay
         # axial air speed at the hub: body z speed plus (Omega x r_i)_z = wx y_i - wy x_i (mix rows 1, 2: y, -x)
         t = kf * r * r + lift - kz * r * (bz + wx * mix[1, i] + wy * mix[2, i])
         f += t
@@ -202,8 +333,8 @@ def _rigid(s, a, vp, cp, mix, decay, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, air
     hd = cp[C_KD_ROTOR] * wsum  # in-plane rotor drag of all rotors, body x and y
     hx = -hd * bx
     hy = -hd * by
-    dk = cp[C_DRAG] * math.sqrt(ux * ux + uy * uy + uz * uz)  # quadratic body drag against the air speed
-    inv_m = 1.0 / vp[V_MASS]
+    dk = cp[C_DRAG] * _sqrt(ux * ux + uy * uy + uz * uz)  # quadratic body drag against the air speed
+    inv_m = 1.0 / X[V_MASS, v]
     jx, jy, jz = cp[C_JPX], cp[C_JPY], cp[C_JPZ]
     return ((r02 * f + r00 * hx + r01 * hy - dk * ux) * inv_m,
             (r12 * f + r10 * hx + r11 * hy - dk * uy) * inv_m,
@@ -217,56 +348,56 @@ def _rigid(s, a, vp, cp, mix, decay, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz, air
             (mz - (wx * jy * wy - wy * jx * wx)) / jz)
 
 
-@njit(cache=True, fastmath=FAST)
-def _integrate(s, a, vp, cp, mix):
-    """Advance the state by one step: rotors exactly (first order, command held), rigid body by RK4."""
+@njit(cache=True, fastmath=FAST, inline="always", error_model="numpy")
+def _integrate(X, v, cp, mix):
+    """Advance lane v by one step: rotors exactly (first order, command held), rigid body by RK4."""
     h = cp[C_DT]
     e_half = cp[C_E_HALF]  # exp(-h / (2 tau))
     e_full = e_half * e_half
-    airx = vp[V_WX] + a[A_GX]
-    airy = vp[V_WY] + a[A_GY]
-    airz = a[A_GZ]
-    v0x, v0y, v0z = s[S_V], s[S_V + 1], s[S_V + 2]
-    q0w, q0x, q0y, q0z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    w0x, w0y, w0z = s[S_W], s[S_W + 1], s[S_W + 2]
-    k1 = _rigid(s, a, vp, cp, mix, 1.0, v0x, v0y, v0z, q0w, q0x, q0y, q0z, w0x, w0y, w0z, airx, airy, airz)
+    airx = X[V_WX, v] + X[A_GX, v]
+    airy = X[V_WY, v] + X[A_GY, v]
+    airz = X[A_GZ, v]
+    v0x, v0y, v0z = X[S_V, v], X[S_V + 1, v], X[S_V + 2, v]
+    q0w, q0x, q0y, q0z = X[S_Q, v], X[S_Q + 1, v], X[S_Q + 2, v], X[S_Q + 3, v]
+    w0x, w0y, w0z = X[S_W, v], X[S_W + 1, v], X[S_W + 2, v]
+    k1 = _rigid(X, v, cp, mix, 1.0, v0x, v0y, v0z, q0w, q0x, q0y, q0z, w0x, w0y, w0z, airx, airy, airz)
     c = 0.5 * h
     v1x, v1y, v1z = v0x + c * k1[0], v0y + c * k1[1], v0z + c * k1[2]
-    k2 = _rigid(s, a, vp, cp, mix, e_half, v1x, v1y, v1z, q0w + c * k1[3], q0x + c * k1[4], q0y + c * k1[5],
+    k2 = _rigid(X, v, cp, mix, e_half, v1x, v1y, v1z, q0w + c * k1[3], q0x + c * k1[4], q0y + c * k1[5],
                 q0z + c * k1[6], w0x + c * k1[7], w0y + c * k1[8], w0z + c * k1[9], airx, airy, airz)
     v2x, v2y, v2z = v0x + c * k2[0], v0y + c * k2[1], v0z + c * k2[2]
-    k3 = _rigid(s, a, vp, cp, mix, e_half, v2x, v2y, v2z, q0w + c * k2[3], q0x + c * k2[4], q0y + c * k2[5],
+    k3 = _rigid(X, v, cp, mix, e_half, v2x, v2y, v2z, q0w + c * k2[3], q0x + c * k2[4], q0y + c * k2[5],
                 q0z + c * k2[6], w0x + c * k2[7], w0y + c * k2[8], w0z + c * k2[9], airx, airy, airz)
     v3x, v3y, v3z = v0x + h * k3[0], v0y + h * k3[1], v0z + h * k3[2]
-    k4 = _rigid(s, a, vp, cp, mix, e_full, v3x, v3y, v3z, q0w + h * k3[3], q0x + h * k3[4], q0y + h * k3[5],
+    k4 = _rigid(X, v, cp, mix, e_full, v3x, v3y, v3z, q0w + h * k3[3], q0x + h * k3[4], q0y + h * k3[5],
                 q0z + h * k3[6], w0x + h * k3[7], w0y + h * k3[8], w0z + h * k3[9], airx, airy, airz)
     h6 = h / 6.0
-    s[S_P] += h6 * (v0x + 2.0 * (v1x + v2x) + v3x)
-    s[S_P + 1] += h6 * (v0y + 2.0 * (v1y + v2y) + v3y)
-    s[S_P + 2] += h6 * (v0z + 2.0 * (v1z + v2z) + v3z)
-    s[S_V] = v0x + h6 * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0])
-    s[S_V + 1] = v0y + h6 * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1])
-    s[S_V + 2] = v0z + h6 * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2])
+    X[S_P, v] += h6 * (v0x + 2.0 * (v1x + v2x) + v3x)
+    X[S_P + 1, v] += h6 * (v0y + 2.0 * (v1y + v2y) + v3y)
+    X[S_P + 2, v] += h6 * (v0z + 2.0 * (v1z + v2z) + v3z)
+    X[S_V, v] = v0x + h6 * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0])
+    X[S_V + 1, v] = v0y + h6 * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1])
+    X[S_V + 2, v] = v0z + h6 * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2])
     qw = q0w + h6 * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3])
     qx = q0x + h6 * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4])
     qy = q0y + h6 * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5])
     qz = q0z + h6 * (k1[6] + 2.0 * (k2[6] + k3[6]) + k4[6])
-    qn = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)  # back onto the unit sphere (R stays in SO(3))
-    s[S_Q] = qw * qn
-    s[S_Q + 1] = qx * qn
-    s[S_Q + 2] = qy * qn
-    s[S_Q + 3] = qz * qn
-    s[S_W] = w0x + h6 * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7])
-    s[S_W + 1] = w0y + h6 * (k1[8] + 2.0 * (k2[8] + k3[8]) + k4[8])
-    s[S_W + 2] = w0z + h6 * (k1[9] + 2.0 * (k2[9] + k3[9]) + k4[9])
+    qn = 1.0 / _sqrt(qw * qw + qx * qx + qy * qy + qz * qz)  # back onto the unit sphere (R stays in SO(3))
+    X[S_Q, v] = qw * qn
+    X[S_Q + 1, v] = qx * qn
+    X[S_Q + 2, v] = qy * qn
+    X[S_Q + 3, v] = qz * qn
+    X[S_W, v] = w0x + h6 * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7])
+    X[S_W + 1, v] = w0y + h6 * (k1[8] + 2.0 * (k2[8] + k3[8]) + k4[8])
+    X[S_W + 2, v] = w0z + h6 * (k1[9] + 2.0 * (k2[9] + k3[9]) + k4[9])
     for i in range(6):
-        c = a[A_RPMCMD + i]
-        s[S_R + i] = c + (s[S_R + i] - c) * e_full
+        c = X[A_RPMCMD + i, v]
+        X[S_R + i, v] = c + (X[S_R + i, v] - c) * e_full
 
 
-@njit(cache=True, fastmath=FAST)
-def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
-    """SO(3) controller (paper eq. 2, MRS form) from estimates (p, v); writes rotor rpm commands into `a`.
+@njit(cache=True, fastmath=FAST, inline="always", error_model="numpy")
+def _control(X, v, cp, alloc, ref, px, py, pz, vx, vy, vz):
+    """SO(3) controller (paper eq. 2, MRS form) of lane v from estimates (p, v); writes rotor rpm commands into A.
 
     Errors are reference minus state (MRS sign; eq. 2 writes state minus reference with the signs flipped).
     The desired heading is fixed (b1d = e1) and the commanded attitude is not differentiated, so eq. 2's
@@ -274,42 +405,42 @@ def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
     """
     dt = cp[C_DT]
     g = cp[C_G]
-    qw, qx, qy, qz = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    qw, qx, qy, qz = X[S_Q, v], X[S_Q + 1, v], X[S_Q + 2, v], X[S_Q + 3, v]
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation(qw, qx, qy, qz)
     ex = ref[0] - px
     ey = ref[1] - py
     ez = ref[2] - pz
     # integrals: world and body horizontal, mass estimator on z
-    a[A_IWX] += ex * dt
-    a[A_IWY] += ey * dt
-    a[A_IBX] += (r00 * ex + r10 * ey + r20 * ez) * dt
-    a[A_IBY] += (r01 * ex + r11 * ey + r21 * ez) * dt
-    dm = a[A_DM] + cp[C_KM] * ez * dt
-    dm = min(max(dm, -0.5 * cp[C_MNOM]), cp[C_DM_MAX])  # the estimate never drops below half the nominal mass
-    a[A_DM] = dm
+    X[A_IWX, v] += ex * dt
+    X[A_IWY, v] += ey * dt
+    X[A_IBX, v] += (r00 * ex + r10 * ey + r20 * ez) * dt
+    X[A_IBY, v] += (r01 * ex + r11 * ey + r21 * ez) * dt
+    dm = X[A_DM, v] + cp[C_KM] * ez * dt
+    dm = _clip(dm, -0.5 * cp[C_MNOM], cp[C_DM_MAX])  # the estimate never drops below half the nominal mass
+    X[A_DM, v] = dm
     kib = cp[C_KIB]
-    ibx = kib * a[A_IBX]
-    iby = kib * a[A_IBY]
-    ax = cp[C_KX_XY] * ex + cp[C_KV_XY] * (ref[3] - vx) + ref[6] + cp[C_KIW] * a[A_IWX] + r00 * ibx + r01 * iby
-    ay = cp[C_KX_XY] * ey + cp[C_KV_XY] * (ref[4] - vy) + ref[7] + cp[C_KIW] * a[A_IWY] + r10 * ibx + r11 * iby
-    az = vp[V_KXZ] * ez + vp[V_KVZ] * (ref[5] - vz) + ref[8] + g + r20 * ibx + r21 * iby
+    ibx = kib * X[A_IBX, v]
+    iby = kib * X[A_IBY, v]
+    ax = cp[C_KX_XY] * ex + cp[C_KV_XY] * (ref[3] - vx) + ref[6] + cp[C_KIW] * X[A_IWX, v] + r00 * ibx + r01 * iby
+    ay = cp[C_KX_XY] * ey + cp[C_KV_XY] * (ref[4] - vy) + ref[7] + cp[C_KIW] * X[A_IWY, v] + r10 * ibx + r11 * iby
+    az = X[V_KXZ, v] * ez + X[V_KVZ, v] * (ref[5] - vz) + ref[8] + g + r20 * ibx + r21 * iby
     m = cp[C_MNOM] + dm
     fx = m * ax
     fy = m * ay
-    fz = max(m * az, 0.05 * m * g)  # keep 5 % of hover thrust: the attitude stays defined, no free fall command
+    fz = _clip(m * az, 0.05 * m * g, math.inf)  # keep 5 % of hover thrust: the attitude stays defined, no free fall command
     # tilt limit: keep the horizontal part within tan(tilt_max) of the vertical part
-    fh = math.sqrt(fx * fx + fy * fy)
+    fh = _sqrt(fx * fx + fy * fy)
     fh_max = fz * cp[C_TAN_TILT]
     if fh > fh_max:
         sc = fh_max / fh
         fx *= sc
         fy *= sc
-    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+    fn = _sqrt(fx * fx + fy * fy + fz * fz)
     # desired attitude: b3c along the force, heading 0
     c3x, c3y, c3z = fx / fn, fy / fn, fz / fn
     # b2c = b3c x e1 normalised, b1c = b2c x b3c
     c2x, c2y, c2z = 0.0, c3z, -c3y
-    n2 = math.sqrt(c2y * c2y + c2z * c2z)
+    n2 = _sqrt(c2y * c2y + c2z * c2z)
     c2y /= n2
     c2z /= n2
     c1x = c2y * c3z - c2z * c3y
@@ -327,7 +458,7 @@ def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
     erx = 0.5 * (e21 - e12)
     ery = 0.5 * (e02 - e20)
     erz = 0.5 * (e10 - e01)
-    wx, wy, wz = s[S_W], s[S_W + 1], s[S_W + 2]
+    wx, wy, wz = X[S_W, v], X[S_W + 1, v], X[S_W + 2, v]
     jx, jy, jz = cp[C_JX], cp[C_JY], cp[C_JZ]
     mx = -cp[C_KR_XY] * erx - cp[C_KW_XY] * wx + (wy * jz * wz - wz * jy * wy)
     my = -cp[C_KR_XY] * ery - cp[C_KW_XY] * wy + (wz * jx * wx - wx * jz * wz)
@@ -337,153 +468,222 @@ def _control(s, a, vp, cp, alloc, ref, px, py, pz, vx, vy, vz):
     rmin, rmax = cp[C_RPM_MIN], cp[C_RPM_MAX]
     for i in range(6):
         t = alloc[i, 0] * f + alloc[i, 1] * mx + alloc[i, 2] * my + alloc[i, 3] * mz
-        r = math.sqrt(max(t, 0.0) / kf)
-        a[A_RPMCMD + i] = min(max(r, rmin), rmax)
-    a[A_FCMD] = f
+        r = _sqrt(_clip(t, 0.0, math.inf) / kf)
+        X[A_RPMCMD + i, v] = _clip(r, rmin, rmax)
+    X[A_FCMD, v] = f
 
 
-@njit(cache=True, fastmath=FAST)
-def _step(s, a, vp, rs, cp, mix, alloc, ref, k):
-    """Step k (0.01 s): sense (noise, gusts, latency), control, integrate RK4; returns OK or a FAIL_* code."""
-    # disturbances: white lidar and vz noise every step; OU gusts and horizontal position error at 20 Hz
-    n6, n7 = _normal2(rs)
+@njit(cache=True, fastmath=FAST, inline="always")
+def _draw_normals(RS, X, k, lanes):
+    """This step's standard normals of lanes 0..lanes-1 into rows Z_N.. of X, each from its lane's own stream: lidar and
+    vz noise every step (rows 5, 6), gust and position-error innovations every SLOW_EVERY steps (rows 0-4)."""
+    for v in range(lanes):
+        X[Z_N + 5, v], X[Z_N + 6, v] = _normal2_at(RS, v)
     if k % SLOW_EVERY == 0:
-        n1, n2 = _normal2(rs)
-        n3, n4 = _normal2(rs)
-        n5, _ = _normal2(rs)
+        for v in range(lanes):
+            X[Z_N + 0, v], X[Z_N + 1, v] = _normal2_at(RS, v)
+            X[Z_N + 2, v], X[Z_N + 3, v] = _normal2_at(RS, v)
+            X[Z_N + 4, v], _ = _normal2_at(RS, v)
+
+
+@njit(cache=True, fastmath=FAST, error_model="numpy")
+def _step_setup(cp, k):
+    """What step k does alike in every lane: the OU coefficients (ag, bg, ap, bp) of the 20 Hz gust and
+    position-error update, or (1, 0, 1, 0) between updates, and the rows of this step's and of the delayed
+    estimate in the latency ring buffer L."""
+    ag, bg, ap, bp = 1.0, 0.0, 1.0, 0.0
+    if k % SLOW_EVERY == 0:
         ag = cp[C_A_GUST]
-        bg = math.sqrt(1.0 - ag * ag)
-        a[A_GX] = ag * a[A_GX] + bg * cp[C_GUST_XY] * n1
-        a[A_GY] = ag * a[A_GY] + bg * cp[C_GUST_XY] * n2
-        a[A_GZ] = ag * a[A_GZ] + bg * cp[C_GUST_Z] * n3
+        bg = _sqrt(1.0 - ag * ag)
         ap = cp[C_A_POS]
-        bp = math.sqrt(1.0 - ap * ap)
-        a[A_NX] = ap * a[A_NX] + bp * cp[C_SIG_POS] * n4
-        a[A_NY] = ap * a[A_NY] + bp * cp[C_SIG_POS] * n5
-    zmeas = s[S_P + 2] + cp[C_SIG_LIDAR] * n6
-    a[A_ZMEAS] = zmeas
-    # the controller sees the estimate of `delay` steps ago (estimation + communication latency)
+        bp = _sqrt(1.0 - ap * ap)
     slot = k % MAX_DELAY
-    o = A_BUF + 6 * slot
-    a[o] = s[S_P] + a[A_NX]
-    a[o + 1] = s[S_P + 1] + a[A_NY]
-    a[o + 2] = zmeas
-    a[o + 3] = s[S_V]
-    a[o + 4] = s[S_V + 1]
-    a[o + 5] = s[S_V + 2] + cp[C_SIG_VZ] * n7
-    o = A_BUF + 6 * ((slot - int(cp[C_DELAY]) + MAX_DELAY) % MAX_DELAY)
-    a[A_ZFB] = a[o + 2]
-    _control(s, a, vp, cp, alloc, ref, a[o], a[o + 1], a[o + 2], a[o + 3], a[o + 4], a[o + 5])
-    _integrate(s, a, vp, cp, mix)
+    return ag, bg, ap, bp, 6 * slot, 6 * ((slot - int(cp[C_DELAY]) + MAX_DELAY) % MAX_DELAY)
+
+
+@njit(cache=True, fastmath=FAST, inline="always", error_model="numpy")
+def _disturb(X, v, cp, sk):
+    """First part of a step of lane v: the disturbances move and the lidar reads. `sk` = `_step_setup(cp, k)`: what
+    step k does the same for every lane, worked out before the lane loop so that the loop body is branch-free."""
+    ag, bg, ap, bp, _, _ = sk
+    # OU gusts and horizontal position error, updated at 20 Hz (on the other steps ag = ap = 1, bg = bp = 0)
+    X[A_GX, v] = ag * X[A_GX, v] + bg * cp[C_GUST_XY] * X[Z_N + 0, v]
+    X[A_GY, v] = ag * X[A_GY, v] + bg * cp[C_GUST_XY] * X[Z_N + 1, v]
+    X[A_GZ, v] = ag * X[A_GZ, v] + bg * cp[C_GUST_Z] * X[Z_N + 2, v]
+    X[A_NX, v] = ap * X[A_NX, v] + bp * cp[C_SIG_POS] * X[Z_N + 3, v]
+    X[A_NY, v] = ap * X[A_NY, v] + bp * cp[C_SIG_POS] * X[Z_N + 4, v]
+    zmeas = X[S_P + 2, v] + cp[C_SIG_LIDAR] * X[Z_N + 5, v]  # white lidar and vz noise every step
+    X[A_ZMEAS, v] = zmeas
+    # this step's estimate (x, y, z, vx, vy, vz): position error on x, y; lidar z; vz noise
+    X[E_EST, v] = X[S_P, v] + X[A_NX, v]
+    X[E_EST + 1, v] = X[S_P + 1, v] + X[A_NY, v]
+    X[E_EST + 2, v] = zmeas
+    X[E_EST + 3, v] = X[S_V, v]
+    X[E_EST + 4, v] = X[S_V + 1, v]
+    X[E_EST + 5, v] = X[S_V + 2, v] + cp[C_SIG_VZ] * X[Z_N + 6, v]
+
+
+@njit(cache=True, fastmath=FAST, inline="always", error_model="numpy")
+def _push_estimates(X, L, sk, lanes):
+    """Second part of a step: this step's estimates (rows E_EST.. of X) of lanes 0..lanes-1 join the latency buffer,
+    one row at a time (a lane loop that stores at a row offset unknown at compile time vectorises only when it
+    does little else: LLVM needs a runtime alias check per pair of rows it cannot tell apart)."""
+    o = sk[4]
+    for j in range(6):
+        for v in range(lanes):
+            L[o + j, v] = X[E_EST + j, v]
+
+
+@njit(cache=True, fastmath=FAST, inline="always", error_model="numpy")
+def _act(X, L, v, cp, mix, alloc, ref, sk):
+    """Last part of a step of lane v (after `_push_estimates`): the controller acts on the estimate of
+    `delay` steps ago (estimation + communication latency), then RK4 over 0.01 s; returns OK or a FAIL_* code."""
+    o = sk[5]
+    X[A_ZFB, v] = L[o + 2, v]
+    _control(X, v, cp, alloc, ref, L[o, v], L[o + 1, v], L[o + 2, v], L[o + 3, v], L[o + 4, v], L[o + 5, v])
+    _integrate(X, v, cp, mix)
     total = 0.0
     for i in range(NS):
-        total += s[i]
-    if not math.isfinite(total):
-        return FAIL_NONFINITE
-    if s[S_P + 2] < cp[C_Z_GROUND]:
-        return FAIL_GROUND
-    if 1.0 - 2.0 * (s[S_Q + 1] ** 2 + s[S_Q + 2] ** 2) < 0.0:
-        return FAIL_TILT
-    return OK
+        total += X[i, v]
+    # first failure that applies, as selects (abs(total) < inf is False for NaN and inf alike)
+    tilt = 1.0 - 2.0 * (X[S_Q + 1, v] * X[S_Q + 1, v] + X[S_Q + 2, v] * X[S_Q + 2, v]) < 0.0
+    fail = FAIL_TILT if tilt else OK
+    fail = FAIL_GROUND if X[S_P + 2, v] < cp[C_Z_GROUND] else fail
+    return fail if abs(total) < math.inf else FAIL_NONFINITE
 
 
-@njit(cache=True, fastmath=FAST)
-def _fly_one(seed, round_id, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, trace_row, costs_row):
-    """Fly one vehicle through the whole reference; fill its costs, trace; return (status, failure time s)."""
-    s = np.empty(NS)
-    a = np.empty(NA)
-    vp = np.empty(NVP)
-    rs = np.empty(1, dtype=np.uint64)
+LANES = 32  # vehicles flown side by side in one chunk: their state (about 1 kB each) stays in the L1 cache
+SIMD = 4  # a chunk flies a multiple of this many lanes (AVX2: 4 float64), so no lane takes the scalar remainder
+
+
+@njit(cache=True, fastmath=FAST, error_model="numpy")
+def _fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs,
+               status, t_fail):
+    """Fly vehicles lo..hi-1 of a batch side by side through the whole reference into their rows of the outputs.
+
+    Struct of arrays with the lanes innermost, all state in one (NX, LANES) array so that every access is a
+    constant row offset from one base: each step draws the lanes' normals (a scalar loop: log, cos, sin), then
+    one branch-free loop over the lanes steps them all, which LLVM vectorises. The lane count is padded up to a
+    multiple of SIMD with copies of the first vehicle (flown, not kept), so each vehicle takes the same vector
+    code whatever the batch size: results do not depend on the batch. A lane that fails keeps being stepped
+    (its numbers no longer count) until every lane of the chunk has failed.
+    """
+    nv = hi - lo
+    w = min(LANES, (nv + SIMD - 1) // SIMD * SIMD)
     n = ref.shape[0]
     dt = cp[C_DT]
-    _init_vehicle(seed, round_id, kxz, kvz, ref[0, 0], ref[0, 1], ref[0, 2], cp, s, a, vp, rs)
     alpha = cp[C_LP_ALPHA]
-    zf = ref[0, 2]
+    X = np.zeros((NX, LANES))
+    L = np.empty((NL, LANES))
+    RS = np.empty(LANES, dtype=np.uint64)
+    for v in range(w):
+        i = lo + v if v < nv else lo
+        _init_vehicle(seeds[i], round_ids[i], kxz[i], kvz[i], ref[0, 0], ref[0, 1], ref[0, 2], cp, X[:, v],
+                      L[:, v], RS[v:v + 1])
+        X[F_ZF, v] = ref[0, 2]
+        # the vehicle's hover thrust in command units (rotor speeds from the nominal k_f): payload, spread included
+        X[F_MG, v] = X[V_MASS, v] * cp[C_KF] / X[V_KF, v] * cp[C_G]
+        X[F_ST, v] = OK
+        X[F_KF, v] = n
     rf = ref[0, 2]
-    iae = 0.0
-    ise = 0.0
-    itae = 0.0
-    eff = 0.0
-    # the vehicle's hover thrust in command units (rotor speeds from the nominal k_f): payload and spread included
-    mg = vp[V_MASS] * cp[C_KF] / vp[V_KF] * cp[C_G]
-    status = OK
-    k_fail = n
     for k in range(n):
-        status = _step(s, a, vp, rs, cp, mix, alloc, ref[k], k)
+        _draw_normals(RS, X, k, w)
+        rk = ref[k]
         # the controller's own error (its delayed measurement against ref[k]), measurement and reference low-passed
         # alike so that the filter lag is not counted as error
-        zf += alpha * (a[A_ZFB] - zf)
         rf += alpha * (ref[k, 2] - rf)
-        if k >= n_settle:
+        on = 1.0 if k >= n_settle else 0.0
+        tk = (k - n_settle) * dt
+        sk = _step_setup(cp, k)
+        for v in range(w):
+            _disturb(X, v, cp, sk)
+        _push_estimates(X, L, sk, w)
+        for v in range(w):
+            code = _act(X, L, v, cp, mix, alloc, rk, sk)
+            ok = X[F_ST, v] == OK
+            zf = X[F_ZF, v] + alpha * (X[A_ZFB, v] - X[F_ZF, v])
             e = abs(zf - rf)
-            iae += e
-            ise += e * e
-            itae += (k - n_settle) * dt * e
-            eff += abs(a[A_FCMD] - mg) / mg
+            X[F_ZF, v] = zf if ok else X[F_ZF, v]
+            X[F_IAE, v] += on * e if ok else 0.0
+            X[F_ISE, v] += on * e * e if ok else 0.0
+            X[F_ITAE, v] += on * tk * e if ok else 0.0
+            X[F_EFF, v] += on * abs(X[A_FCMD, v] - X[F_MG, v]) / X[F_MG, v] if ok else 0.0
+            fails = ok and code != OK
+            X[F_ST, v] = code if fails else X[F_ST, v]
+            X[F_KF, v] = k if fails else X[F_KF, v]
         if trace_every > 0 and k % trace_every == 0:
-            trace_row[k // trace_every] = zf
-        if status != OK:
-            k_fail = k
+            for v in range(nv):
+                if X[F_KF, v] >= k:
+                    traces[lo + v, k // trace_every] = X[F_ZF, v]
+        alive = 0
+        for v in range(w):
+            alive += X[F_ST, v] == OK
+        if alive == 0:
             break
-    if status != OK:
-        # penalty: the error is taken as failure_error_m from the failure to the end of the primitive
-        ef = cp[C_FAIL_ERR]
-        for j in range(max(k_fail + 1, n_settle), n):
-            t = (j - n_settle) * dt
-            iae += ef
-            ise += ef * ef
-            itae += t * ef
-            eff += 1.0
-        if trace_every > 0:
-            for j in range(k_fail // trace_every + 1, trace_row.shape[0]):
-                trace_row[j] = np.nan
-    costs_row[COST_IAE] = iae
-    costs_row[COST_ISE] = ise
-    costs_row[COST_ITAE] = itae
-    costs_row[COST_EFFORT] = iae + cp[C_EFFORT_W] * eff
-    return status, k_fail * dt
+    for v in range(nv):
+        i = lo + v
+        iae, ise, itae, eff = X[F_IAE, v], X[F_ISE, v], X[F_ITAE, v], X[F_EFF, v]
+        st = int(X[F_ST, v])
+        kf = int(X[F_KF, v])
+        if st != OK:
+            # penalty: the error is taken as failure_error_m from the failure to the end of the primitive
+            ef = cp[C_FAIL_ERR]
+            for j in range(max(kf + 1, n_settle), n):
+                t = (j - n_settle) * dt
+                iae += ef
+                ise += ef * ef
+                itae += t * ef
+                eff += 1.0
+            if trace_every > 0:
+                for j in range(kf // trace_every + 1, traces.shape[1]):
+                    traces[i, j] = np.nan
+        costs[i, COST_IAE] = iae
+        costs[i, COST_ISE] = ise
+        costs[i, COST_ITAE] = itae
+        costs[i, COST_EFFORT] = iae + cp[C_EFFORT_W] * eff
+        status[i] = st
+        t_fail[i] = kf * dt
 
 
-@njit(cache=True, fastmath=FAST)
-def _fly_vehicle(i, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
-                 t_fail):
-    """Fly vehicle i of a batch into row i of the outputs: the one body of both batch entry points."""
-    st, tf = _fly_one(seeds[i], round_ids[i], kxz[i], kvz[i], ref, n_settle, cp, mix, alloc, trace_every, traces[i],
-                      costs[i])
-    status[i] = st
-    t_fail[i] = tf
-
-
-@njit(cache=True, parallel=True, fastmath=FAST)
+@njit(cache=True, parallel=True)
 def fly_batch(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
               t_fail):
-    """Fly B vehicles (vehicle i: seeds[i], round_ids[i], gains kxz[i], kvz[i]) along `ref` (n, 9: p, v, a),
-    spread over numba's threads (worth its thread launch from a few vehicles on: `batch.PARALLEL_FROM`)."""
-    for i in prange(seeds.shape[0]):
-        _fly_vehicle(i, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
-                     t_fail)
-
-
-@njit(cache=True, fastmath=FAST)
-def fly_serial(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
-               t_fail):
-    """`fly_batch` on the calling thread alone: no thread launch, for the small batches of a tuning round."""
-    for i in range(seeds.shape[0]):
-        _fly_vehicle(i, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
-                     t_fail)
+    """Fly B vehicles (vehicle i: seeds[i], round_ids[i], gains kxz[i], kvz[i]) along `ref` (n, 9: p, v, a), in
+    chunks of LANES spread over numba's threads (worth its thread launch from a few chunks on: `batch.PARALLEL_FROM`)."""
+    b = seeds.shape[0]
+    for c in prange((b + LANES - 1) // LANES):
+        _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
+                   trace_every, traces, costs, status, t_fail)
 
 
 @njit(cache=True)
-def init_batch(seeds, round_ids, kxz, kvz, pos, cp, S, A, VP, RS):
-    """Reset B vehicles to hover at pos (B, 3)."""
-    for i in range(seeds.shape[0]):
-        _init_vehicle(seeds[i], round_ids[i], kxz[i], kvz[i], pos[i, 0], pos[i, 1], pos[i, 2], cp, S[i], A[i],
-                      VP[i], RS[i])
+def fly_serial(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
+               t_fail):
+    """`fly_batch` on the calling thread alone: no thread launch, for the small batches of a tuning round."""
+    b = seeds.shape[0]
+    for c in range((b + LANES - 1) // LANES):
+        _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
+                   trace_every, traces, costs, status, t_fail)
 
 
-@njit(cache=True, fastmath=FAST)
-def step_batch(S, A, VP, RS, cp, mix, alloc, refs, k, status):
-    """Advance B vehicles by one step towards refs (B, 9); vehicles with status != OK are left frozen."""
-    for i in range(S.shape[0]):
-        if status[i] == OK:
-            status[i] = _step(S[i], A[i], VP[i], RS[i], cp, mix, alloc, refs[i], k)
+@njit(cache=True)
+def init_batch(seeds, round_ids, kxz, kvz, pos, cp, X, L, RS):
+    """Reset B vehicles (the columns of X (NX, B) and L (NL, B), their streams RS (B,)) to hover at pos (B, 3)."""
+    for v in range(seeds.shape[0]):
+        _init_vehicle(seeds[v], round_ids[v], kxz[v], kvz[v], pos[v, 0], pos[v, 1], pos[v, 2], cp, X[:, v],
+                      L[:, v], RS[v:v + 1])
+
+
+@njit(cache=True, fastmath=FAST, error_model="numpy")
+def step_batch(X, L, RS, cp, mix, alloc, refs, k, status):
+    """Advance B vehicles (the columns of X) by one step towards refs (B, 9); vehicles with status != OK are left
+    frozen."""
+    b = X.shape[1]
+    _draw_normals(RS, X, k, b)
+    sk = _step_setup(cp, k)
+    for v in range(b):
+        _disturb(X, v, cp, sk)  # a frozen vehicle's disturbances move on too: they are its own
+    _push_estimates(X, L, sk, b)
+    for v in range(b):
+        if status[v] == OK:
+            status[v] = _act(X, L, v, cp, mix, alloc, refs[v], sk)

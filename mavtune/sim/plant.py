@@ -29,10 +29,10 @@ class Plant:
         b = self.vehicles
         self._cp = batch.constants(self.scenario)
         self._mix, self._alloc = batch.mixing()
-        self._S = np.zeros((b, K.NS))
-        self._A = np.zeros((b, K.NA))
-        self._VP = np.zeros((b, K.NVP))
-        self._RS = np.zeros((b, 1), dtype=np.uint64)
+        # struct of arrays, one column (lane) per vehicle, as the kernel keeps them
+        self._X = np.zeros((K.NX, b))
+        self._L = np.zeros((K.NL, b))
+        self._RS = np.zeros(b, dtype=np.uint64)
         self._status = np.zeros(b, dtype=np.int64)
         self._kx = np.full(b, MRS_DEFAULT_KX)
         self._kv = np.full(b, MRS_DEFAULT_KV)
@@ -44,7 +44,7 @@ class Plant:
         pos = self._per_vehicle(position_m, 3, "position_m")
         seeds = batch.seed_array([self.seed + j for j in range(self.vehicles)])
         rounds = np.full(self.vehicles, int(round_id), dtype=np.int64)
-        K.init_batch(seeds, rounds, self._kx, self._kv, pos, self._cp, self._S, self._A, self._VP, self._RS)
+        K.init_batch(seeds, rounds, self._kx, self._kv, pos, self._cp, self._X, self._L, self._RS)
         self._status[:] = K.OK
         self._k = 0
         self.t_s = 0.0
@@ -57,8 +57,8 @@ class Plant:
             raise MavtuneError("plant gains must be finite and >= 0")
         self._kx[:] = kx
         self._kv[:] = kv
-        self._VP[:, K.V_KXZ] = kx
-        self._VP[:, K.V_KVZ] = kv
+        self._X[K.V_KXZ] = kx
+        self._X[K.V_KVZ] = kv
 
     def step(self, ref_pos_m, ref_vel_mps=None, ref_acc_mps2=None) -> None:
         """Advance 0.01 s towards the reference ((3,) or (B, 3) each; velocity/acceleration default to 0)."""
@@ -68,7 +68,7 @@ class Plant:
             refs[:, 3:6] = self._per_vehicle(ref_vel_mps, 3, "ref_vel_mps")
         if ref_acc_mps2 is not None:
             refs[:, 6:9] = self._per_vehicle(ref_acc_mps2, 3, "ref_acc_mps2")
-        K.step_batch(self._S, self._A, self._VP, self._RS, self._cp, self._mix, self._alloc, refs, self._k,
+        K.step_batch(self._X, self._L, self._RS, self._cp, self._mix, self._alloc, refs, self._k,
                      self._status)
         self._k += 1
         self.t_s = self._k * DT_S
@@ -85,17 +85,17 @@ class Plant:
     @property
     def position_m(self) -> np.ndarray:
         """True positions (B, 3), world frame, z up."""
-        return self._S[:, K.S_P:K.S_P + 3].copy()
+        return self._X[K.S_P:K.S_P + 3].T.copy()
 
     @property
     def velocity_mps(self) -> np.ndarray:
         """True velocities (B, 3), world frame."""
-        return self._S[:, K.S_V:K.S_V + 3].copy()
+        return self._X[K.S_V:K.S_V + 3].T.copy()
 
     @property
     def rotation(self) -> np.ndarray:
         """Attitudes (B, 3, 3): body-to-world rotation matrices."""
-        w, x, y, z = (self._S[:, K.S_Q + i] for i in range(4))
+        w, x, y, z = (self._X[K.S_Q + i] for i in range(4))
         return np.stack([
             np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
             np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
@@ -105,13 +105,13 @@ class Plant:
     @property
     def altitude_measured_m(self) -> np.ndarray:
         """The last lidar altitude measurement (B,), with its noise."""
-        return self._A[:, K.A_ZMEAS].copy()
+        return self._X[K.A_ZMEAS].copy()
 
     @property
     def altitude_feedback_m(self) -> np.ndarray:
         """The altitude measurement (B,) the controller acted on in the last step: the lidar reading of `latency_s`
         ago, noise included. Its error against the reference is what the simulator's cost sums."""
-        return self._A[:, K.A_ZFB].copy()
+        return self._X[K.A_ZFB].copy()
 
     @property
     def failed(self) -> np.ndarray:
@@ -121,4 +121,4 @@ class Plant:
     @property
     def rotor_rpm(self) -> np.ndarray:
         """Rotor speeds (B, 6), rpm."""
-        return self._S[:, K.S_R:K.S_R + 6].copy()
+        return self._X[K.S_R:K.S_R + 6].T.copy()

@@ -59,8 +59,8 @@ def test_climbing_costs_thrust_and_an_updraft_lifts():
     plant = Plant(3, sc)
     plant.reset([0.0, 0.0, 2.0])
     plant.set_gains(0.0, 0.0)  # no altitude feedback: the thrust stays at the hover command
-    plant._S[1, K.S_V + 2] = 1.0  # vehicle 1 climbs at 1 m/s
-    plant._A[2, K.A_GZ] = 1.0  # vehicle 2 hovers in a 1 m/s updraft (decaying as an OU gust over the step)
+    plant._X[K.S_V + 2, 1] = 1.0  # vehicle 1 climbs at 1 m/s
+    plant._X[K.A_GZ, 2] = 1.0  # vehicle 2 hovers in a 1 m/s updraft (decaying as an OU gust over the step)
     plant.step([0.0, 0.0, 2.0])
     dv = plant.velocity_mps[:, 2] - np.array([0.0, 1.0, 0.0])
     inflow = 6 * af.AXIAL_INFLOW_N_PER_RPM_MPS * plant.rotor_rpm[0].mean() / af.MASS_KG * plant.dt_s  # per m/s
@@ -80,7 +80,7 @@ def test_translational_lift_raises_a_vehicle_in_a_side_wind():
     plant = Plant(1, sc)
     plant.reset([0.0, 0.0, 2.0])
     plant.set_gains(0.0, 0.0)
-    plant._VP[0, K.V_WX] = 3.0  # 3 m/s of wind along x
+    plant._X[K.V_WX, 0] = 3.0  # 3 m/s of wind along x
     plant.step([0.0, 0.0, 2.0])
     lift = 6 * af.TRANSLATIONAL_LIFT_N_PER_MPS2 * 9.0 / af.MASS_KG
     drag_z = 0.0  # the wind is horizontal
