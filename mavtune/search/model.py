@@ -50,22 +50,22 @@ def local_vertex(samples: Mapping[float, Sequence[float]], bracket: tuple[float,
     fit = _fit(pts, 0.5 * (lo + hi), hi - lo, neighbours)
     if fit is None:
         return Vertex(fallback, math.nan, False)
-    vertex, design, w, y, beta, n = fit
+    vertex, design, w, y, beta, n, k = fit
     value = float(min(max(vertex, lo), hi))
-    return Vertex(value, _vertex_se(design, w, y, beta, n, cv), True)
+    return Vertex(value, _vertex_se(design, w, y, beta, n, cv / math.sqrt(k)), True)
 
 
 def _vertex_se(design: np.ndarray, w: np.ndarray, y: np.ndarray, beta: np.ndarray, n: np.ndarray,
                cv: float) -> float:
     """Standard error of the vertex −b/2a by the delta method: the coefficients' covariance is the weighted
-    least-squares one, with the relative noise `cv` (or the residuals' when it is unknown) as the unit variance."""
+    least-squares one, with `cv` — the relative noise in the weights' units — (or the residuals' when it is
+    unknown) as the unit standard deviation."""
     _, b, a = beta
     xtwx = design.T @ (design * w[:, None])
     try:
         cov = np.linalg.inv(xtwx)
     except np.linalg.LinAlgError:
         return math.nan
-    # weights are flights / cost², so a flight of relative noise cv has unit variance cv² per weight
     if math.isfinite(cv):
         unit = cv * cv
     else:
@@ -88,14 +88,21 @@ def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neigh
     x = np.array([p[0] for p in near]) - centre
     y = np.array([p[1] for p in near])
     n = np.array([p[2] for p in near], dtype=float)
-    scale = np.maximum(np.abs(y), np.max(np.abs(y)) * 1e-12 + 1e-300)
+    top = float(np.max(np.abs(y)))
+    scale = np.maximum(np.abs(y), 1e-6 * top) if top > 0 else np.ones_like(y)  # relative noise: sd ∝ cost
     w = n / scale**2 * (1.0 - np.minimum(np.abs(x) / span, 1.0) ** 3) ** 3  # flights / variance × tricube
-    if np.count_nonzero(w > 0) < 3:
+    k = float(w.max())
+    if np.count_nonzero(w > 0) < 3 or not 0 < k < math.inf:
         return None
+    w = w / k  # well scaled for the solver; the unit variance is cv² / k (see _vertex_se)
     design = np.column_stack([np.ones_like(x), x, x * x])
     sw = np.sqrt(w)
-    beta, *_ = np.linalg.lstsq(design * sw[:, None], y * sw, rcond=None)
-    _, b, a = beta
-    if not a > 0 or not math.isfinite(a):
+    try:
+        beta, *_ = np.linalg.lstsq(design * sw[:, None], y * sw, rcond=None)
+    except np.linalg.LinAlgError:
         return None
-    return centre - b / (2.0 * a), design, w, y, beta, n
+    _, b, a = beta
+    vertex = centre - b / (2.0 * a) if a > 0 else math.nan
+    if not math.isfinite(vertex):
+        return None
+    return vertex, design, w, y, beta, n, k
