@@ -57,7 +57,8 @@ def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsi
 
 
 def test_plan_command_prints_the_numbers():
-    out = CliRunner().invoke(app, ["plan", "--strategy", "split", "--vehicles", "8", "--battery-s", "60"])
+    out = CliRunner().invoke(app, ["plan", "--strategy", "split", "--vehicles", "8", "--battery-s", "60", "--epsilon", "0.125",
+                                   "--no-adaptive"])
     assert out.exit_code == 0, out.output
     text = " ".join(out.output.split())
     assert "rounds 8 (guaranteed at most 28" in text
