@@ -21,7 +21,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import CallableFleet, Evaluate, Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
-from mavtune.search.interval import DRAWS, resample
+from mavtune.search.interval import DRAWS, resample, resolution
 from mavtune.strategy import Strategy
 
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
@@ -263,7 +263,7 @@ class Tuner:
             lo, hi = s.space[name]
             interval = resample(lambda pool: s.search(lo, hi, pool),
                                 lambda search: rule.assign(search, int(s.vehicles), speculate=False),
-                                rec.samples, self.pool, self.gains[name], 0.5 * (rec.bracket[1] - rec.bracket[0]),
+                                rec.samples, self.pool, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
             out[name] = interval.to_dict()
         self._uncertainty = (len(self.searches), out)
