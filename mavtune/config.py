@@ -1,7 +1,7 @@
 """The run configuration: pydantic models read from TOML and overridden by command-line flags.
 
     [tuning]   what to tune and how (space, method, epsilon, bootstraps, vehicles, strategy, reuse, initial,
-               adaptive averaging: adaptive, confidence, cap)
+               adaptive averaging: adaptive, confidence, cap; answer: the search's or a fit of its flights)
     [flight]   the primitive and its timing, the battery time for the plan
     [sim]      the simulated scenario (payload, wind, noise, spread, cost) — mavtune.sim.Scenario
     [fleet]    which vehicles fly: "sim" (built in), "zenoh" (swarm agents), "mavlink" (PX4 / ArduPilot)
