@@ -78,3 +78,12 @@ def test_unknown_answer_is_named():
 
     with pytest.raises(MavtuneError, match="unknown answer 'guess'"):
         make_search("eql", 0.0, 1.0, 0.125, answer="guess")
+
+
+def test_the_model_never_answers_where_flights_failed():
+    """A diverging gain (flights failed above 0.64) leaves a wall, not a cost: the answer stays
+    on the measured side, not beyond the last point flown safely, even when the fit's vertex is."""
+    samples = {0.25: [3.0], 0.375: [2.0], 0.5: [1.5], 0.625: [1.2], 0.75: [math.inf], 0.875: [math.inf]}
+    v = local_vertex(samples, (0.5, 0.875), 0.6875)
+    assert v.value <= 0.625
+    assert local_vertex({0.5: [1.0], 0.75: [math.inf]}, (0.5, 0.875), 0.6875).value == 0.5

@@ -9,7 +9,8 @@ as 1/√flights — and its vertex, kept inside the final bracket, is the answer
 Weights: each point counts by its flights over its variance (the noise is relative, sd ∝ cost, so a point
 twice as costly counts a quarter), times a tricube kernel in its distance from the bracket's middle that
 spans the `NEIGHBOURS` nearest points (LOESS): the fit is local, far points on the walls of the valley do not
-bend it. A fit that is not convex, or has fewer than three usable points, falls back to the search's answer.
+bend it. A fit that is not convex, or has fewer than three usable points, falls back to the search's answer;
+the answer never lies beyond the last measured point before a point whose flight failed.
 On a noise-free quadratic the fit is exact: the answer is its minimiser, clipped to the bracket.
 """
 
@@ -42,9 +43,13 @@ def local_vertex(samples: Mapping[float, Sequence[float]], bracket: tuple[float,
     `fallback` is the search's own answer, returned when no convex fit exists; `cv` the run's pooled relative
     noise for the vertex's standard error (NaN: from the fit's residuals alone).
     """
-    lo, hi = bracket
     pts = sorted((float(x), float(np.mean(c)), len(c)) for x, c in samples.items()
                  if c and all(math.isfinite(v) for v in c))
+    lo, hi = _clear_of_failures(bracket, pts, [float(x) for x, c in samples.items() if c and
+                                               not all(math.isfinite(v) for v in c)])
+    if hi < lo:  # the best measured point lies outside the bracket: nothing to add to the search's answer
+        return Vertex(fallback, math.nan, False)
+    fallback = min(max(fallback, lo), hi)
     if len(pts) < 3 or not hi > lo:
         return Vertex(fallback, math.nan, False)
     fit = _fit(pts, 0.5 * (lo + hi), hi - lo, neighbours)
@@ -53,6 +58,23 @@ def local_vertex(samples: Mapping[float, Sequence[float]], bracket: tuple[float,
     vertex, design, w, y, beta, n, k = fit
     value = float(min(max(vertex, lo), hi))
     return Vertex(value, _vertex_se(design, w, y, beta, n, cv / math.sqrt(k)), True)
+
+
+def _clear_of_failures(bracket: tuple[float, float], finite: list[tuple[float, float, int]],
+                       failed: list[float]) -> tuple[float, float]:
+    """The part of the bracket between the measured points nearest the failures on each side of the best one: a
+    fit must not answer gains towards which flights failed (a diverging gain has no cost to fit, only a wall),
+    nor beyond the last gain flown safely on the way there."""
+    lo, hi = bracket
+    if not finite or not failed:
+        return lo, hi
+    best = min(finite, key=lambda p: p[1])[0]
+    for f in failed:
+        if f > best:
+            hi = min(hi, max([x for x, _, _ in finite if x < f], default=best))
+        elif f < best:
+            lo = max(lo, min([x for x, _, _ in finite if x > f], default=best))
+    return lo, hi
 
 
 def _vertex_se(design: np.ndarray, w: np.ndarray, y: np.ndarray, beta: np.ndarray, n: np.ndarray,
