@@ -21,7 +21,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import CallableFleet, Evaluate, Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
-from mavtune.search.interval import DRAWS, resample
+from mavtune.search.interval import DRAWS, resample, resolution
 from mavtune.strategy import Strategy
 
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
@@ -139,6 +139,7 @@ class Settings:
     cap: int | None = None
     refly: bool = False
     stop_undecided: bool = False
+    answer: str = "search"
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -180,7 +181,8 @@ class Settings:
     def search(self, lo: float, hi: float, pool: NoisePool | None = None) -> LineSearch:
         """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool`."""
         return make_search(self.method, lo, hi, self.epsilon, reuse=self.reuse, points=self.points,
-                           adaptive=self.adaptive_rule, pool=pool, refly=self.refly and self.reuse)
+                           adaptive=self.adaptive_rule, pool=pool, refly=self.refly and self.reuse,
+                           answer=self.answer)
 
     def start_gains(self) -> Gains:
         """The gains before tuning: the given initial values, mid-range for the rest."""
@@ -203,6 +205,7 @@ class Settings:
             "adaptive": None if self.adaptive_rule is None else {"confidence": self.adaptive_rule.confidence,
                                                                   "cap": self.adaptive_rule.cap,
                                                                   "stop": self.adaptive_rule.stop},
+            "answer": self.answer if self.answer != "search" else None,
         }
 
 
@@ -260,7 +263,7 @@ class Tuner:
             lo, hi = s.space[name]
             interval = resample(lambda pool: s.search(lo, hi, pool),
                                 lambda search: rule.assign(search, int(s.vehicles), speculate=False),
-                                rec.samples, self.pool, self.gains[name], 0.5 * (rec.bracket[1] - rec.bracket[0]),
+                                rec.samples, self.pool, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
             out[name] = interval.to_dict()
         self._uncertainty = (len(self.searches), out)
@@ -376,6 +379,7 @@ def tune(
     adaptive: bool = False,
     confidence: float = 0.9,
     cap: int | None = None,
+    answer: str = "search",
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
 ) -> TuningResult:
@@ -385,7 +389,8 @@ def tune(
     for the built-in simulator (`vehicles` simulated vehicles, default scenario, `seed`). `replicates` is r
     of the groups strategy, `points` the points per iteration of nsection (default: one per slot),
     `max_bootstraps` caps the paper's stop rule (`bootstraps=None`), `adaptive` flies close comparisons again
-    until the kept point is right with probability `confidence` or each point has `cap` flights, `on_round`
+    until the kept point is right with probability `confidence` or each point has `cap` flights, `answer` is
+    each line search's answer ("search" or "model": a local fit of all its flights), `on_round`
     sees every round as it ends, `draws` resampled searches give each gain's interval (0: none).
     """
     space = dict(space if space is not None else {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
@@ -402,7 +407,8 @@ def tune(
     settings = Settings(space=space, method=method, epsilon=epsilon, bootstraps=bootstraps,
                         vehicles=vehicles if vehicles is not None else fleet.size, strategy=strategy, reuse=reuse,
                         initial=dict(initial or {}), replicates=replicates, points=points,
-                        max_bootstraps=max_bootstraps, seed=seed, adaptive=adaptive, confidence=confidence, cap=cap)
+                        max_bootstraps=max_bootstraps, seed=seed, adaptive=adaptive, confidence=confidence, cap=cap,
+                        answer=answer)
     return run_tuning(settings, fleet, journal, on_round, draws=draws)
 
 

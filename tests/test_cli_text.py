@@ -71,7 +71,7 @@ def test_bad_input_is_one_line_with_status_2(args, says):
 
 
 def test_a_long_plan_flies_only_when_the_cap_is_raised():
-    code, out, _ = cli("plan", "--epsilon", "0.004", "--max-rounds", "5000")
+    code, out, _ = cli("plan", "--epsilon", "0.004", "--no-adaptive", "--max-rounds", "5000")
     assert code == 0 and "rounds 1004" in out
 
 
@@ -88,7 +88,7 @@ def test_ignored_settings_are_warned_and_recorded(tmp_path):
 
 
 def test_one_vehicle_is_one_vehicle():
-    code, out, _ = cli("plan", "-n", "1")
+    code, out, _ = cli("plan", "-n", "1", "--epsilon", "0.125", "--no-adaptive")
     assert code == 0 and "1 sim vehicle ·" in out and "(1 vehicle × 36 rounds" in out
 
 

@@ -64,6 +64,40 @@ def test_resume_after_a_crash_mid_round_is_identical(tmp_path_factory, crash_at,
     assert [r.replayed for r in resumed.rounds] == [i < crash_at for i in range(len(reference.rounds))]
 
 
+class NoisyFleet(CountingFleet):
+    """Flights with 20 % noise that depends only on (round, vehicle): a replayed round is the same round."""
+
+    def fly(self, assignments, round_id):
+        import random
+
+        flights = super().fly(assignments, round_id)
+        for i, f in enumerate(flights):
+            f.cost = (noisy_cost(f.gains) + 0.3) * (1 + 0.2 * random.Random(round_id * 1000 + i).gauss(0, 1))
+        return flights
+
+
+@given(st.integers(0, 60))
+@settings(max_examples=8, deadline=None)
+def test_resume_of_the_default_configuration_is_identical(tmp_path_factory, crash_at):
+    """The CLI's default — adaptive averaging and the model answer — is deterministic given the recorded costs."""
+    from mavtune.config import load_config
+
+    default = load_config(None).tuning
+    assert default.adaptive and default.answer == "model"
+    kwargs = dict(SETTINGS, epsilon=default.epsilon, adaptive=True, confidence=default.confidence, cap=default.cap,
+                  answer=default.answer, draws=0)
+    reference = mavtune.tune(NoisyFleet(2), **kwargs)
+    crash_at = min(crash_at, len(reference.rounds) - 1)
+    path = tmp_path_factory.mktemp("j") / "journal.sqlite"
+    with pytest.raises(Crash):
+        mavtune.tune(NoisyFleet(2, crash_at=crash_at), journal=path, **kwargs)
+    fleet = NoisyFleet(2)
+    resumed = mavtune.tune(fleet, journal=path, **kwargs)
+    assert fleet.flown == list(range(crash_at, len(reference.rounds)))
+    assert resumed.gains == reference.gains
+    assert [r.assignments for r in resumed.rounds] == [r.assignments for r in reference.rounds]
+
+
 def test_finished_journal_replays_without_flying(tmp_path):
     path = tmp_path / "j.sqlite"
     first = mavtune.tune(CountingFleet(2), journal=path, **SETTINGS)

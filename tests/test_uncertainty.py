@@ -63,9 +63,11 @@ def spread(result, key):
     return sum(u["hi"] - u["lo"] if key == "width" else u[key] for u in result.uncertainty.values())
 
 
-def test_intervals_shrink_with_replicates():
-    few = [mavtune.tune(noisy_bowl(s), vehicles=2, strategy="avg", bootstraps=1, seed=s) for s in range(4)]
-    many = [mavtune.tune(noisy_bowl(s), vehicles=32, strategy="avg", bootstraps=1, seed=s) for s in range(4)]
+@pytest.mark.parametrize("answer", ["search", "model"])
+def test_intervals_shrink_with_replicates(answer):
+    few = [mavtune.tune(noisy_bowl(s), vehicles=2, strategy="avg", bootstraps=1, seed=s, answer=answer) for s in range(4)]
+    many = [mavtune.tune(noisy_bowl(s), vehicles=32, strategy="avg", bootstraps=1, seed=s, answer=answer)
+            for s in range(4)]
     assert all(math.isfinite(spread(r, "width")) for r in few + many)
     assert sum(spread(r, "se") for r in many) < 0.6 * sum(spread(r, "se") for r in few)
     assert sum(spread(r, "width") for r in many) < 0.8 * sum(spread(r, "width") for r in few)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from mavtune.config import load_config
+from mavtune.config import PAPER_TUNING, load_config
 from mavtune.report import markdown as md
 
 EXTENSIONS_CSV = "extensions.csv"
@@ -64,7 +64,7 @@ def variant_run(v: Variant, i: int, seed: int) -> dict[str, Any]:
     from mavtune.sim import SimFleet
     from mavtune.tuner import run_tuning
 
-    cfg = load_config(None, {"tuning.strategy": v.strategy, "tuning.vehicles": v.vehicles,
+    cfg = load_config(None, {**PAPER_TUNING, "tuning.strategy": v.strategy, "tuning.vehicles": v.vehicles,
                              "tuning.reuse": v.reuse, "tuning.replicates": v.replicates})
     result = run_tuning(cfg.settings(), SimFleet(v.vehicles, cfg.scenario(), seed=seed + SEED_OFFSET + 10 * i,
                                                   trace_hz=0.0))

@@ -23,7 +23,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from mavtune.config import Config, load_config
+from mavtune.config import PAPER_TUNING, Config, load_config
 from mavtune.experiments import extensions as ext
 from mavtune.options import SchedulerOpt
 from mavtune.report import claims as C
@@ -78,9 +78,8 @@ class Reproduction:
 
 def run_config(strategy: str, payload_kg: float, seed: int) -> Config:
     """The paper's tuning setting (EQL, ε 0.125, 2 bootstraps, initial kd 0.2, 2 vehicles, no reuse) as a Config."""
-    return load_config(None, {"tuning.strategy": strategy, "tuning.reuse": False, "tuning.vehicles": VEHICLES,
-                              "tuning.method": "eql", "tuning.epsilon": 0.125, "tuning.bootstraps": 2,
-                              "tuning.initial": {"kd": 0.2}, "tuning.seed": seed, "sim.payload_kg": payload_kg})
+    return load_config(None, {**PAPER_TUNING, "tuning.strategy": strategy, "tuning.vehicles": VEHICLES,
+                              "tuning.seed": seed, "sim.payload_kg": payload_kg})
 
 
 def _payload_tag(p: float) -> str:

@@ -16,6 +16,7 @@ from typing import Any, ClassVar, Hashable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.search.evidence import NoisePool, PointStats, p_best, point_stats
+from mavtune.search.model import ANSWERS, Vertex, local_vertex
 
 State = Hashable
 
@@ -65,13 +66,17 @@ class LineSearch(ABC):
     name: ClassVar[str]
 
     def __init__(self, lo: float, hi: float, epsilon: float, *, reuse: bool = True,
-                 adaptive: Adaptive | None = None, pool: NoisePool | None = None, refly: bool = False):
+                 adaptive: Adaptive | None = None, pool: NoisePool | None = None, refly: bool = False,
+                 answer: str = "search"):
         lo, hi, epsilon = float(lo), float(hi), float(epsilon)
         if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
             raise MavtuneError(f"search interval [{lo}, {hi}] is empty: lo must be below hi")
         if not 0.0 < epsilon < 0.5:
             raise MavtuneError(f"epsilon {epsilon} is outside (0, 0.5)")
+        if answer not in ANSWERS:
+            raise MavtuneError(f"unknown answer {answer!r}; choose one of {', '.join(ANSWERS)}")
         self.lo, self.hi, self.epsilon, self.reuse = lo, hi, epsilon, reuse
+        self.answer = answer  # "search": the method's own result; "model": a local fit of all flights (`model`)
         self.adaptive = adaptive
         self.refly = refly  # a point carried from a finished comparison gets fresh flights in the next one
         self.pool = pool if pool is not None else NoisePool()
@@ -144,9 +149,18 @@ class LineSearch(ABC):
 
     @property
     def result(self) -> float:
+        """The answer: the method's own (the final bracket's midpoint), or with answer "model" the vertex of a
+        local quadratic fitted to every flight, inside the final bracket."""
+        return self.vertex().value
+
+    def vertex(self) -> Vertex:
+        """The answer with its standard error from the fit (NaN for the method's own answer)."""
         if not self.done:
             raise MavtuneError(f"{self.name} search is not finished yet")
-        return self._result(self._state)
+        own = self._result(self._state)
+        if self.answer != "model":
+            return Vertex(own, math.nan, False)
+        return local_vertex(self.samples(), self.bracket, own, self.pool.cv)
 
     @property
     def bracket(self) -> tuple[float, float]:

@@ -12,7 +12,7 @@ import pytest
 from rich.console import Console
 
 import mavtune
-from mavtune.config import load_config
+from mavtune.config import PAPER_TUNING, load_config
 from mavtune.fleet import Flight, Status
 from mavtune.report import write_run_report
 from mavtune.run import run
@@ -58,7 +58,7 @@ def test_callable_fleet_without_traces_three_gains_three_vehicles(tmp_path):
 
 def test_simfleet_run_report_has_timeline_plan_and_tuning(tmp_path):
     """The report of the paper's 56 rounds (its time is measured in benchmarks/report_time.py)."""
-    cfg = load_config(None, {"tuning.reuse": False})  # the paper's 56 rounds
+    cfg = load_config(None, PAPER_TUNING)  # the paper's 56 rounds
     result = run(cfg, tmp_path, console=Console(file=io.StringIO()), report=False)
     assert len(result.rounds) == 56
     write_run_report(tmp_path, result, cfg)

@@ -11,13 +11,15 @@ from collections import Counter
 import pytest
 
 import mavtune
+from mavtune.config import Tuning
 
 from .conftest import backend, free_port
 
 pytestmark = [pytest.mark.integration]
 
 SESSION = ["--session", "itest"]
-TUNE = {"initial": {"kd": 0.2}}  # the coordinator's defaults (tune's): eql, eps 0.125, 2 bootstraps, avg, reuse
+TUNE = {name: getattr(Tuning(), name) for name in ("initial", "epsilon", "adaptive", "confidence", "cap", "answer")}
+# the coordinator flies the configuration's defaults; tune()'s own defaults are the paper's engine settings
 
 
 def start_swarm(procs, tmp_path, n, *, seed, noise_free, min_flight_s=0.0, result_timeout_s=20.0, out=None,
@@ -82,13 +84,17 @@ def test_agents_equal_in_process_run(procs, tmp_path, n, seed):
 
 @pytest.mark.timeout(150)
 def test_agent_killed_mid_flight_run_completes_with_fault_free_gains(procs, tmp_path):
+    # the search's own answer: noise-free, a lost flight changes no comparison (the model's fit weighs a point by
+    # its flights, so there the answer moves with the number of flights a point got)
+    config = tmp_path / "search.toml"
+    config.write_text('[tuning]\nanswer = "search"\n')
     _, out, twin = start_swarm(procs, tmp_path, 2, seed=3, noise_free=True, min_flight_s=0.25, result_timeout_s=10,
-                               extra=["--bootstraps", "1"])
+                               extra=["--bootstraps", "1", "--config", str(config)])
     assert procs.wait_log("v1", "round 3: FLYING", 60), procs.log("v1")[-2000:]
     procs.kill("v1")
     assert wait_exit(procs, "coordinator", 120) == 0, procs.log("coordinator")[-3000:]
     result = json.loads((out / "result.json").read_text())
-    assert result["gains"] == mavtune.tune(twin, **TUNE, bootstraps=1).gains
+    assert result["gains"] == mavtune.tune(twin, **{**TUNE, "answer": "search"}, bootstraps=1).gains
     assert result["flights_by_status"]["lost"] >= 1
     assert any(e["event"] == "lost" and e["vehicle"] == "v1" for e in result["events"])
     assert [i for i, _ in journal_rounds(out / "journal.sqlite")] == list(range(result["rounds"]))

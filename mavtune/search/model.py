@@ -1,0 +1,130 @@
+"""The line search's answer as a best estimate from all its flights: a local quadratic fit (response surface).
+
+The comparisons of a line search decide its final bracket; under noise the points it compares last differ by
+less than one flight's noise, so the bracket's midpoint is the answer of a coin flip at a resolution of ε.
+Every flight of the search also measures the shape of the cost around the minimum. A quadratic fitted by
+weighted least squares to the points nearest the bracket pools all of them — its vertex's standard error falls
+as 1/√flights — and its vertex, kept inside the final bracket, is the answer.
+
+Weights: each point counts by its flights over its variance (the noise is relative, sd ∝ cost, so a point
+twice as costly counts a quarter), times a tricube kernel in its distance from the bracket's middle that
+spans the `NEIGHBOURS` nearest points (LOESS): the fit is local, far points on the walls of the valley do not
+bend it. A fit that is not convex, or has fewer than three usable points, falls back to the search's answer;
+the answer never lies beyond the last measured point before a point whose flight failed.
+On a noise-free quadratic the fit is exact: the answer is its minimiser, clipped to the bracket.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+NEIGHBOURS = 7  # measured points the local fit spans (a quadratic has 3 parameters: 4 spare for the noise)
+ANSWERS = ("search", "model")
+
+
+@dataclass(frozen=True)
+class Vertex:
+    """The fitted minimiser (clipped to the bracket), its standard error from the fit (NaN when the search's
+    answer stands), and whether the fit was used."""
+
+    value: float
+    se: float
+    fitted: bool
+
+
+def local_vertex(samples: Mapping[float, Sequence[float]], bracket: tuple[float, float], fallback: float,
+                 cv: float = math.nan, neighbours: int = NEIGHBOURS) -> Vertex:
+    """The minimiser of a weighted local quadratic through `samples` (point → flight costs), inside `bracket`.
+
+    `fallback` is the search's own answer, returned when no convex fit exists; `cv` the run's pooled relative
+    noise for the vertex's standard error (NaN: from the fit's residuals alone).
+    """
+    pts = sorted((float(x), float(np.mean(c)), len(c)) for x, c in samples.items()
+                 if c and all(math.isfinite(v) for v in c))
+    lo, hi = _clear_of_failures(bracket, pts, [float(x) for x, c in samples.items() if c and
+                                               not all(math.isfinite(v) for v in c)])
+    if hi < lo:  # the best measured point lies outside the bracket: nothing to add to the search's answer
+        return Vertex(fallback, math.nan, False)
+    fallback = min(max(fallback, lo), hi)
+    if len(pts) < 3 or not hi > lo:
+        return Vertex(fallback, math.nan, False)
+    fit = _fit(pts, 0.5 * (lo + hi), hi - lo, neighbours)
+    if fit is None:
+        return Vertex(fallback, math.nan, False)
+    vertex, design, w, y, beta, n, k = fit
+    value = float(min(max(vertex, lo), hi))
+    return Vertex(value, _vertex_se(design, w, y, beta, n, cv / math.sqrt(k)), True)
+
+
+def _clear_of_failures(bracket: tuple[float, float], finite: list[tuple[float, float, int]],
+                       failed: list[float]) -> tuple[float, float]:
+    """The part of the bracket between the measured points nearest the failures on each side of the best one: a
+    fit must not answer gains towards which flights failed (a diverging gain has no cost to fit, only a wall),
+    nor beyond the last gain flown safely on the way there."""
+    lo, hi = bracket
+    if not finite or not failed:
+        return lo, hi
+    best = min(finite, key=lambda p: p[1])[0]
+    for f in failed:
+        if f > best:
+            hi = min(hi, max([x for x, _, _ in finite if x < f], default=best))
+        elif f < best:
+            lo = max(lo, min([x for x, _, _ in finite if x > f], default=best))
+    return lo, hi
+
+
+def _vertex_se(design: np.ndarray, w: np.ndarray, y: np.ndarray, beta: np.ndarray, n: np.ndarray,
+               cv: float) -> float:
+    """Standard error of the vertex −b/2a by the delta method: the coefficients' covariance is the weighted
+    least-squares one, with `cv` — the relative noise in the weights' units — (or the residuals' when it is
+    unknown) as the unit standard deviation."""
+    _, b, a = beta
+    xtwx = design.T @ (design * w[:, None])
+    try:
+        cov = np.linalg.inv(xtwx)
+    except np.linalg.LinAlgError:
+        return math.nan
+    if math.isfinite(cv):
+        unit = cv * cv
+    else:
+        dof = int(n.sum()) - 3
+        if dof < 1:
+            return math.nan
+        unit = float(np.sum(w * (y - design @ beta) ** 2)) / dof
+    grad = np.array([0.0, -1.0 / (2.0 * a), b / (2.0 * a * a)])
+    var = float(grad @ cov @ grad) * unit
+    return math.sqrt(var) if var >= 0 else math.nan
+
+
+def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neighbours: int):
+    """Weighted least squares of cost = c + b·(x − centre) + a·(x − centre)² over the `neighbours` points
+    (x, mean cost, flights) nearest `centre`; (vertex, design, weights, means, coefficients, flights), or None
+    when fewer than three points weigh anything or the fit is not convex."""
+    near = sorted(pts, key=lambda p: abs(p[0] - centre))[:max(3, neighbours)]
+    reach = max(abs(p[0] - centre) for p in near)
+    span = max(reach * 1.25, width)  # the farthest neighbour keeps some weight
+    x = np.array([p[0] for p in near]) - centre
+    y = np.array([p[1] for p in near])
+    n = np.array([p[2] for p in near], dtype=float)
+    top = float(np.max(np.abs(y)))
+    scale = np.maximum(np.abs(y), 1e-6 * top) if top > 0 else np.ones_like(y)  # relative noise: sd ∝ cost
+    w = n / scale**2 * (1.0 - np.minimum(np.abs(x) / span, 1.0) ** 3) ** 3  # flights / variance × tricube
+    k = float(w.max())
+    if np.count_nonzero(w > 0) < 3 or not 0 < k < math.inf:
+        return None
+    w = w / k  # well scaled for the solver; the unit variance is cv² / k (see _vertex_se)
+    design = np.column_stack([np.ones_like(x), x, x * x])
+    sw = np.sqrt(w)
+    try:
+        beta, *_ = np.linalg.lstsq(design * sw[:, None], y * sw, rcond=None)
+    except np.linalg.LinAlgError:
+        return None
+    _, b, a = beta
+    vertex = centre - b / (2.0 * a) if a > 0 else math.nan
+    if not math.isfinite(vertex):
+        return None
+    return vertex, design, w, y, beta, n, k
