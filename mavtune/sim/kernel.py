@@ -13,9 +13,11 @@ Layout, for speed (issue 11): a struct of arrays. A vehicle is a lane, a column 
 parameters, normals and cost accumulators, plus its column of the latency buffer L; `fly_*` fly chunks of LANES
 vehicles, the time loop outside and loops over the lanes inside, so LLVM vectorises them (4 float64 lanes per AVX2
 instruction: branch-free bodies, selects instead of min/max, sqrt as LLVM's intrinsic, one written array per loop
-where a row offset is known only at run time). Chunks go over numba's threads. fastmath here allows contraction
-to FMA, reciprocal and approximate-function rewrites and ignores the sign of zero, never NaN or inf (the divergence
-checks need them).
+where a row offset is known only at run time). Chunks go over numba's threads. fastmath here only ignores the sign of
+zero: no FMA contraction, reciprocal or approximate-function rewrites, whose results depend on how LLVM compiled
+a call site (the parallel path's copy of `_fly_chunk` is compiled apart from the serial one's, and with them the
+two differed in the 14th digit depending on compile order); about 7 % slower, and a vehicle flies bit for bit the
+same whichever path flies it. Never NaN or inf assumptions either (the divergence checks need them).
 Rotor forces (RotorPy's model, coefficients in `airframe`): rotor i at hub position r_i meets the air at
 u_i = R^T (v - wind) + Omega x r_i (body frame); it gives thrust k_f w^2 + k_h (u_x^2 + u_y^2) - k_z w u_i,z along
 body z (axial inflow and translational lift) and in-plane drag -k_d w (u_x, u_y), plus quadratic body drag.
@@ -44,8 +46,8 @@ from llvmlite import ir
 from numba import njit, prange, types
 from numba.extending import intrinsic
 
-# fastmath without nnan/ninf: divergence checks rely on NaN/inf being seen
-FAST = {"contract", "arcp", "nsz", "afn"}
+# fastmath: only nsz (see the module docstring: IEEE results, the same from every compiled copy; NaN/inf seen)
+FAST = {"nsz"}
 
 # ---- shared constants vector `cp` -----------------------------------------------------------------------------
 (C_DT, C_G, C_MNOM, C_KF, C_RPM_MIN, C_RPM_MAX, C_JX, C_JY, C_JZ, C_DRAG,
@@ -645,6 +647,19 @@ def _fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc
         t_fail[i] = kf * dt
 
 
+@njit(cache=True, inline="always")
+def _lo(c):
+    """First vehicle of chunk c, as int64 whatever the loop's index type (prange's may be unsigned): one
+    specialisation of `_fly_chunk` serves the serial and the parallel path, so both fly bit for bit the same."""
+    return np.int64(c) * LANES
+
+
+@njit(cache=True, inline="always")
+def _hi(c, b):
+    """One past the last vehicle of chunk c of a batch of b, as int64 (see `_lo`)."""
+    return min(np.int64(b), (np.int64(c) + 1) * LANES)
+
+
 @njit(cache=True, parallel=True)
 def fly_batch(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
               t_fail):
@@ -652,7 +667,7 @@ def fly_batch(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_e
     chunks of LANES spread over numba's threads (worth its thread launch from a few chunks on: `batch.PARALLEL_FROM`)."""
     b = seeds.shape[0]
     for c in prange((b + LANES - 1) // LANES):
-        _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
+        _fly_chunk(_lo(c), _hi(c, b), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
                    trace_every, traces, costs, status, t_fail)
 
 
@@ -662,7 +677,7 @@ def fly_serial(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_
     """`fly_batch` on the calling thread alone: no thread launch, for the small batches of a tuning round."""
     b = seeds.shape[0]
     for c in range((b + LANES - 1) // LANES):
-        _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
+        _fly_chunk(_lo(c), _hi(c, b), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
                    trace_every, traces, costs, status, t_fail)
 
 
