@@ -647,19 +647,6 @@ def _fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc
         t_fail[i] = kf * dt
 
 
-@njit(cache=True, inline="always")
-def _lo(c):
-    """First vehicle of chunk c, as int64 whatever the loop's index type (prange's may be unsigned): one
-    specialisation of `_fly_chunk` serves the serial and the parallel path, so both fly bit for bit the same."""
-    return np.int64(c) * LANES
-
-
-@njit(cache=True, inline="always")
-def _hi(c, b):
-    """One past the last vehicle of chunk c of a batch of b, as int64 (see `_lo`)."""
-    return min(np.int64(b), (np.int64(c) + 1) * LANES)
-
-
 @njit(cache=True, parallel=True)
 def fly_batch(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
               t_fail):
@@ -667,7 +654,7 @@ def fly_batch(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_e
     chunks of LANES spread over numba's threads (worth its thread launch from a few chunks on: `batch.PARALLEL_FROM`)."""
     b = seeds.shape[0]
     for c in prange((b + LANES - 1) // LANES):
-        _fly_chunk(_lo(c), _hi(c, b), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
+        _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
                    trace_every, traces, costs, status, t_fail)
 
 
@@ -677,7 +664,7 @@ def fly_serial(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_
     """`fly_batch` on the calling thread alone: no thread launch, for the small batches of a tuning round."""
     b = seeds.shape[0]
     for c in range((b + LANES - 1) // LANES):
-        _fly_chunk(_lo(c), _hi(c, b), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
+        _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
                    trace_every, traces, costs, status, t_fail)
 
 
