@@ -293,8 +293,11 @@ def run_app(args: list[str] | None = None) -> int:
 
 
 def _say(message: str, colour: str, code: int) -> int:
-    """One line on stderr (a message spread over lines is joined), then the exit status."""
-    typer.secho(" ".join(message.split("\n")), fg=colour, err=True)
+    """One line on stderr (a message spread over lines is joined; other control characters, which a file name
+    given by the user may hold, are shown escaped), then the exit status."""
+    text = " ".join(message.split("\n"))
+    text = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+    typer.secho(text, fg=colour, err=True)
     return code
 
 

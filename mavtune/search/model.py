@@ -20,7 +20,6 @@ import math
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-import numpy as np
 
 NEIGHBOURS = 7  # measured points the local fit spans (a quadratic has 3 parameters: 4 spare for the noise)
 ANSWERS = ("search", "model")
@@ -43,14 +42,14 @@ def local_vertex(samples: Mapping[float, Sequence[float]], bracket: tuple[float,
     `fallback` is the search's own answer, returned when no convex fit exists; `cv` the run's pooled relative
     noise for the vertex's standard error (NaN: from the fit's residuals alone).
     """
-    pts = sorted((float(x), float(np.mean(c)), len(c)) for x, c in samples.items()
+    pts = sorted((float(x), math.fsum(c) / len(c), len(c)) for x, c in samples.items()
                  if c and all(math.isfinite(v) for v in c))
     lo, hi = _clear_of_failures(bracket, pts, [float(x) for x, c in samples.items() if c and
                                                not all(math.isfinite(v) for v in c)])
     if hi < lo:  # the best measured point lies outside the bracket: nothing to add to the search's answer
         return Vertex(fallback, math.nan, False)
     fallback = min(max(fallback, lo), hi)
-    if len(pts) < 3 or not hi > lo:
+    if len(pts) < 3 or not hi > lo or len({m for _, m, _ in pts}) == 1:  # a flat cost (the plan's) has no vertex
         return Vertex(fallback, math.nan, False)
     fit = _fit(pts, 0.5 * (lo + hi), hi - lo, neighbours)
     if fit is None:
@@ -82,6 +81,8 @@ def _vertex_se(design: np.ndarray, w: np.ndarray, y: np.ndarray, beta: np.ndarra
     """Standard error of the vertex −b/2a by the delta method: the coefficients' covariance is the weighted
     least-squares one, with `cv` — the relative noise in the weights' units — (or the residuals' when it is
     unknown) as the unit standard deviation."""
+    import numpy as np  # here, not at import: `mavtune plan` rehearses searches without numpy
+
     _, b, a = beta
     xtwx = design.T @ (design * w[:, None])
     try:
@@ -104,6 +105,8 @@ def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neigh
     """Weighted least squares of cost = c + b·(x − centre) + a·(x − centre)² over the `neighbours` points
     (x, mean cost, flights) nearest `centre`; (vertex, design, weights, means, coefficients, flights), or None
     when fewer than three points weigh anything or the fit is not convex."""
+    import numpy as np  # here, not at import: `mavtune plan` rehearses searches without numpy
+
     near = sorted(pts, key=lambda p: abs(p[0] - centre))[:max(3, neighbours)]
     reach = max(abs(p[0] - centre) for p in near)
     span = max(reach * 1.25, width)  # the farthest neighbour keeps some weight
