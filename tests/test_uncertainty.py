@@ -88,3 +88,16 @@ def test_noise_free_interval_is_the_search_resolution_and_unknown_without_repeat
     single = mavtune.tune(noisy_bowl(0), method="dichotomy", vehicles=1, bootstraps=1)  # no point flown twice
     assert all(math.isnan(u["se"]) and math.isnan(u["lo"]) for u in single.uncertainty.values())
     assert math.isnan(single.noise["cv"])
+
+
+@given(st.lists(st.floats(-1e300, 1e300), min_size=2, max_size=8))
+def test_sample_variance_never_overflows_and_matches_the_textbook_where_it_can(values):
+    import statistics
+
+    from mavtune.search.evidence import sample_variance
+
+    mean = math.fsum(values) / len(values)
+    var = sample_variance(values, mean)
+    assert var >= 0 or math.isnan(mean)
+    if math.isfinite(mean) and max(abs(v) for v in values) < 1e100:
+        assert var == pytest.approx(statistics.variance(values, mean), rel=1e-9, abs=1e-300)

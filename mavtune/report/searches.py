@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 from mavtune.fleet import Status
+from mavtune.search.evidence import sample_variance
 
 NAN = math.nan
 
@@ -50,8 +51,7 @@ class PointStats:
         """Standard error of the mean, sample std / √n (NaN below two flights)."""
         if self.n < 2:
             return NAN
-        m = self.mean
-        return math.sqrt(sum((c - m) ** 2 for c in self.finite) / (self.n - 1) / self.n)
+        return math.sqrt(sample_variance(self.finite, self.mean) / self.n)
 
 
 @dataclass

@@ -74,6 +74,17 @@ class NoisePool:
         return self._pooled()[1]
 
 
+def sample_variance(values: Sequence[float], mean: float) -> float:
+    """Sample variance about `mean` (n − 1 in the denominator), scaled by the largest deviation so that huge
+    values give a huge (or infinite) variance rather than an OverflowError; NaN below two values."""
+    if len(values) < 2:
+        return math.nan
+    scale = max(abs(v - mean) for v in values)
+    if scale == 0.0 or not math.isfinite(scale):
+        return scale * scale
+    return scale * scale * math.fsum(((v - mean) / scale) ** 2 for v in values) / (len(values) - 1)
+
+
 def point_stats(costs: Sequence[float], pool: NoisePool | None = None) -> PointStats:
     """Mean and standard error of one point's flights; a failed flight makes the mean infinite (the worst)."""
     n = len(costs)
@@ -85,7 +96,7 @@ def point_stats(costs: Sequence[float], pool: NoisePool | None = None) -> PointS
     cv = pool.cv if pool is not None else math.nan
     prior = (cv * mean) ** 2 if math.isfinite(cv) else math.nan
     if n >= 2:
-        own = math.fsum((c - mean) ** 2 for c in costs) / (n - 1)
+        own = sample_variance(costs, mean)
         var = own if math.isnan(prior) else (PRIOR_DOF * prior + (n - 1) * own) / (PRIOR_DOF + n - 1)
     else:
         var = prior
