@@ -79,7 +79,7 @@ class Journal:
         """Turn any SQLite or file-system failure into one line naming the journal (the file is left as it is)."""
         try:
             yield
-        except (sqlite3.DatabaseError, OSError) as exc:
+        except (sqlite3.DatabaseError, OSError, UnicodeDecodeError) as exc:  # a damaged text in the file
             if self._db is not None:
                 self._db.close()
             reason = " ".join(str(exc).split()) or type(exc).__name__
@@ -202,7 +202,7 @@ def blank(path: str | Path) -> bool:
     try:
         with closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)) as db:
             return db.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()[0] == 0
-    except (sqlite3.DatabaseError, OSError):
+    except (sqlite3.DatabaseError, OSError, UnicodeDecodeError):
         return False
 
 
