@@ -10,7 +10,7 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence, TypeVar
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
@@ -19,6 +19,7 @@ from mavtune.vehicles.mavlink.vehicle import MavlinkVehicle
 from mavtune.vehicles.parammap import ParamMap
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 ORIGINALS_FILE = "original_params.json"
 _file_lock = threading.Lock()
@@ -134,11 +135,16 @@ class MavlinkFleet:
     def _start_problems(self) -> list[str]:
         """Why vehicles cannot start, after waiting up to safety.ready_wait_s: a first sensor reading may arrive
         a moment after the heartbeat and parameters on a busy link, so only a problem that lasts refuses the run."""
+        return self._poll(lambda: [f"{v.name}: {p}" for v in self.vehicles if (p := v.ready_problem())],
+                          lambda problems: not problems)
+
+    def _poll(self, probe: Callable[[], T], done: Callable[[T], bool]) -> T:
+        """probe() every 50 ms until done(its result) or safety.ready_wait_s has passed; its last result."""
         deadline = time.monotonic() + self.config.safety.ready_wait_s
         while True:
-            problems = [f"{v.name}: {p}" for v in self.vehicles if (p := v.ready_problem())]
-            if not problems or time.monotonic() >= deadline:
-                return problems
+            result = probe()
+            if done(result) or time.monotonic() >= deadline:
+                return result
             time.sleep(0.05)
 
     def _event(self, kind: str, **data: Any) -> None:
@@ -155,12 +161,8 @@ class MavlinkFleet:
 
         When none is ready, wait up to safety.ready_wait_s for one (a link hiccup should not end the run).
         """
-        deadline = time.monotonic() + self.config.safety.ready_wait_s
-        while True:
-            n = len(self._ready())
-            if n or time.monotonic() >= deadline or all(v.ready_problem() == v.released for v in self.vehicles):
-                return n
-            time.sleep(0.05)
+        return len(self._poll(self._ready, lambda ready: bool(ready) or all(
+            v.ready_problem() == v.released for v in self.vehicles)))
 
     def _ready(self) -> list[MavlinkVehicle]:
         ready = []
