@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import random
 import statistics
+import warnings
 
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -87,3 +88,22 @@ def test_the_model_never_answers_where_flights_failed():
     v = local_vertex(samples, (0.5, 0.875), 0.6875)
     assert v.value <= 0.625
     assert local_vertex({0.5: [1.0], 0.75: [math.inf]}, (0.5, 0.875), 0.6875).value == 0.5
+
+
+@given(st.integers(-300, 300), st.floats(0.0, 0.3), st.integers(0, 10_000))
+@settings(max_examples=100, deadline=None)
+def test_the_fit_does_not_depend_on_the_costs_unit_and_never_warns(exponent, noise, seed):
+    """Costs in any unit (scaled by 10^±300) give the same answer and error, without an overflow or a division
+    by zero along the way (costs of 1e-170 once squared to 0 in the weights)."""
+    draw = random.Random(seed)
+    base = {x / 10: [(1.0 + (x / 10 - 0.4) ** 2) * (1.0 + noise * draw.gauss(0.0, 1.0)) for _ in range(3)]
+            for x in range(1, 8)}
+    base = {x: [abs(c) + 1e-3 for c in costs] for x, costs in base.items()}
+    scaled = {x: [c * 10.0**exponent for c in costs] for x, costs in base.items()}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for cv in (0.1, math.nan):
+            one, other = local_vertex(base, (0.2, 0.6), 0.4, cv), local_vertex(scaled, (0.2, 0.6), 0.4, cv)
+            assert one.fitted == other.fitted
+            assert other.value == pytest.approx(one.value, rel=1e-9, abs=1e-12)
+            assert other.se == pytest.approx(one.se, rel=1e-6, nan_ok=True)

@@ -103,8 +103,9 @@ def _vertex_se(design: np.ndarray, w: np.ndarray, y: np.ndarray, beta: np.ndarra
 
 def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neighbours: int):
     """Weighted least squares of cost = c + b·(x − centre) + a·(x − centre)² over the `neighbours` points
-    (x, mean cost, flights) nearest `centre`; (vertex, design, weights, means, coefficients, flights), or None
-    when fewer than three points weigh anything or the fit is not convex."""
+    (x, mean cost, flights) nearest `centre`; (vertex, design, weights, means relative to the largest,
+    coefficients, flights, weights' scale), or None when fewer than three points weigh anything or the fit is
+    not convex."""
     import numpy as np  # here, not at import: `mavtune plan` rehearses searches without numpy
 
     near = sorted(pts, key=lambda p: abs(p[0] - centre))[:max(3, neighbours)]
@@ -112,9 +113,10 @@ def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neigh
     span = max(reach * 1.25, width)  # the farthest neighbour keeps some weight
     x = np.array([p[0] for p in near]) - centre
     y = np.array([p[1] for p in near])
+    y = y / np.max(np.abs(y))  # costs in units of the largest (> 0: a flat cost never gets here): the vertex is
+    # the same, and costs of any size neither under- nor overflow
     n = np.array([p[2] for p in near], dtype=float)
-    top = float(np.max(np.abs(y)))
-    scale = np.maximum(np.abs(y), 1e-6 * top) if top > 0 else np.ones_like(y)  # relative noise: sd ∝ cost
+    scale = np.maximum(np.abs(y), 1e-6)  # relative noise: sd ∝ cost
     w = n / scale**2 * (1.0 - np.minimum(np.abs(x) / span, 1.0) ** 3) ** 3  # flights / variance × tricube
     k = float(w.max())
     if np.count_nonzero(w > 0) < 3 or not 0 < k < math.inf:
