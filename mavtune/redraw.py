@@ -76,7 +76,11 @@ def replay(out_dir: Path) -> tuple[TuningResult, Any, str, dict[str, Any] | None
     if status == "finished" and ended != "finished":
         raise MavtuneError(f"{out_dir / 'result.json'} says finished but the journal's {counted(recorded, 'round')} "
                            "do not end the run; nothing was changed")
-    return tuner.snapshot(), config, status or ("finished" if ended == "finished" else "error"), summary
+    result = tuner.snapshot()
+    log = (summary or {}).get("rounds_log") or []
+    for rnd, logged in zip(result.rounds, log + [{}] * (len(result.rounds) - len(log))):
+        rnd.replayed = bool(isinstance(logged, dict) and logged.get("replayed"))  # as the run that ended had it
+    return result, config, status or ("finished" if ended == "finished" else "error"), summary
 
 
 def redraw(out_dir: str | Path, surface: Path | None = None, console: Console | None = None) -> Path:
