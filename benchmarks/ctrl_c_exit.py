@@ -113,8 +113,8 @@ def main(signum: int = signal.SIGINT) -> None:
              f"{os.cpu_count()} cores, shared; load average {load_start[0]:.1f} at the start "
              f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Exit time is wall time from the signal to "
              f"the process's end; CPU is the whole run's (user + sys). Target: {TARGET_S:g} s, one line, status "
-             "130, journal intact, result.json and report.md consistent (once a round is recorded, a report.md that says "
-             "interrupted after the journal's rounds and claims no final gains).", ""]
+             "130, journal intact, result.json and report.md consistent (once a round is recorded, a report.md "
+             "that says interrupted after the journal's rounds and claims no final gains).", ""]
     with tempfile.TemporaryDirectory() as tmp:
         for vehicles, args in FLEETS.items():
             rows = []
@@ -128,7 +128,8 @@ def main(signum: int = signal.SIGINT) -> None:
             recorded = sum(bool(r["rounds"]) for _, _, r in rows)
             lines += [f"## {vehicles} vehicles (`mavtune tune {' '.join(args)}`)", "",
                       f"Exit after the signal: median {statistics.median(times):.2f} s, worst {max(times):.2f} s; "
-                      f"{sum(t > TARGET_S for t in times)} of {len(times)} over {TARGET_S:g} s; {bad} with a problem; "
+                      f"{sum(t > TARGET_S for t in times)} of {len(times)} over {TARGET_S:g} s; {bad} with a "
+                      "problem; "
                       f"{reports} of {len(times)} with a report.md consistent with result.json and the journal "
                       f"({recorded} of them had recorded a round: the others have nothing to report).",
                       "", "| signal at | exit, s | CPU, s | status | stderr | journal rounds | result.json | report |"

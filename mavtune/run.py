@@ -262,7 +262,8 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                 _report(console, out_dir, result, config, surface, status, summary)
         recorded = len(book)
     if status == "interrupted":
-        told = {None: f" (no report.md: `mavtune report {out_dir}` writes it)", REPORT: f" (report.md so far, text only: `mavtune report {out_dir}` draws it whole)"}
+        told = {None: f" (no report.md: `mavtune report {out_dir}` writes it)",
+                REPORT: f" (report.md so far, text only: `mavtune report {out_dir}` draws it whole)"}
         raise Interrupted(f"interrupted: the journal keeps {counted(recorded, 'round')}"
                           f"{told.get(summary.get('report'), '') if recorded else ''}; `mavtune tune --out "
                           f"{out_dir}` resumes")
@@ -322,13 +323,13 @@ def _report(console: Console, out_dir: Path, result: TuningResult, config: Confi
             if left < MIN_REPORT_S:
                 raise interrupts.TimeLimit
             with interrupts.time_limit(left):
-                write_run_report(out_dir, result, config, status=status, figures=False)
+                write_run_report(out_dir, result, config, status=status, figures=False, summary=summary)
             text = True
             why = "not drawn after an interrupt (the command ends within 2 s of it)"
         else:
-            write_run_report(out_dir, result, config, status=status, figures=False)
+            write_run_report(out_dir, result, config, status=status, figures=False, summary=summary)
             text = True
-            write_run_report(out_dir, result, config, surface=surface, status=status)
+            write_run_report(out_dir, result, config, surface=surface, status=status, summary=summary)
             figures = True
     except MavtuneError as exc:
         why = str(exc)

@@ -86,22 +86,25 @@ class Report:
 
 
 def write_run_report(out_dir: str | Path, result, config=None, surface: Any = None, title: str | None = None,
-                     status: str = "finished", figures: bool = True) -> Path:
+                     status: str = "finished", figures: bool = True, summary: dict[str, Any] | None = None) -> Path:
     """Write `out_dir/report.md` (and its figures unless `figures` is False) for a TuningResult that ended with
     `status`; `config` (a Config, optional) gives the flight timing and the plan; `surface` (a
     `mavtune.sim.surface.Surface` or a surface.csv path; default `out_dir/surface.csv` if present) gets the final
-    gains drawn on it; `title` defaults to `run_title`. Returns the report's path."""
+    gains drawn on it; `title` defaults to `run_title`; `summary` is result.json when the caller holds it (read
+    from the folder otherwise). Returns the report's path."""
     out = Path(out_dir)
     try:
-        return _write(out, result, config, surface, title, status, figures)
+        return _write(out, result, config, surface, title, status, figures, summary)
     except OSError as exc:
         raise MavtuneError(f"cannot write the run report in {out}: {exc.strerror or exc}") from None
 
 
-def _write(out: Path, result, config, surface: Any, title: str | None, status: str, figures: bool) -> Path:
+def _write(out: Path, result, config, surface: Any, title: str | None, status: str, figures: bool,
+           summary: dict[str, Any] | None) -> Path:
     """`write_run_report` without the translation of file-system errors."""
     out.mkdir(parents=True, exist_ok=True)
-    rep = Report(out, result, config, surface, _read_json(out / "result.json"), status, figures)
+    summary = summary if summary is not None else _read_json(out / "result.json")
+    rep = Report(out, result, config, surface, summary, status, figures)
     parts = [f"# {title or run_title(status, len(rep.rounds))}", ""]
     if not figures:
         for name in FIGURES:  # figures of an earlier state of the run would not match this report
