@@ -161,3 +161,34 @@ def test_ctrl_c_mid_run_leaves_a_report_of_the_journal_s_rounds_and_report_draws
     assert journal.read_bytes() == journal_bytes and rounds_in(journal) == kept
     after = result_of(folder)
     assert after["report_figures"] is True and "figures_missing" not in after and after["rounds"] == kept
+
+
+def test_tune_on_a_finished_folder_replays_it_to_the_same_result(finished, tmp_path):
+    folder = copy(finished, tmp_path)
+    before, journal = result_of(folder), (folder / "journal.sqlite").read_bytes()
+    code, err = run_cli("tune", "-q", "--out", str(folder))
+    assert code == 0, err
+    after = result_of(folder)
+    assert after["status"] == "finished" and after["gains"] == before["gains"] and after["rounds"] == before["rounds"]
+    assert all(r["replayed"] for r in after["rounds_log"])  # none flown again
+    assert (folder / "journal.sqlite").read_bytes() == journal
+
+
+def test_figures_that_cannot_be_drawn_leave_the_text_report(monkeypatch, tmp_path):
+    """The text is written before the figures: a full disk (or Ctrl-C) while drawing keeps a report that matches
+    result.json, and result.json says how to draw the rest."""
+    import mavtune.report.tuning_figure as figure
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(figure, "plot_tuning", full_disk)
+    folder = tmp_path / "run"
+    code, err = run_cli("tune", *SHORT, "--stage-rounds", "2", "--out", str(folder))
+    assert code == 0, err
+    result = result_of(folder)
+    assert result["report"] == "report.md" and result["report_figures"] is False
+    assert "No space left on device" in result["figures_missing"] and "mavtune report" in result["figures_missing"]
+    text = (folder / "report.md").read_text()
+    assert "in progress after 2 rounds" in text and "Text only" in text
+    assert not any((folder / name).exists() for name in FIGURES)

@@ -60,9 +60,14 @@ def final_gains_section(final: dict[str, float], uncertainty: dict[str, dict[str
                         heading: str = "Final gains", lead: str | None = None) -> list[str]:
     """The final gains with their uncertainty, where it comes from, and the run's flight-to-flight noise (under
     `heading`, after `lead` when given: an unfinished run's gains so far)."""
-    note = ("± se and the interval are the tuner's, computed from the recorded flights." if uncertainty else
-            "This result carries no uncertainty of the final gains (a tuner that computes one writes `uncertainty` "
-            "into the result); the spread of the bootstraps' results is the only hint of it here.")
+    if any(_known(u.get("se")) for u in uncertainty.values()) or (uncertainty and not lead):
+        note = "± se and the interval are the tuner's, computed from the recorded flights."
+    elif lead:
+        note = ("No interval yet: an interrupted run computes none (the resumed run gives them), and a gain whose "
+                "line search has not finished has none.")
+    else:
+        note = ("This result carries no uncertainty of the final gains (a tuner that computes one writes "
+                "`uncertainty` into the result); the spread of the bootstraps' results is the only hint of it here.")
     cv, dof = (noise or {}).get("cv", math.nan), (noise or {}).get("dof", math.nan)
     if _known(cv):
         note += (f" Flight-to-flight noise of the cost, pooled over the run: {100 * cv:.1f} % of the cost (one "
