@@ -176,6 +176,22 @@ def tune_command(
     run(cfg, folder, quiet=quiet, surface=surface, stage_rounds=stage_rounds)
 
 
+@app.command("report")
+def report_command(
+    run_dir: Path = typer.Argument(..., help="A run folder (from `mavtune tune`): its journal and config.json."),
+    surface: Optional[Path] = typer.Option(None, "--surface", help="A surface.csv (from `mavtune surface`) to draw "
+                                           "the final gains on."),
+) -> None:
+    """Draw a run folder's report (report.md and figures) again from its journal, flying nothing."""
+    from mavtune.redraw import redraw
+
+    if surface is not None:
+        from mavtune.sim.surface import read_csv
+
+        read_csv(surface)  # a missing or malformed surface is named before anything is written
+    redraw(run_dir, surface)
+
+
 bank_app = typer.Typer(help="A bank of tuned gains by vehicle mass, looked up by the mass estimator's reading.",
                        no_args_is_help=True)
 app.add_typer(bank_app, name="bank")

@@ -44,14 +44,27 @@ class RoundRecord:
 
 
 class Journal:
-    """An append-only SQLite log of rounds plus a small key/value table (config, original parameters)."""
+    """An append-only SQLite log of rounds plus a small key/value table (config, original parameters).
 
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
+    `read_only` opens an existing journal to read it (e.g. to draw its report): nothing in the file is written,
+    and a missing or blank one is refused."""
+
+    def __init__(self, path: str | Path, read_only: bool = False):
+        self.path, self.read_only = Path(path), read_only
         if self.path.is_dir():
             raise MavtuneError(f"journal path {self.path} is a directory, not a file")
         fresh = not self.path.exists() or self.path.stat().st_size == 0
         self._db: sqlite3.Connection | None = None
+        if read_only:
+            if fresh or blank(self.path):
+                raise MavtuneError(f"journal {self.path} is {'missing' if not self.path.exists() else 'empty'}: it "
+                                   "records no round")
+            with self._sqlite("is not a readable SQLite journal"):
+                self._db = sqlite3.connect(_read_only_uri(self.path), uri=True, isolation_level=None)
+                self._check_tables()
+                self._digests = "digest" in [c[1] for c in self._db.execute("PRAGMA table_info(rounds)")]
+            self._check_version(self.get("schema_version", SCHEMA_VERSION))
+            return
         with self._sqlite("is not a readable SQLite journal"):
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._db = sqlite3.connect(self.path, isolation_level=None)
@@ -70,7 +83,10 @@ class Journal:
         version = self.get("schema_version")
         if version is None:
             self.put("schema_version", SCHEMA_VERSION)
-        elif version != SCHEMA_VERSION:
+        self._check_version(version or SCHEMA_VERSION)
+
+    def _check_version(self, version: Any) -> None:
+        if version != SCHEMA_VERSION:
             self.close()
             raise MavtuneError(f"journal {self.path} has schema version {version}, this mavtune reads {SCHEMA_VERSION}")
 
@@ -122,6 +138,9 @@ class Journal:
     def bind(self, config: dict[str, Any]) -> None:
         """Tie the journal to one run's fingerprint; resuming with another one is refused, naming the field."""
         stored, config = self.get("config"), json.loads(json.dumps(config))  # compare as stored: lists, not tuples
+        if stored is None and self.read_only:
+            raise MavtuneError(f"journal {self.path} records no settings to check its rounds against; it was left "
+                               "as it is")
         if stored is None:
             self.put("config", config)
             self.put("created", time.time())
@@ -200,10 +219,17 @@ def blank(path: str | Path) -> bool:
     if not path.is_file() or path.stat().st_size == 0:
         return True
     try:
-        with closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)) as db:
+        with closing(sqlite3.connect(_read_only_uri(path), uri=True)) as db:
             return db.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()[0] == 0
     except (sqlite3.DatabaseError, OSError, UnicodeDecodeError):
         return False
+
+
+def _read_only_uri(path: Path) -> str:
+    """An SQLite URI that reads `path` and writes nothing: immutable (no lock files added) unless a write-ahead
+    log lies beside it (a run that did not close it, or one still going), which must then be read too."""
+    wal = path.with_name(path.name + "-wal").exists()
+    return f"{path.resolve().as_uri()}?mode=ro{'' if wal else '&immutable=1'}"
 
 
 def _digest(row: tuple) -> str:

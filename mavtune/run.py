@@ -262,7 +262,10 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                 _report(console, out_dir, result, config, surface, status, summary)
         recorded = len(book)
     if status == "interrupted":
-        raise Interrupted(f"interrupted: the journal keeps {counted(recorded, 'round')}; `mavtune tune --out "
+        told = {None: f" (no report.md: `mavtune report {out_dir}` writes it)",
+                REPORT: f" (report.md so far, text only: `mavtune report {out_dir}` draws it whole)"}
+        raise Interrupted(f"interrupted: the journal keeps {counted(recorded, 'round')}"
+                          f"{told.get(summary.get('report'), '') if recorded else ''}; `mavtune tune --out "
                           f"{out_dir}` resumes")
     if status == "stage":
         console.print(f"stage done: {counted(tuner.flown, 'round')} flown now, {len(result.rounds)} of at most "
@@ -301,16 +304,18 @@ class _CountedCommits:
 
 def _report(console: Console, out_dir: Path, result: TuningResult, config: Config, surface: Path | None,
             status: str, summary: dict[str, Any]) -> None:
-    """Write the run report, then say in result.json that it describes this state of the run.
+    """Write the run report, then say in result.json which report describes this state of the run.
 
-    The report of an earlier state is removed first, so report.md either matches result.json or is absent (and
-    result.json says why). After Ctrl-C the report must be done REPORT_AFTER_INTERRUPT_S after the signal, so the
-    command ends at once; another Ctrl-C while it is written stops it the same way. A report that cannot be written never hides how the
-    run ended."""
+    The text (tables, no figures, no matplotlib) is written first, whatever ended the run; the figures are added
+    unless the run was interrupted. After Ctrl-C the text must be done REPORT_AFTER_INTERRUPT_S after the signal,
+    so the command ends at once; another Ctrl-C while the report is written stops it the same way. report.md
+    matches result.json or is absent (result.json then says why and how to write it: `mavtune report DIR`). A
+    report that cannot be written never hides how the run ended."""
     from mavtune.report import write_run_report
+    from mavtune.report.run_report import FIGURES
 
-    ending = {"finished": "", "stage": "in progress", "interrupted": "interrupted", "error": "stopped"}
-    title = "mavtune tuning run" + (f" — {ending[status]} after {len(result.rounds)} rounds" if ending[status] else "")
+    redraw = f"`mavtune report {out_dir}`"
+    text = figures = False
     why = None
     try:
         if status == "interrupted":
@@ -318,23 +323,31 @@ def _report(console: Console, out_dir: Path, result: TuningResult, config: Confi
             if left < MIN_REPORT_S:
                 raise interrupts.TimeLimit
             with interrupts.time_limit(left):
-                write_run_report(out_dir, result, config, surface=surface, title=title)
+                write_run_report(out_dir, result, config, status=status, figures=False, summary=summary)
+            text = True
+            why = "not drawn after an interrupt (the command ends within 2 s of it)"
         else:
-            write_run_report(out_dir, result, config, surface=surface, title=title)
+            write_run_report(out_dir, result, config, status=status, figures=False, summary=summary)
+            text = True
+            write_run_report(out_dir, result, config, surface=surface, status=status, summary=summary)
+            figures = True
     except MavtuneError as exc:
         why = str(exc)
     except interrupts.TimeLimit:
         why = f"it could not be written within {REPORT_AFTER_INTERRUPT_S:g} s of the interrupt"
     except KeyboardInterrupt:
         why = "interrupted while it was written"
-    if why is None:
-        summary["report"] = REPORT
-    else:
+    summary["report"] = REPORT if text else None
+    summary["report_figures"] = figures
+    if not text:
         (out_dir / REPORT).unlink(missing_ok=True)
-        summary["report"] = None
-        summary["report_missing"] = f"{why}; `mavtune tune --out {out_dir}` writes it"
+        summary["report_missing"] = f"{why}; {redraw} writes it"
         console.print(f"[yellow]report not written: {escape(summary['report_missing'])}[/] (the journal and "
                       "result.json are complete)")
+    elif not figures:
+        for name in FIGURES:  # the figures of a drawing cut short would not match the text report
+            (out_dir / name).unlink(missing_ok=True)
+        summary["figures_missing"] = f"{why}; {redraw} draws them"
     with interrupts.deferred():
         _write_json(out_dir / "result.json", summary)
     if why == "interrupted while it was written" and status != "interrupted":

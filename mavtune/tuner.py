@@ -221,15 +221,16 @@ class Tuner:
     """Runs the bootstrap over a fleet, journaling each round; a journal with rounds is replayed first.
 
     `stage_rounds` ends the process after that many newly flown rounds (StageDone): tuning in stages, as the
-    paper's summary wishes — swap batteries or fix a vehicle, then resume from the journal. Whatever ends a
-    run, `snapshot()` is what it has done so far.
+    paper's summary wishes — swap batteries or fix a vehicle, then resume from the journal; 0 replays the journal
+    and flies nothing (the run as recorded, e.g. to draw its report). Whatever ends a run, `snapshot()` is what it
+    has done so far.
     """
 
     def __init__(self, settings: Settings, fleet: Fleet, journal: Journal | None = None,
                  on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None,
                  draws: int = DRAWS):
-        if stage_rounds is not None and (journal is None or stage_rounds < 1):
-            raise MavtuneError("tuning in stages needs a journal and at least 1 round per stage")
+        if stage_rounds is not None and (journal is None or stage_rounds < 0):
+            raise MavtuneError("tuning in stages needs a journal and a number of rounds per stage")
         self.settings, self.fleet, self.journal, self.on_round = settings, fleet, journal, on_round
         self.stage_rounds = stage_rounds
         self.draws = draws  # resampled searches behind each gain's interval (0: no interval)

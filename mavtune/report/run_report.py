@@ -9,12 +9,17 @@ passed in); the table of rounds; fleet events (drop-outs, rejoins, aborts) when 
 A section is a function of the `Report` returning Markdown lines; add one by adding it to `SECTIONS`. Whatever the
 data (odd results from a network, a run stopped after one round), the report is written: a section that cannot be
 drawn says so in its place.
+
+The report says how the run ended (`status`): a run that did not finish gets its gains so far, marked not final,
+and the state of every line search. Without `figures` it is text only (tables, no matplotlib: quick even with 1000
+vehicles, so an interrupted run has one before it exits); `mavtune report DIR` draws the figures later.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -25,13 +30,21 @@ from mavtune.fleet import Status
 from mavtune.plan import clock
 from mavtune.report import markdown as md
 from mavtune.report.searches import SearchView, noise, search_views, uncertainty
-from mavtune.report.timeline import has_traces, plot_timeline, vehicle_order
+from mavtune.report.traces import has_traces, vehicle_order
 
 REPORT = "report.md"
 TIMELINE_PNG = "timeline.png"
 TUNING_PNG = "tuning.png"
 SURFACE_PNG = "gains_on_surface.png"
 SURFACE_CSV = "surface.csv"
+FIGURES = (TUNING_PNG, TIMELINE_PNG, SURFACE_PNG)
+ENDINGS = {"finished": "", "stage": "in progress", "interrupted": "interrupted", "error": "stopped"}
+
+
+def run_title(status: str, rounds: int) -> str:
+    """The report's title: how the run ended and after how many rounds (nothing added for a finished run)."""
+    ending = ENDINGS.get(status, status)
+    return "mavtune tuning run" + (f" — {ending} after {rounds} rounds" if ending else "")
 
 
 @dataclass
@@ -43,6 +56,13 @@ class Report:
     config: Any = None  # a Config, optional
     surface: Any = None  # a Surface, a surface.csv path, or None for out/surface.csv
     summary: dict[str, Any] = field(default_factory=dict)  # result.json as written by the run
+    status: str = "finished"  # how the run ended: finished, stage, interrupted or error
+    figures: bool = True  # False: text only, no matplotlib
+
+    @property
+    def final(self) -> bool:
+        """Whether the gains are the run's answer (a finished run), not where an unfinished one stood."""
+        return self.status == "finished"
 
     @cached_property
     def round_s(self) -> float:
@@ -65,27 +85,37 @@ class Report:
         return uncertainty(self.result)
 
 
-def write_run_report(out_dir: str | Path, result, config=None, surface: Any = None,
-                     title: str = "mavtune tuning run") -> Path:
-    """Write `out_dir/report.md` and its figures for a TuningResult; `config` (a Config, optional) gives the
-    flight timing and the plan; `surface` (a `mavtune.sim.surface.Surface` or a surface.csv path; default
-    `out_dir/surface.csv` if present) gets the final gains drawn on it. Returns the report's path."""
+def write_run_report(out_dir: str | Path, result, config=None, surface: Any = None, title: str | None = None,
+                     status: str = "finished", figures: bool = True, summary: dict[str, Any] | None = None) -> Path:
+    """Write `out_dir/report.md` (and its figures unless `figures` is False) for a TuningResult that ended with
+    `status`; `config` (a Config, optional) gives the flight timing and the plan; `surface` (a
+    `mavtune.sim.surface.Surface` or a surface.csv path; default `out_dir/surface.csv` if present) gets the final
+    gains drawn on it; `title` defaults to `run_title`; `summary` is result.json when the caller holds it (read
+    from the folder otherwise). Returns the report's path."""
     out = Path(out_dir)
     try:
-        return _write(out, result, config, surface, title)
+        return _write(out, result, config, surface, title, status, figures, summary)
     except OSError as exc:
         raise MavtuneError(f"cannot write the run report in {out}: {exc.strerror or exc}") from None
 
 
-def _write(out: Path, result, config, surface: Any, title: str) -> Path:
+def _write(out: Path, result, config, surface: Any, title: str | None, status: str, figures: bool,
+           summary: dict[str, Any] | None) -> Path:
     """`write_run_report` without the translation of file-system errors."""
     out.mkdir(parents=True, exist_ok=True)
-    rep = Report(out, result, config, surface, _read_json(out / "result.json"))
-    parts = [f"# {title}", ""]
+    summary = summary if summary is not None else _read_json(out / "result.json")
+    rep = Report(out, result, config, surface, summary, status, figures)
+    parts = [f"# {title or run_title(status, len(rep.rounds))}", ""]
+    if not figures:
+        for name in FIGURES:  # figures of an earlier state of the run would not match this report
+            (out / name).unlink(missing_ok=True)
+        parts += [f"_Text only, no figures: `mavtune report {out}` draws them from the journal._", ""]
     for section in SECTIONS:
         parts += _guarded(section, rep)
     path = out / REPORT
-    path.write_text("\n".join(parts))
+    partial = path.with_name(REPORT + ".partial")
+    partial.write_text("\n".join(parts))
+    os.replace(partial, path)  # readers see the old report or the new one, never half of one
     return path
 
 
@@ -131,7 +161,36 @@ def _settings(rep: Report) -> list[str]:
 def _final_gains(rep: Report) -> list[str]:
     from mavtune.report.tuning_section import final_gains_section
 
-    return final_gains_section(rep.gains, rep.uncertainty, rep.searches, noise(rep.result))
+    if rep.final:
+        return final_gains_section(rep.gains, rep.uncertainty, rep.searches, noise(rep.result))
+    lead = (f"The run was {ENDINGS.get(rep.status, rep.status)} after {len(rep.rounds)} rounds: these are the gains "
+            "it held then — each finished line search's result, the start value of a gain not searched yet — not "
+            f"its answer. `mavtune tune --out {rep.out}` continues it to the result an uninterrupted run gives.")
+    return final_gains_section(rep.gains, rep.uncertainty, rep.searches, noise(rep.result),
+                               heading="Gains so far (not final)", lead=lead)
+
+
+def _line_searches(rep: Report) -> list[str]:
+    """Where every line search of an unfinished run stands: finished with its result, or in progress."""
+    if rep.final:
+        return []
+    rows = []
+    for v in rep.searches:
+        first, last = v.rounds[0], v.rounds[-1]
+        if v.finished:
+            state = f"finished: {md.num(v.result, 4)}" + (f" (stopped narrowing: {v.stop_reason})"
+                                                          if v.stop_reason else "")
+        else:
+            lo, hi = v.brackets[-1] if v.brackets else (math.nan, math.nan)
+            state = f"in progress: bracket [{md.num(lo, 4)}, {md.num(hi, 4)}] as its last round was planned"
+        rows.append([v.bootstrap, v.gain, f"{first}–{last}" if last != first else first, len(v.comparisons), state])
+    planned = rep.summary.get("plan") or {}
+    done = (f"{len(rep.rounds)} rounds flown of the {planned['rounds']} planned (at most {planned.get('rounds_max')})."
+            if planned.get("rounds") else f"{len(rep.rounds)} rounds flown.")
+    if not rows:
+        return ["## Line searches so far", "", done + " No line search was begun.", ""]
+    return ["## Line searches so far", "", done, "",
+            md.table(["bootstrap", "gain", "rounds", "comparisons", "state"], rows, ["r", "l", "l", "r", "l"]), ""]
 
 
 def _plan_vs_actual(rep: Report) -> list[str]:
@@ -141,8 +200,8 @@ def _plan_vs_actual(rep: Report) -> list[str]:
 def _tuning(rep: Report) -> list[str]:
     from mavtune.report.tuning_section import tuning_section
 
-    if not rep.searches:
-        return tuning_section([], None)
+    if not rep.searches or not rep.figures:
+        return tuning_section(rep.searches, None)
     from mavtune.report.tuning_figure import MAX_ROWS, drawn_bootstraps, plot_tuning
 
     space = (getattr(rep.result, "settings", None) or {}).get("space") or {}
@@ -158,6 +217,10 @@ def _timeline(rep: Report) -> list[str]:
     parts = ["## Timeline", ""]
     if not rep.rounds:
         return parts + ["No round was flown.", ""]
+    if not rep.figures:
+        return []
+    from mavtune.report.timeline import plot_timeline
+
     plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG)
     what = ("altitude reference (dashed) and measurement of each vehicle, its tracking error |z − z_ref| (thin) "
             "with the mean over each flight (bar), " if has_traces(rep.rounds)
@@ -168,6 +231,8 @@ def _timeline(rep: Report) -> list[str]:
 
 
 def _cost_surface(rep: Report) -> list[str]:
+    if not rep.figures or not rep.final:
+        return []
     grid, source = _surface(rep.out, rep.surface)
     if grid is None or not {"kp", "kd"} <= set(rep.gains):
         return []
@@ -191,8 +256,9 @@ def _tuned_params(rep: Report) -> list[str]:
     return tuned_params_section(rep.summary)
 
 
-SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _tuned_params, _plan_vs_actual, _tuning, _timeline,
-                                                  _cost_surface, _rounds, _fleet_events]
+SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _line_searches, _tuned_params,
+                                                  _plan_vs_actual, _tuning, _timeline, _cost_surface, _rounds,
+                                                  _fleet_events]
 
 
 def _read_json(path: Path) -> dict[str, Any]:

@@ -135,16 +135,18 @@ def search_rounds(rounds: Sequence) -> list[tuple[int, str, list[int]]]:
 def point_stats(rounds: Sequence, indices: Sequence[int], gain: str, width: float = 1.0) -> list[PointStats]:
     """Every point flown in the rounds `indices`, in order of first flight, with its measured costs."""
     points: list[PointStats] = []
+    seen: dict[float, PointStats] = {}  # by exact value: 1000 vehicles flying one point find it at once
     for k in indices:
         rnd = rounds[k]
         for i, f in enumerate(rnd.flights):
             p = flown_point(rnd, i, gain)
             if not math.isfinite(p):
                 continue
-            stats = next((s for s in points if same_point(s.point, p, width)), None)
+            stats = seen.get(p) or next((s for s in points if same_point(s.point, p, width)), None)
             if stats is None:
                 stats = PointStats(p, [], [])
                 points.append(stats)
+            seen[p] = stats
             if f.status is not Status.LOST:
                 stats.costs.append(as_float(f.cost))
                 stats.vehicles.append(str(f.vehicle))

@@ -22,25 +22,13 @@ from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter  # noqa
 
 from mavtune.fleet import Status  # noqa: E402
 from mavtune.report.searches import flown_point, search_rounds  # noqa: E402
-from mavtune.report.traces import clean_trace, drawable, to_draw, tracking_error  # noqa: E402
+from mavtune.report.traces import (  # noqa: E402
+    clean_trace, drawable, has_traces, to_draw, tracking_error, vehicle_order,
+)
 
 VEHICLE_OFFSET_M = 1.0  # the paper lowers the second vehicle's curves by 1 m
 MAX_LOG_TICKS = 6  # labelled ticks on a log axis; more collide on a panel 1.8 in high
 LABEL_MIN_IN = 0.5  # a line search's band gets its name on top when it is at least this wide, in
-
-
-def vehicle_order(rounds: Sequence) -> list[str]:
-    """Vehicle names in order of first appearance over the rounds."""
-    names: dict[str, None] = {}
-    for rnd in rounds:
-        for f in rnd.flights:
-            names.setdefault(str(f.vehicle), None)
-    return list(names)
-
-
-def has_traces(rounds: Sequence) -> bool:
-    """True when at least one flight carries a drawable trace."""
-    return any(clean_trace(f.trace) is not None for rnd in rounds for f in rnd.flights)
 
 
 def text(s: object) -> str:

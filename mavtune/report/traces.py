@@ -7,6 +7,7 @@ arrives (arrays of unequal length, NaN, infinite or absurdly large samples, stri
 from __future__ import annotations
 
 import math
+from typing import Sequence
 
 import numpy as np
 
@@ -75,3 +76,17 @@ def mean_abs_error_m(trace) -> float:
     if err is None or not np.isfinite(err[1]).any():
         return float("nan")
     return float(np.nanmean(err[1]))
+
+
+def vehicle_order(rounds: Sequence) -> list[str]:
+    """Vehicle names in order of first appearance over the rounds."""
+    names: dict[str, None] = {}
+    for rnd in rounds:
+        for f in rnd.flights:
+            names.setdefault(str(f.vehicle), None)
+    return list(names)
+
+
+def has_traces(rounds: Sequence) -> bool:
+    """True when at least one flight carries a drawable trace."""
+    return any(clean_trace(f.trace) is not None for rnd in rounds for f in rnd.flights)

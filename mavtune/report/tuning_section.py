@@ -56,16 +56,23 @@ def points_table(view: SearchView) -> str:
 
 
 def final_gains_section(final: dict[str, float], uncertainty: dict[str, dict[str, float]],
-                        views: Sequence[SearchView], noise: dict[str, float] | None = None) -> list[str]:
-    """The final gains with their uncertainty, where it comes from, and the run's flight-to-flight noise."""
-    note = ("± se and the interval are the tuner's, computed from the recorded flights." if uncertainty else
-            "This result carries no uncertainty of the final gains (a tuner that computes one writes `uncertainty` "
-            "into the result); the spread of the bootstraps' results is the only hint of it here.")
+                        views: Sequence[SearchView], noise: dict[str, float] | None = None,
+                        heading: str = "Final gains", lead: str | None = None) -> list[str]:
+    """The final gains with their uncertainty, where it comes from, and the run's flight-to-flight noise (under
+    `heading`, after `lead` when given: an unfinished run's gains so far)."""
+    if any(_known(u.get("se")) for u in uncertainty.values()) or (uncertainty and not lead):
+        note = "± se and the interval are the tuner's, computed from the recorded flights."
+    elif lead:
+        note = ("No interval yet: an interrupted run computes none (the resumed run gives them), and a gain whose "
+                "line search has not finished has none.")
+    else:
+        note = ("This result carries no uncertainty of the final gains (a tuner that computes one writes "
+                "`uncertainty` into the result); the spread of the bootstraps' results is the only hint of it here.")
     cv, dof = (noise or {}).get("cv", math.nan), (noise or {}).get("dof", math.nan)
     if _known(cv):
         note += (f" Flight-to-flight noise of the cost, pooled over the run: {100 * cv:.1f} % of the cost (one "
                  "standard deviation" + (f", {dof:.0f} degrees of freedom)." if _known(dof) else ")."))
-    return ["## Final gains", "", gains_table(final, uncertainty, views), "", note, ""]
+    return [f"## {heading}", "", *([lead, ""] if lead else []), gains_table(final, uncertainty, views), "", note, ""]
 
 
 def tuning_section(views: Sequence[SearchView], figure: str | None, figure_note: str = "") -> list[str]:
