@@ -20,7 +20,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains
 from mavtune.journal import Journal
 from mavtune.plan import counted
-from mavtune.run import JOURNAL, REPORT, _summary, _write_json, plan_of, saved_config
+from mavtune.run import JOURNAL, REPORT, plan_of, run_summary, saved_config, write_json
 from mavtune.search.interval import DRAWS
 from mavtune.tuner import StageDone, Tuner, TuningResult
 
@@ -91,18 +91,18 @@ def redraw(out_dir: str | Path, surface: Path | None = None, console: Console | 
     out_dir, console = Path(out_dir), console or Console()
     result, config, status, summary = replay(out_dir)
     if summary is None:  # the run never wrote result.json: one from the journal, saying so
-        summary = _summary(config, plan_of(config), result, None, status, None if status == "finished" else
+        summary = run_summary(config, plan_of(config), result, None, status, None if status == "finished" else
                            "the run ended without writing result.json (killed or crashed?); written by "
                            "`mavtune report` from the journal", float("nan"), [], {})
         summary.pop("wall_s")
         with interrupts.deferred():
-            _write_json(out_dir / "result.json", summary)
+            write_json(out_dir / "result.json", summary)
     path = write_run_report(out_dir, result, config, surface=surface, status=status)
     for note in REPORT_NOTES:
         summary.pop(note, None)
     summary |= {"report": REPORT, "report_figures": True}
     with interrupts.deferred():
-        _write_json(out_dir / "result.json", summary)
+        write_json(out_dir / "result.json", summary)
     console.print(f"{path}: the {status} run, {counted(len(result.rounds), 'round')} (from the journal; nothing "
                   "flown)", highlight=False)
     return path

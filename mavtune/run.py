@@ -213,7 +213,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                           "again")
         ignored = warn(console, config)
         console.print(plan_panel(config, plan))
-        _write_json(out_dir / "config.json", config.model_dump(mode="json"))
+        write_json(out_dir / "config.json", config.model_dump(mode="json"))
         fleet: Fleet | None = None
         tuner: Tuner | None = None
         started, status, error, outcome = time.time(), "error", None, {}
@@ -252,12 +252,12 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                         tuner.draws = 0  # no intervals: resampling 1000 vehicles' searches takes longer than an
                         # interrupted run may (the resumed run gives them)
                     result = tuner.snapshot() if tuner is not None else None
-                    summary = _summary(config, plan, result, fleet, status, error, time.time() - started, ignored,
+                    summary = run_summary(config, plan, result, fleet, status, error, time.time() - started, ignored,
                                        outcome)
                     if tuner is not None or not (out_dir / "result.json").exists():  # else nothing was flown or
                         # replayed: the folder's result.json and report still describe its journal
                         (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
-                        _write_json(out_dir / "result.json", summary)
+                        write_json(out_dir / "result.json", summary)
             if report and result is not None:
                 _report(console, out_dir, result, config, surface, status, summary)
         recorded = len(book)
@@ -349,12 +349,12 @@ def _report(console: Console, out_dir: Path, result: TuningResult, config: Confi
             (out_dir / name).unlink(missing_ok=True)
         summary["figures_missing"] = f"{why}; {redraw} draws them"
     with interrupts.deferred():
-        _write_json(out_dir / "result.json", summary)
+        write_json(out_dir / "result.json", summary)
     if why == "interrupted while it was written" and status != "interrupted":
         raise KeyboardInterrupt
 
 
-def _summary(config: Config, plan: Plan, result: TuningResult | None, fleet: Fleet | None, status: str,
+def run_summary(config: Config, plan: Plan, result: TuningResult | None, fleet: Fleet | None, status: str,
              error: str | None, wall_s: float, warnings: list[str], outcome: dict[str, Any]) -> dict[str, Any]:
     """What result.json says: how the run ended, the gains, every round (from 0), what the fleet reports."""
     summary: dict[str, Any] = {"status": status, "error": error, "gains": None, "rounds": 0, "flights": 0,
@@ -376,7 +376,7 @@ def _summary(config: Config, plan: Plan, result: TuningResult | None, fleet: Fle
     return summary
 
 
-def _write_json(path: Path, data: dict[str, Any]) -> None:
+def write_json(path: Path, data: dict[str, Any]) -> None:
     """Write a JSON object atomically (readers see the old file or the new one, never half of either), one line
     per top-level key. Not indented throughout: indenting makes `json` use its pure-Python encoder, 1 s for a
     1000-vehicle run's few rounds where the C encoder takes 0.05 s — time an interrupted run does not have."""

@@ -9,7 +9,7 @@ import time
 import pytest
 
 from mavtune import interrupts
-from mavtune.run import _write_json
+from mavtune.run import write_json
 
 
 def test_a_time_limit_cannot_be_swallowed_by_a_report_section():
@@ -40,7 +40,7 @@ def test_result_json_is_whole_json_one_line_per_key(tmp_path):
     data = {"status": "interrupted", "rounds": 3, "gains": None, "noise": {"cv": math.nan, "dof": 0},
             "rounds_log": [{"flights": [{"cost": math.inf, "status": "failed"}]}], "when": tmp_path}
     path = tmp_path / "result.json"
-    _write_json(path, data)
+    write_json(path, data)
     text = path.read_text()
     assert len(text.strip().splitlines()) == len(data) + 2
     back = json.loads(text)
