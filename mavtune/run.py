@@ -355,7 +355,7 @@ def _report(console: Console, out_dir: Path, result: TuningResult, config: Confi
 
 
 def run_summary(config: Config, plan: Plan, result: TuningResult | None, fleet: Fleet | None, status: str,
-             error: str | None, wall_s: float, warnings: list[str], outcome: dict[str, Any]) -> dict[str, Any]:
+                error: str | None, wall_s: float, warnings: list[str], outcome: dict[str, Any]) -> dict[str, Any]:
     """What result.json says: how the run ended, the gains, every round (from 0), what the fleet reports."""
     summary: dict[str, Any] = {"status": status, "error": error, "gains": None, "rounds": 0, "flights": 0,
                                "report": None, "warnings": warnings}
