@@ -21,6 +21,7 @@ def test_pins_cover_the_grid():
     assert set(PINNED["tunes"]) == {_key(c) for c in tune_cases()}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", sorted({c["method"] for c in plan_grid()}))
 def test_plan_numbers_unchanged(method):
     for case in plan_grid():
