@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections import deque
+from itertools import groupby
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar, Hashable, Sequence
+from typing import ClassVar, Hashable, Sequence
 
 from mavtune.errors import MavtuneError
-from mavtune.search.evidence import NoisePool, PointStats, p_best, point_stats
+from mavtune.search.evidence import Moments, NoisePool, PointStats, moments, p_best, point_stats
 from mavtune.search.model import ANSWERS, Vertex, local_vertex
 
 State = Hashable
@@ -84,6 +86,8 @@ class LineSearch(ABC):
         self.width0 = hi - lo
         self._registry: dict[int, list[tuple[float, int]]] = {}
         self._where: dict[int, float] = {}
+        self._key_of: dict[float, int] = {}  # every float seen -> its key: one registry look-up per float
+        self._known_moments: dict[int, Moments] = {}  # key -> its usable flights' moments
         self._next_key = 0
         self._state = self._initial()
         self._samples: dict[int, list[float]] = {}  # key -> every flight's cost usable now
@@ -129,8 +133,17 @@ class LineSearch(ABC):
         """A point's identity: points closer than 1e-9 of the initial width are the same point.
 
         Different paths through a search compute the same point with different float rounding; a bucketed
-        registry makes them one key without the boundary misses of plain rounding.
+        registry makes them one key without the boundary misses of plain rounding. A float keeps the key it got
+        first (a point registered later within 2e-9 of it does not take it over).
         """
+        known = self._key_of.get(x)
+        if known is not None:
+            return known
+        self._key_of[x] = k = self._lookup(x)
+        return k
+
+    def _lookup(self, x: float) -> int:
+        """The registry's key of x, registering it as a new point when none is within 1e-9 of the width."""
         scaled = (x - self.lo) / self.width0 * 1e8
         bucket = round(scaled)
         for b in (bucket - 1, bucket, bucket + 1):
@@ -168,7 +181,25 @@ class LineSearch(ABC):
 
     def stats(self, x: float) -> PointStats:
         """What the flights usable now say about point x."""
-        return point_stats(self._samples.get(self.key(x), ()), self.pool)
+        return self._stats(self.key(x))
+
+    def _stats(self, k: int) -> PointStats:
+        """Point k's stats now; its flights' own moments are computed again only after it got more (its flights
+        only grow; where they are set aside, `_forget` drops what was computed from them)."""
+        costs = self._samples.get(k, ())
+        known = self._known_moments.get(k)
+        if known is None or known.n != len(costs):
+            known = self._known_moments[k] = moments(costs)
+        return point_stats(known, self.pool)
+
+    def _forget(self, k: int | None = None) -> None:
+        """Set aside point k's usable flights (all points' when k is None): asked again from scratch."""
+        if k is None:
+            self._samples.clear()
+            self._known_moments.clear()
+        else:
+            self._samples.pop(k, None)
+            self._known_moments.pop(k, None)
 
     def samples(self) -> dict[float, list[float]]:
         """Every point flown in this search and the costs of its flights (without reuse, of every iteration)."""
@@ -189,7 +220,7 @@ class LineSearch(ABC):
         if unknown:
             return unknown
         cap = self.adaptive.cap if self.adaptive is not None else 0
-        more = [(self._fresh(self.key(p)), self.stats(p).mean, p) for p in points]
+        more = [(self._fresh(k := self.key(p)), self._stats(k).mean, p) for p in points]
         return [p for n, _, p in sorted(more) if n < cap]
 
     def tell(self, points: Sequence[float], costs: Sequence[float]) -> None:
@@ -198,20 +229,30 @@ class LineSearch(ABC):
         if len(points) != len(costs):
             raise MavtuneError(f"told {len(costs)} costs for {len(points)} points")
         current = {self.key(p) for p in (self._points(self._state) or ())}
-        for p, c in zip(points, costs):
+        costs = list(costs)
+        told: dict[int, list[float]] = {}  # key -> its costs in the order flown, keys in the order first flown
+        first_finite: dict[int, int] = {}  # the pool meets new points in the order of their first finite flight
+        for p, run in groupby(range(len(points)), points.__getitem__):  # a round flies runs of one point
             k = self.key(p)
             if not self.reuse and k not in current:
                 continue  # without reuse only the current iteration's points count
-            c = float(c)
-            c = c if not math.isnan(c) else math.inf
-            self._samples.setdefault(k, []).append(c)
-            self._flown.setdefault(k, []).append(c)
-            self.pool.add((self._owner, k), c)
+            start = next(run)
+            cs = [math.inf if math.isnan(c) else c for c in map(float, costs[start:start + 1 + sum(1 for _ in run)])]
+            told.setdefault(k, []).extend(cs)
+            if k not in first_finite:
+                at = next((i for i, c in enumerate(cs) if math.isfinite(c)), None)
+                if at is not None:
+                    first_finite[k] = start + at
+        for k, cs in told.items():
+            self._samples.setdefault(k, []).extend(cs)
+            self._flown.setdefault(k, []).extend(cs)
+        for k in sorted(first_finite, key=first_finite.__getitem__):
+            self.pool.extend((self._owner, k), told[k])
         self._settle()
 
     def _decide(self, keys: Sequence[int]) -> tuple[int, float, list[PointStats]]:
         """The kept index (lowest mean, ties to the left), the probability it is right, and the points' stats."""
-        stats = [point_stats(self._samples[k], self.pool) for k in keys]
+        stats = [self._stats(k) for k in keys]
         best = min(range(len(stats)), key=lambda i: stats[i].mean)
         return best, p_best([s.mean for s in stats], [s.se for s in stats], best), stats
 
@@ -247,7 +288,7 @@ class LineSearch(ABC):
             self._failed_tries = 0
             self._before = {k: len(self._samples[k]) for k in keys}
             if not self.reuse:
-                self._samples.clear()
+                self._forget()
                 self._before.clear()
 
     def _all_failed(self, points: Sequence[float], keys: Sequence[int]) -> None:
@@ -255,7 +296,7 @@ class LineSearch(ABC):
         if self._failed_tries < FAILED_RETRIES:
             self._failed_tries += 1
             for k in keys:
-                self._samples.pop(k, None)  # set aside (the flights stay in the run's record): ask again
+                self._forget(k)  # set aside (the flights stay in the run's record): ask again
             return
         shown = ", ".join(f"{p:.4g}" for p in points)
         self.stop_reason = (f"every flight at {shown} failed, {FAILED_RETRIES + 1} times: a comparison of failed "
@@ -293,30 +334,63 @@ class LineSearch(ABC):
         score: dict[int, float] = {}
         where: dict[int, float] = {}
         depth_of: dict[int, int] = {}
-        heap: list[tuple[float, int, int, Any, frozenset]] = [(-1.0, 0, 0, self._state, frozenset(taken))]
-        counter, expanded = 1, 0
-        while heap and expanded < max_nodes:
-            neg_p, depth, _, state, flown = heapq.heappop(heap)
-            expanded += 1
-            prob = -neg_p
-            points = self._points(state)
-            if points is None:
+        # The walk visits states in the order of a heap of (−probability, depth, push order); all states of one
+        # (probability, depth) are pushed before the first of them is taken (a parent comes strictly first), so
+        # each such class is a first-in first-out queue and the heap only orders the classes. What a state
+        # scores and where it leads is worked out once per state; the points flown on the way to a state are a
+        # bit mask over the points that can score (unknown and not taken).
+        nodes: dict[State, tuple[list[tuple[float, int, int]], int, list[State]] | None] = {}
+        bits: dict[int, int] = {}
+        classes: dict[tuple[float, int], deque] = {(-1.0, 0): deque([(self._state, 0)])}
+        order: list[tuple[float, int]] = [(-1.0, 0)]
+        expanded = 0
+        while order and expanded < max_nodes:
+            neg_p, depth = order[0]
+            queue = classes[order[0]]
+            if not queue:
+                heapq.heappop(order)
                 continue
-            keys = [self.key(p) for p in points]
-            for p, k in zip(points, keys):
-                if not self._samples.get(k) and k not in flown:
+            state, path = queue.popleft()
+            expanded += 1
+            node = nodes.get(state, False)
+            if node is False:
+                node = nodes[state] = self._node(state, taken, bits)
+            if node is None:
+                continue
+            scoring, mask, children = node
+            prob = -neg_p
+            for p, k, bit in scoring:
+                if not path & bit:
                     score[k] = score.get(k, 0.0) + prob
                     where[k] = p
                     depth_of[k] = min(depth_of.get(k, depth), depth)
-            outcomes = list(range(len(points)))
-            if all(self._samples.get(k) for k in keys):
-                best, p_right, _ = self._decide(keys)
-                if self._decided(keys, p_right):
-                    outcomes = [best]
-            now_flown = flown | frozenset(keys)
-            for best in outcomes:
-                child = self._advance(state, best)
-                heapq.heappush(heap, (-prob / len(outcomes), depth + 1, counter, child, now_flown))
-                counter += 1
+            child_class = (-prob / len(children), depth + 1)
+            queue = classes.get(child_class)
+            if queue is None:
+                queue = classes[child_class] = deque()
+                heapq.heappush(order, child_class)
+            path |= mask
+            queue.extend((child, path) for child in children)
         ranked = sorted(score, key=lambda k: (-score[k], depth_of[k], k))
         return [where[k] for k in ranked[:n]]
+
+    def _node(self, state: State, taken: set[int], bits: dict[int, int]):
+        """One state of the speculation walk: the points it would score (point, key, bit: unknown and not
+        taken), the bit mask of them, and the states it leads to (only the decided outcome once decided);
+        None once the search is finished."""
+        points = self._points(state)
+        if points is None:
+            return None
+        keys = [self.key(p) for p in points]
+        scoring, mask = [], 0
+        for p, k in zip(points, keys):
+            if not self._samples.get(k) and k not in taken:
+                bit = bits.setdefault(k, 1 << len(bits))
+                scoring.append((p, k, bit))
+                mask |= bit
+        outcomes = range(len(points))
+        if all(self._samples.get(k) for k in keys):
+            best, p_right, _ = self._decide(keys)
+            if self._decided(keys, p_right):
+                outcomes = [best]
+        return scoring, mask, [self._advance(state, best) for best in outcomes]
