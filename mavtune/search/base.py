@@ -53,6 +53,9 @@ class Adaptive:
             raise MavtuneError(f"adaptive cap {self.cap} must be at least 1 flight per point")
 
 
+FIRST_WALKS_KEPT = 64  # speculation walks from a search with no flights, kept for the next search of the same kind
+_FIRST_WALKS: dict[Hashable, tuple[list[float], list[float]]] = {}
+
 FAILED_RETRIES = 2  # times a comparison whose every point failed is flown again before the search stops
 
 
@@ -330,6 +333,30 @@ class LineSearch(ABC):
         if n <= 0 or not self.reuse or self.done:
             return []
         max_nodes = max_nodes or 64 * n
+        if self._samples:
+            return self._walk(n, exclude, max_nodes)
+        # nothing flown yet: the walk depends only on what the search is, its state and the points it has named
+        # so far (so every line search of a run, and every rehearsal of a plan, starts with the same walk)
+        memo = (self._shape(), self._state, n, max_nodes, tuple(exclude), tuple(self._key_of.items()))
+        known = _FIRST_WALKS.get(memo)
+        if known is None:
+            named = len(self._where)
+            found = self._walk(n, exclude, max_nodes)
+            known = _FIRST_WALKS[memo] = (found, list(self._where.values())[named:])
+            while len(_FIRST_WALKS) > FIRST_WALKS_KEPT:
+                del _FIRST_WALKS[next(iter(_FIRST_WALKS))]
+        found, named = known
+        for x in named:  # the points the walk named, given their keys in the same order
+            self.key(x)
+        return list(found)
+
+    def _shape(self) -> Hashable:
+        """Everything besides the flights that decides what this search asks: its method, interval, tolerance and
+        rules (a method with more parameters adds them)."""
+        return type(self), self.lo, self.hi, self.epsilon, self.reuse, self.refly, self.adaptive
+
+    def _walk(self, n: int, exclude: Sequence[float], max_nodes: int) -> list[float]:
+        """The speculation walk itself (see `speculate`)."""
         taken = {self.key(p) for p in exclude} | {self.key(p) for p in self.ask()}
         score: dict[int, float] = {}
         where: dict[int, float] = {}
