@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections import deque
 from itertools import groupby
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -235,12 +234,15 @@ class LineSearch(ABC):
         costs = list(costs)
         told: dict[int, list[float]] = {}  # key -> its costs in the order flown, keys in the order first flown
         first_finite: dict[int, int] = {}  # the pool meets new points in the order of their first finite flight
-        for p, run in groupby(range(len(points)), points.__getitem__):  # a round flies runs of one point
+        end = 0
+        for p, run in groupby(points):  # a round flies runs of one point
+            start, end = end, end + len(list(run))
             k = self.key(p)
             if not self.reuse and k not in current:
                 continue  # without reuse only the current iteration's points count
-            start = next(run)
-            cs = [math.inf if math.isnan(c) else c for c in map(float, costs[start:start + 1 + sum(1 for _ in run)])]
+            cs = list(map(float, costs[start:end]))
+            if any(map(math.isnan, cs)):
+                cs = [math.inf if math.isnan(c) else c for c in cs]
             told.setdefault(k, []).extend(cs)
             if k not in first_finite:
                 at = next((i for i, c in enumerate(cs) if math.isfinite(c)), None)
@@ -363,41 +365,42 @@ class LineSearch(ABC):
         depth_of: dict[int, int] = {}
         # The walk visits states in the order of a heap of (−probability, depth, push order); all states of one
         # (probability, depth) are pushed before the first of them is taken (a parent comes strictly first), so
-        # each such class is a first-in first-out queue and the heap only orders the classes. What a state
-        # scores and where it leads is worked out once per state; the points flown on the way to a state are a
-        # bit mask over the points that can score (unknown and not taken).
+        # the walk takes whole classes of (probability, depth) in heap order, each in the order its states were
+        # pushed. What a state scores and where it leads is worked out once per state; the points flown on the
+        # way to a state are a bit mask over the points that can score (unknown and not taken).
         nodes: dict[State, tuple[list[tuple[float, int, int]], int, list[State]] | None] = {}
         bits: dict[int, int] = {}
-        classes: dict[tuple[float, int], deque] = {(-1.0, 0): deque([(self._state, 0)])}
+        classes: dict[tuple[float, int], list[tuple[list[State], int]]] = {(-1.0, 0): [([self._state], 0)]}
         order: list[tuple[float, int]] = [(-1.0, 0)]
-        expanded = 0
-        while order and expanded < max_nodes:
-            neg_p, depth = order[0]
-            queue = classes[order[0]]
-            if not queue:
-                heapq.heappop(order)
-                continue
-            state, path = queue.popleft()
-            expanded += 1
-            node = nodes.get(state, False)
-            if node is False:
-                node = nodes[state] = self._node(state, taken, bits)
-            if node is None:
-                continue
-            scoring, mask, children = node
+        left = max_nodes
+        while order and left > 0:
+            neg_p, depth = heapq.heappop(order)
             prob = -neg_p
-            for p, k, bit in scoring:
-                if not path & bit:
-                    score[k] = score.get(k, 0.0) + prob
-                    where[k] = p
-                    depth_of[k] = min(depth_of.get(k, depth), depth)
-            child_class = (-prob / len(children), depth + 1)
-            queue = classes.get(child_class)
-            if queue is None:
-                queue = classes[child_class] = deque()
-                heapq.heappush(order, child_class)
-            path |= mask
-            queue.extend((child, path) for child in children)
+            below: dict[int, list] = {}  # outcomes -> the class their states go to
+            for states, path in classes.pop((neg_p, depth)):
+                for state in states:
+                    if left == 0:
+                        break
+                    left -= 1
+                    node = nodes.get(state, False)
+                    if node is False:
+                        node = nodes[state] = self._node(state, taken, bits)
+                    if node is None:
+                        continue
+                    scoring, mask, children = node
+                    for p, k, bit in scoring:
+                        if not path & bit:
+                            score[k] = score.get(k, 0.0) + prob
+                            where[k] = p
+                            depth_of[k] = min(depth_of.get(k, depth), depth)
+                    queue = below.get(len(children))
+                    if queue is None:
+                        child_class = (-prob / len(children), depth + 1)
+                        queue = below[len(children)] = classes.get(child_class)
+                        if queue is None:
+                            queue = below[len(children)] = classes[child_class] = []
+                            heapq.heappush(order, child_class)
+                    queue.append((children, path | mask))
         ranked = sorted(score, key=lambda k: (-score[k], depth_of[k], k))
         return [where[k] for k in ranked[:n]]
 

@@ -52,7 +52,7 @@ class NoisePool:
 
     def extend(self, group: Hashable, costs: Sequence[float]) -> None:
         """Add flights of one group at once (one update however many)."""
-        finite = [float(c) for c in costs if math.isfinite(c)]
+        finite = list(map(float, filter(math.isfinite, costs)))
         if finite:
             self._groups.setdefault(group, []).extend(finite)
             self._terms.pop(group, None)
@@ -98,7 +98,7 @@ def sample_variance(values: Sequence[float], mean: float) -> float:
     values give a huge (or infinite) variance rather than an OverflowError; NaN below two values."""
     if len(values) < 2:
         return math.nan
-    scale = max(abs(v - mean) for v in values)
+    scale = max(abs(max(values) - mean), abs(min(values) - mean))  # rounding keeps order: the largest |v − mean|
     if scale == 0.0 or not math.isfinite(scale):
         return scale * scale
     return scale * scale * math.fsum(((v - mean) / scale) ** 2 for v in values) / (len(values) - 1)
@@ -119,7 +119,7 @@ def moments(costs: Sequence[float]) -> Moments:
     n = len(costs)
     if n == 0:
         return Moments(0, math.nan, math.nan)
-    if not all(math.isfinite(c) for c in costs):
+    if not all(map(math.isfinite, costs)):
         return Moments(n, math.inf, 0.0)
     mean = math.fsum(costs) / n
     return Moments(n, mean, sample_variance(costs, mean) if n >= 2 else math.nan)
