@@ -52,6 +52,7 @@ class Adaptive:
             raise MavtuneError(f"adaptive cap {self.cap} must be at least 1 flight per point")
 
 
+P_BEST_STEPS = 16  # work of p_best per point of a comparison of three or more, in speculation steps (~1 µs)
 FIRST_WALKS_KEPT = 64  # speculation walks from a search with no flights, kept for the next search of the same kind
 _FIRST_WALKS: dict[Hashable, tuple[list[float], list[float]]] = {}
 
@@ -100,6 +101,7 @@ class LineSearch(ABC):
         self._failed_tries = 0
         self._before: dict[int, int] = {}  # flights a point carried into this comparison had before it
         self.stop_reason: str | None = None  # why the search stopped narrowing before its tolerance
+        self.walked = 0  # work besides the flights: speculation states and points, p_best grids (the plan's bound)
         self._settle()
 
     # ----- what each method defines -------------------------------------------------------------
@@ -258,6 +260,8 @@ class LineSearch(ABC):
     def _decide(self, keys: Sequence[int]) -> tuple[int, float, list[PointStats]]:
         """The kept index (lowest mean, ties to the left), the probability it is right, and the points' stats."""
         stats = [self._stats(k) for k in keys]
+        if len(keys) > 2:
+            self.walked += P_BEST_STEPS * len(keys)  # three points or more: p_best integrates on a grid
         best = min(range(len(stats)), key=lambda i: stats[i].mean)
         return best, p_best([s.mean for s in stats], [s.se for s in stats], best), stats
 
@@ -401,6 +405,7 @@ class LineSearch(ABC):
                             queue = below[len(children)] = classes[child_class] = []
                             heapq.heappush(order, child_class)
                     queue.append((children, path | mask))
+        self.walked += max_nodes - left + sum(len(node[2]) for node in nodes.values() if node)
         ranked = sorted(score, key=lambda k: (-score[k], depth_of[k], k))
         return [where[k] for k in ranked[:n]]
 
