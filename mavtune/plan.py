@@ -22,6 +22,7 @@ MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal
 NOISE_PROBES = 32  # costs of pure noise rehearsed per line search (seeded: the plan is reproducible)
 EXPECTED_PROBES = 16  # noisy bowls rehearsed for the expected rounds of adaptive averaging
 EXPECTED_NOISE = 0.2  # their flight-to-flight noise, relative (the simulator's is 10–35 %)
+ROUND_STEPS = 30  # a rehearsed round's own work (ask, assign, tell, settle), in the same steps
 PLAN_WORK = 4_000_000  # rehearsed flights + speculation steps a plan may take (1–1.5 µs each: ~5 s); more is refused
 
 
@@ -117,13 +118,17 @@ class Work:
 
     def check_before(self, search, rehearsals: int) -> None:
         """Refuse before rehearsing what must exceed the limit: every rehearsal flies all its vehicles in at
-        least budget / slots rounds (no round flies more points than slots), and one round's speculation walk
-        may take 64 states per spare slot, each naming its comparison's points and leading to as many states."""
+        least budget / slots rounds (no round flies more points than slots); one round's speculation walk may
+        take 64 states per spare slot, each naming its comparison's points and leading to as many states; an
+        adaptive plan's flat rehearsal flies each point of each comparison `cap` times."""
         s = self.settings
         slots = s.strategy_rule.slots(s.vehicles)
         self.add(rehearsals * math.ceil(search.budget() / slots) * s.vehicles, tally=False)
         if search.reuse and slots > 1:
             self.add(64 * slots * (1 + len(search.ask())), tally=False)
+        if s.adaptive_rule is not None:  # the flat rehearsal flies every point of every comparison to the cap
+            flights = len(search.needs()) * len(search.ask()) * s.adaptive_rule.cap
+            self.add(flights + ROUND_STEPS * math.ceil(flights / s.vehicles), tally=False)
 
     def add(self, steps: int, tally: bool = True) -> None:
         """Count `steps` done (or, without `tally`, check that they alone fit); past the limit the plan is refused."""
@@ -143,10 +148,10 @@ def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], 
     work = work if work is not None else Work(settings)
     rounds = 0
     while not search.done:
-        walked = search.walked
+        steps = search.steps
         flown = settings.strategy_rule.assign(search, settings.vehicles, speculate)
         search.tell(flown, [cost(p) for p in flown])
-        work.add(len(flown) + search.walked - walked)
+        work.add(ROUND_STEPS + len(flown) + search.steps - steps)
         rounds += 1
     return rounds
 

@@ -101,7 +101,7 @@ class LineSearch(ABC):
         self._failed_tries = 0
         self._before: dict[int, int] = {}  # flights a point carried into this comparison had before it
         self.stop_reason: str | None = None  # why the search stopped narrowing before its tolerance
-        self.walked = 0  # work besides the flights: speculation states and points, p_best grids (the plan's bound)
+        self.steps = 0  # work besides the flights: flights rescanned, speculation states and points, p_best grids
         self._settle()
 
     # ----- what each method defines -------------------------------------------------------------
@@ -194,6 +194,7 @@ class LineSearch(ABC):
         known = self._known_moments.get(k)
         if known is None or known.n != len(costs):
             known = self._known_moments[k] = moments(costs)
+            self.steps += 2 * len(costs)  # its moments, and its term of the pooled noise
         return point_stats(known, self.pool)
 
     def _forget(self, k: int | None = None) -> None:
@@ -261,7 +262,7 @@ class LineSearch(ABC):
         """The kept index (lowest mean, ties to the left), the probability it is right, and the points' stats."""
         stats = [self._stats(k) for k in keys]
         if len(keys) > 2:
-            self.walked += P_BEST_STEPS * len(keys)  # three points or more: p_best integrates on a grid
+            self.steps += P_BEST_STEPS * len(keys)  # three points or more: p_best integrates on a grid
         best = min(range(len(stats)), key=lambda i: stats[i].mean)
         return best, p_best([s.mean for s in stats], [s.se for s in stats], best), stats
 
@@ -405,7 +406,7 @@ class LineSearch(ABC):
                             queue = below[len(children)] = classes[child_class] = []
                             heapq.heappush(order, child_class)
                     queue.append((children, path | mask))
-        self.walked += max_nodes - left + sum(len(node[2]) for node in nodes.values() if node)
+        self.steps += max_nodes - left + sum(len(node[2]) for node in nodes.values() if node)
         ranked = sorted(score, key=lambda k: (-score[k], depth_of[k], k))
         return [where[k] for k in ranked[:n]]
 
