@@ -194,7 +194,7 @@ class LineSearch(ABC):
         known = self._known_moments.get(k)
         if known is None or known.n != len(costs):
             known = self._known_moments[k] = moments(costs)
-            self.steps += 2 * len(costs)  # its moments, and its term of the pooled noise
+            self.steps += len(costs) // 4  # its moments and its term of the pooled noise: ~0.3 µs a flight
         return point_stats(known, self.pool)
 
     def _forget(self, k: int | None = None) -> None:
