@@ -120,6 +120,11 @@ def seconds(r: dict, key: str) -> str:
     return f"{r[key]:.3g}" if key in r else "—"
 
 
+def table(title: str, columns: list[str]) -> list[str]:
+    """A markdown section's heading and its table's header."""
+    return ["", f"## {title}", "", "| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", default=BEFORE)
@@ -153,12 +158,10 @@ def main() -> None:
         "",
         "`.venv/bin/python benchmarks/plan_time.py`",
         "",
-        "## make_plan (default configuration plus the flags shown)",
-        "",
-        "| plan | before CPU s | after CPU s | speed-up (CPU) | before wall s | after wall s | rounds (before / after) "
-        "| load |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
+    lines += table("make_plan (default configuration plus the flags shown)",
+                   ["plan", "before CPU s", "after CPU s", "speed-up (CPU)", "before wall s", "after wall s",
+                    "rounds (before / after)", "load"])
     for r in rows:
         b, a = r["before"], r["after"]
         ratio = f"{b['cpu_s'] / a['cpu_s']:.0f}×" if "cpu_s" in b and a.get("cpu_s") else (
@@ -167,27 +170,17 @@ def main() -> None:
                 else a.get("refused", "") or str(a.get("rounds", "")))
         lines.append(f"| `{r['plan']}` | {seconds(b, 'cpu_s')} | {seconds(a, 'cpu_s')} | {ratio} | "
                      f"{seconds(b, 'wall_s')} | {seconds(a, 'wall_s')} | {same} | {r['load_1min']:.1f} |")
-    lines += [
-        "",
-        "## The largest accepted settings (after only): planned, or refused in one line, in bounded time",
-        "",
-        "| plan | CPU s | wall s | outcome | load |",
-        "| --- | --- | --- | --- | --- |",
-    ]
+    lines += table("The largest accepted settings (after only): planned, or refused in one line, in bounded time",
+                   ["plan", "CPU s", "wall s", "outcome", "load"])
     for r in corners:
         a = r["after"]
         outcome = f"error: {a['refused']}" if "refused" in a else (
             f"{a['rounds']} rounds (at most {a['rounds_max']})" if "rounds" in a else a.get("error", "timeout"))
         lines.append(f"| `{r['plan']}` | {seconds(a, 'cpu_s')} | {seconds(a, 'wall_s')} | {outcome} | "
                      f"{r['load_1min']:.1f} |")
-    lines += [
-        "",
-        "## Engine overhead per round (ask + assign + tell, no flying; default adaptive EQL, ε = 0.2)",
-        "",
-        "| vehicles | strategy | rounds | before CPU ms/round | after CPU ms/round | speed-up (CPU) | before wall ms | "
-        "after wall ms | load |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
-    ]
+    lines += table("Engine overhead per round (ask + assign + tell, no flying; default adaptive EQL, ε = 0.2)",
+                   ["vehicles", "strategy", "rounds", "before CPU ms/round", "after CPU ms/round", "speed-up (CPU)",
+                    "before wall ms", "after wall ms", "load"])
     for r in engine:
         b, a = r["before"], r["after"]
         ms = lambda x, k: f"{1e3 * x[k]:.3g}" if k in x else "—"  # noqa: E731
