@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import heapq
 import math
-from itertools import groupby
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from itertools import groupby
 from typing import ClassVar, Hashable, Sequence
 
 from mavtune.errors import MavtuneError
@@ -230,7 +230,8 @@ class LineSearch(ABC):
 
     def tell(self, points: Sequence[float], costs: Sequence[float]) -> None:
         """Record one flight's cost per entry (points may repeat: replicates are pooled); NaN or infinite
-        count as the worst; points of later iterations are kept for reuse."""
+        count as the worst; points of later iterations are kept for reuse. A run of flights of one point is
+        recorded at once (each flight's cost kept, in order): the work is per point, not per vehicle."""
         if len(points) != len(costs):
             raise MavtuneError(f"told {len(costs)} costs for {len(points)} points")
         current = {self.key(p) for p in (self._points(self._state) or ())}
