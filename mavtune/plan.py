@@ -28,7 +28,7 @@ NOISE_PROBES = 32  # costs of pure noise rehearsed per line search (seeded: the 
 EXPECTED_PROBES = 16  # noisy bowls rehearsed for the expected rounds of adaptive averaging
 EXPECTED_NOISE = 0.2  # their flight-to-flight noise, relative (the simulator's is 10–35 %)
 ROUND_STEPS = 30  # a rehearsed round's own work (ask, assign, tell, settle), in the same steps
-PLAN_WORK = 5_000_000  # rehearsed flights + other steps a plan may take (about 1 µs each: ~5 s); more is refused
+PLAN_WORK = 4_500_000  # rehearsed flights + other steps a plan may take (about 1.1 µs each: ~5 s); more is refused
 
 
 @dataclass(frozen=True)

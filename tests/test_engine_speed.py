@@ -175,4 +175,4 @@ def test_the_cli_refuses_a_plan_it_cannot_rehearse_in_time_before_rehearsing(tmp
                           text=True, timeout=60)
     assert done.returncode == 2, done.stdout + done.stderr
     lines = (done.stdout + done.stderr).strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: planning ") and "takes more than 5,000,000" in lines[0]
+    assert len(lines) == 1 and lines[0].startswith("error: planning ") and "takes more than 4,500,000" in lines[0]

@@ -59,6 +59,15 @@ _FIRST_WALKS: dict[Hashable, tuple[list[float], list[float]]] = {}
 FAILED_RETRIES = 2  # times a comparison whose every point failed is flown again before the search stops
 
 
+def _flight_index(spans: Sequence[tuple[int, int]], at: int) -> int:
+    """The index in the round of the `at`-th flight of a point flown in these runs [start, end)."""
+    for start, end in spans:
+        if at < end - start:
+            return start + at
+        at -= end - start
+    raise IndexError(at)
+
+
 class LineSearch(ABC):
     """Minimise a cost over [lo, hi] by comparisons; `ask()` what to fly, `tell()` what it cost.
 
@@ -236,22 +245,25 @@ class LineSearch(ABC):
             raise MavtuneError(f"told {len(costs)} costs for {len(points)} points")
         current = {self.key(p) for p in (self._points(self._state) or ())}
         costs = list(costs)
+        runs: dict[int, list[tuple[int, int]]] = {}  # key -> its runs of flights (a round flies runs of one point)
+        end = 0
+        for p, run in groupby(points):
+            start, end = end, end + len(list(run))
+            runs.setdefault(self.key(p), []).append((start, end))
+            self.steps += 1  # a run's own work (~1 µs; a flight within it is cheap)
         told: dict[int, list[float]] = {}  # key -> its costs in the order flown, keys in the order first flown
         first_finite: dict[int, int] = {}  # the pool meets new points in the order of their first finite flight
-        end = 0
-        for p, run in groupby(points):  # a round flies runs of one point
-            start, end = end, end + len(list(run))
-            k = self.key(p)
+        for k, spans in runs.items():
             if not self.reuse and k not in current:
                 continue  # without reuse only the current iteration's points count
-            cs = list(map(float, costs[start:end]))
+            cs = list(map(float, costs[spans[0][0]:spans[0][1]] if len(spans) == 1 else
+                          (c for start, end in spans for c in costs[start:end])))
             if any(map(math.isnan, cs)):
                 cs = [math.inf if math.isnan(c) else c for c in cs]
-            told.setdefault(k, []).extend(cs)
-            if k not in first_finite:
-                at = next((i for i, c in enumerate(cs) if math.isfinite(c)), None)
-                if at is not None:
-                    first_finite[k] = start + at
+            told[k] = cs
+            at = next((i for i, c in enumerate(cs) if math.isfinite(c)), None)
+            if at is not None:
+                first_finite[k] = _flight_index(spans, at)
         for k, cs in told.items():
             self._samples.setdefault(k, []).extend(cs)
             self._flown.setdefault(k, []).extend(cs)
