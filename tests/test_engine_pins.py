@@ -32,3 +32,9 @@ def test_plan_numbers_unchanged(method):
 @pytest.mark.parametrize("case", tune_cases(), ids=_key)
 def test_tuning_runs_unchanged(case):
     assert tune_numbers(case) == PINNED["tunes"][_key(case)]
+
+
+@pytest.mark.parametrize("case", plan_grid()[::9], ids=_key)
+def test_plan_numbers_unchanged_on_a_sample(case):
+    """Every ninth setting of the grid in the default suite (the whole grid: `pytest -m slow`)."""
+    assert plan_numbers(case) == PINNED["plans"][_key(case)]
