@@ -6,6 +6,11 @@ guarantee whatever the costs (as if no speculative point were ever used). Withou
 off) the two are equal. With adaptive averaging `rounds` is the expected case (the mean over rehearsals on
 bowls with 20 % flight-to-flight noise) and `rounds_max` the worst: every comparison too close to call until
 each of its points has the cap of flights.
+
+Every accepted setting plans in bounded time: the rehearsals count their work (`Work`: flights told, speculation
+steps, flights rescanned) and a plan past `PLAN_WORK` is refused in one line — up front when a lower bound of
+the work already exceeds it. The search code they drive works per point, not per flight, wherever it can
+(`mavtune.search.base`), which made plans 3–30× faster without changing one number (tests/test_engine_pins.py).
 """
 
 from __future__ import annotations
@@ -15,12 +20,15 @@ import random
 from dataclasses import dataclass
 from typing import Callable
 
+from mavtune.errors import MavtuneError
 from mavtune.tuner import Settings
 
 MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal costs)
 NOISE_PROBES = 32  # costs of pure noise rehearsed per line search (seeded: the plan is reproducible)
 EXPECTED_PROBES = 16  # noisy bowls rehearsed for the expected rounds of adaptive averaging
 EXPECTED_NOISE = 0.2  # their flight-to-flight noise, relative (the simulator's is 10–35 %)
+ROUND_STEPS = 30  # a rehearsed round's own work (ask, assign, tell, settle), in the same steps
+PLAN_WORK = 4_500_000  # rehearsed flights + other steps a plan may take (about 1.1 µs each: ~5 s); more is refused
 
 
 @dataclass(frozen=True)
@@ -106,13 +114,49 @@ def _rounds_without_speculation(settings: Settings, lo: float, hi: float) -> int
     return sum(math.ceil(n / slots) for n in search.needs() if n)
 
 
-def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float], speculate: bool = True) -> int:
+class Work:
+    """What a plan's rehearsals have done: vehicle flights told and speculation steps (states walked, points
+    looked at). Past `limit` the plan is refused in one line: every accepted setting plans in bounded time."""
+
+    def __init__(self, settings: Settings, limit: int | None = None):
+        self.settings, self.limit, self.done = settings, PLAN_WORK if limit is None else limit, 0
+
+    def check_before(self, search, rehearsals: int) -> None:
+        """Refuse before rehearsing what must exceed the limit: every rehearsal flies all its vehicles in at
+        least budget / slots rounds (no round flies more points than slots); one round's speculation walk may
+        take 64 states per spare slot, each naming its comparison's points and leading to as many states; an
+        adaptive plan's flat rehearsal flies each point of each comparison `cap` times."""
+        s = self.settings
+        slots = s.strategy_rule.slots(s.vehicles)
+        self.add(rehearsals * math.ceil(search.budget() / slots) * s.vehicles, tally=False)
+        if search.reuse and slots > 1:
+            self.add(64 * slots * (1 + len(search.ask())), tally=False)
+        if s.adaptive_rule is not None:  # the flat rehearsal flies every point of every comparison to the cap
+            flights = len(search.needs()) * len(search.ask()) * s.adaptive_rule.cap
+            self.add(flights + ROUND_STEPS * math.ceil(flights / s.vehicles), tally=False)
+
+    def add(self, steps: int, tally: bool = True) -> None:
+        """Count `steps` done (or, without `tally`, check that they alone fit); past the limit the plan is refused."""
+        if (self.done + steps if tally else steps) > self.limit:
+            s = self.settings
+            raise MavtuneError(f"planning {counted(s.vehicles, 'vehicle')} ({s.strategy}, {s.method}, ε = {s.epsilon:g}"
+                               f"{f', cap {s.adaptive_rule.cap}' if s.adaptive_rule else ''}) takes more than "
+                               f"{self.limit:,} rehearsed flights and speculation steps; use fewer vehicles, a larger "
+                               "epsilon" + (" or a smaller cap" if s.adaptive_rule else ""))
+        self.done += steps if tally else 0
+
+
+def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float], speculate: bool = True,
+              work: Work | None = None) -> int:
     """Rounds one line search takes, speculation included (unless told not to), on the cost `cost`."""
     search = settings.search(lo, hi)
+    work = work if work is not None else Work(settings)
     rounds = 0
     while not search.done:
+        steps = search.steps
         flown = settings.strategy_rule.assign(search, settings.vehicles, speculate)
         search.tell(flown, [cost(p) for p in flown])
+        work.add(ROUND_STEPS + len(flown) + search.steps - steps)
         rounds += 1
     return rounds
 
@@ -127,28 +171,33 @@ def _noisy_bowl(minimum: float, seed: int) -> Callable[[float], float]:
     return lambda x: (1.0 + (x - minimum) ** 2) * (1.0 + EXPECTED_NOISE * draw.gauss(0.0, 1.0))
 
 
-def _adaptive_rounds(settings: Settings, lo: float, hi: float) -> tuple[int, int]:
+def _adaptive_rounds(settings: Settings, lo: float, hi: float, work: Work) -> tuple[int, int]:
     """Expected and worst rounds of one adaptive line search: the mean over noisy bowls, and the most over a
     flat cost (no comparison ever decided before the cap), a pure-noise cost and no speculation."""
-    expected = [_rehearse(settings, lo, hi, _noisy_bowl((i + 0.5) / EXPECTED_PROBES, i))
+    expected = [_rehearse(settings, lo, hi, _noisy_bowl((i + 0.5) / EXPECTED_PROBES, i), work=work)
                 for i in range(EXPECTED_PROBES)]
     flat = lambda _: 1.0  # noqa: E731
-    worst = max(_rehearse(settings, lo, hi, flat), _rehearse(settings, lo, hi, flat, speculate=False),
-                *(_rehearse(settings, lo, hi, _noise(seed)) for seed in range(2)))
+    worst = max(_rehearse(settings, lo, hi, flat, work=work), _rehearse(settings, lo, hi, flat, False, work),
+                *(_rehearse(settings, lo, hi, _noise(seed), work=work) for seed in range(2)))
     return math.ceil(sum(expected) / len(expected)), max(worst, *expected)
 
 
-def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.0, battery_s: float = 600.0) -> Plan:
-    """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps."""
+def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.0, battery_s: float = 600.0,
+              work_limit: int | None = None) -> Plan:
+    """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps; refused
+    (MavtuneError) when the rehearsals would take more than `work_limit` steps (default `PLAN_WORK`)."""
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
     # every gain's line search has the same shape relative to its range: rehearse one, count it per gain
     lo, hi = 0.0, 1.0
     minimisers = [(i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]
+    work = Work(settings, work_limit)
+    work.check_before(settings.search(lo, hi), EXPECTED_PROBES + 4 if settings.adaptive_rule is not None
+                      else MINIMISER_PROBES + NOISE_PROBES)
     if settings.adaptive_rule is not None:
-        per_search, per_search_max = _adaptive_rounds(settings, lo, hi)
+        per_search, per_search_max = _adaptive_rounds(settings, lo, hi, work)
     else:
         costs = [lambda x, m=m: abs(x - m) for m in minimisers] + [_noise(seed) for seed in range(NOISE_PROBES)]
-        per_search = max(_rehearse(settings, lo, hi, cost) for cost in costs)
+        per_search = max(_rehearse(settings, lo, hi, cost, work=work) for cost in costs)
         per_search_max = max(per_search, _rounds_without_speculation(settings, lo, hi))
     evaluations = settings.search(lo, hi).budget()
     searches = len(settings.space) * bootstraps

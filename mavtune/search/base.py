@@ -12,10 +12,11 @@ import heapq
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar, Hashable, Sequence
+from itertools import groupby
+from typing import ClassVar, Hashable, Sequence
 
 from mavtune.errors import MavtuneError
-from mavtune.search.evidence import NoisePool, PointStats, p_best, point_stats
+from mavtune.search.evidence import Moments, NoisePool, PointStats, moments, p_best, point_stats
 from mavtune.search.model import ANSWERS, Vertex, local_vertex
 
 State = Hashable
@@ -51,7 +52,20 @@ class Adaptive:
             raise MavtuneError(f"adaptive cap {self.cap} must be at least 1 flight per point")
 
 
+P_BEST_STEPS = 16  # work of p_best per point of a comparison of three or more, in speculation steps (~1 µs)
+FIRST_WALKS_KEPT = 64  # speculation walks from a search with no flights, kept for the next search of the same kind
+_FIRST_WALKS: dict[Hashable, tuple[list[float], list[float]]] = {}
+
 FAILED_RETRIES = 2  # times a comparison whose every point failed is flown again before the search stops
+
+
+def _flight_index(spans: Sequence[tuple[int, int]], at: int) -> int:
+    """The index in the round of the `at`-th flight of a point flown in these runs [start, end)."""
+    for start, end in spans:
+        if at < end - start:
+            return start + at
+        at -= end - start
+    raise IndexError(at)
 
 
 class LineSearch(ABC):
@@ -84,6 +98,8 @@ class LineSearch(ABC):
         self.width0 = hi - lo
         self._registry: dict[int, list[tuple[float, int]]] = {}
         self._where: dict[int, float] = {}
+        self._key_of: dict[float, int] = {}  # every float seen -> its key: one registry look-up per float
+        self._known_moments: dict[int, Moments] = {}  # key -> its usable flights' moments
         self._next_key = 0
         self._state = self._initial()
         self._samples: dict[int, list[float]] = {}  # key -> every flight's cost usable now
@@ -94,6 +110,7 @@ class LineSearch(ABC):
         self._failed_tries = 0
         self._before: dict[int, int] = {}  # flights a point carried into this comparison had before it
         self.stop_reason: str | None = None  # why the search stopped narrowing before its tolerance
+        self.steps = 0  # work besides the flights: flights rescanned, speculation states and points, p_best grids
         self._settle()
 
     # ----- what each method defines -------------------------------------------------------------
@@ -129,8 +146,17 @@ class LineSearch(ABC):
         """A point's identity: points closer than 1e-9 of the initial width are the same point.
 
         Different paths through a search compute the same point with different float rounding; a bucketed
-        registry makes them one key without the boundary misses of plain rounding.
+        registry makes them one key without the boundary misses of plain rounding. A float keeps the key it got
+        first (a point registered later within 2e-9 of it does not take it over).
         """
+        known = self._key_of.get(x)
+        if known is not None:
+            return known
+        self._key_of[x] = k = self._lookup(x)
+        return k
+
+    def _lookup(self, x: float) -> int:
+        """The registry's key of x, registering it as a new point when none is within 1e-9 of the width."""
         scaled = (x - self.lo) / self.width0 * 1e8
         bucket = round(scaled)
         for b in (bucket - 1, bucket, bucket + 1):
@@ -168,7 +194,26 @@ class LineSearch(ABC):
 
     def stats(self, x: float) -> PointStats:
         """What the flights usable now say about point x."""
-        return point_stats(self._samples.get(self.key(x), ()), self.pool)
+        return self._stats(self.key(x))
+
+    def _stats(self, k: int) -> PointStats:
+        """Point k's stats now; its flights' own moments are computed again only after it got more (its flights
+        only grow; where they are set aside, `_forget` drops what was computed from them)."""
+        costs = self._samples.get(k, ())
+        known = self._known_moments.get(k)
+        if known is None or known.n != len(costs):
+            known = self._known_moments[k] = moments(costs)
+            self.steps += len(costs) // 4  # its moments and its term of the pooled noise: ~0.3 µs a flight
+        return point_stats(known, self.pool)
+
+    def _forget(self, k: int | None = None) -> None:
+        """Set aside point k's usable flights (all points' when k is None): asked again from scratch."""
+        if k is None:
+            self._samples.clear()
+            self._known_moments.clear()
+        else:
+            self._samples.pop(k, None)
+            self._known_moments.pop(k, None)
 
     def samples(self) -> dict[float, list[float]]:
         """Every point flown in this search and the costs of its flights (without reuse, of every iteration)."""
@@ -189,29 +234,48 @@ class LineSearch(ABC):
         if unknown:
             return unknown
         cap = self.adaptive.cap if self.adaptive is not None else 0
-        more = [(self._fresh(self.key(p)), self.stats(p).mean, p) for p in points]
+        more = [(self._fresh(k := self.key(p)), self._stats(k).mean, p) for p in points]
         return [p for n, _, p in sorted(more) if n < cap]
 
     def tell(self, points: Sequence[float], costs: Sequence[float]) -> None:
         """Record one flight's cost per entry (points may repeat: replicates are pooled); NaN or infinite
-        count as the worst; points of later iterations are kept for reuse."""
+        count as the worst; points of later iterations are kept for reuse. A run of flights of one point is
+        recorded at once (each flight's cost kept, in order): the work is per point, not per vehicle."""
         if len(points) != len(costs):
             raise MavtuneError(f"told {len(costs)} costs for {len(points)} points")
         current = {self.key(p) for p in (self._points(self._state) or ())}
-        for p, c in zip(points, costs):
-            k = self.key(p)
+        costs = list(costs)
+        runs: dict[int, list[tuple[int, int]]] = {}  # key -> its runs of flights (a round flies runs of one point)
+        end = 0
+        for p, run in groupby(points):
+            start, end = end, end + len(list(run))
+            runs.setdefault(self.key(p), []).append((start, end))
+            self.steps += 1  # a run's own work (~1 µs; a flight within it is cheap)
+        told: dict[int, list[float]] = {}  # key -> its costs in the order flown, keys in the order first flown
+        first_finite: dict[int, int] = {}  # the pool meets new points in the order of their first finite flight
+        for k, spans in runs.items():
             if not self.reuse and k not in current:
                 continue  # without reuse only the current iteration's points count
-            c = float(c)
-            c = c if not math.isnan(c) else math.inf
-            self._samples.setdefault(k, []).append(c)
-            self._flown.setdefault(k, []).append(c)
-            self.pool.add((self._owner, k), c)
+            cs = list(map(float, costs[spans[0][0]:spans[0][1]] if len(spans) == 1 else
+                          (c for start, end in spans for c in costs[start:end])))
+            if any(map(math.isnan, cs)):
+                cs = [math.inf if math.isnan(c) else c for c in cs]
+            told[k] = cs
+            at = next((i for i, c in enumerate(cs) if math.isfinite(c)), None)
+            if at is not None:
+                first_finite[k] = _flight_index(spans, at)
+        for k, cs in told.items():
+            self._samples.setdefault(k, []).extend(cs)
+            self._flown.setdefault(k, []).extend(cs)
+        for k in sorted(first_finite, key=first_finite.__getitem__):
+            self.pool.extend((self._owner, k), told[k])
         self._settle()
 
     def _decide(self, keys: Sequence[int]) -> tuple[int, float, list[PointStats]]:
         """The kept index (lowest mean, ties to the left), the probability it is right, and the points' stats."""
-        stats = [point_stats(self._samples[k], self.pool) for k in keys]
+        stats = [self._stats(k) for k in keys]
+        if len(keys) > 2:
+            self.steps += P_BEST_STEPS * len(keys)  # three points or more: p_best integrates on a grid
         best = min(range(len(stats)), key=lambda i: stats[i].mean)
         return best, p_best([s.mean for s in stats], [s.se for s in stats], best), stats
 
@@ -247,7 +311,7 @@ class LineSearch(ABC):
             self._failed_tries = 0
             self._before = {k: len(self._samples[k]) for k in keys}
             if not self.reuse:
-                self._samples.clear()
+                self._forget()
                 self._before.clear()
 
     def _all_failed(self, points: Sequence[float], keys: Sequence[int]) -> None:
@@ -255,7 +319,7 @@ class LineSearch(ABC):
         if self._failed_tries < FAILED_RETRIES:
             self._failed_tries += 1
             for k in keys:
-                self._samples.pop(k, None)  # set aside (the flights stay in the run's record): ask again
+                self._forget(k)  # set aside (the flights stay in the run's record): ask again
             return
         shown = ", ".join(f"{p:.4g}" for p in points)
         self.stop_reason = (f"every flight at {shown} failed, {FAILED_RETRIES + 1} times: a comparison of failed "
@@ -289,34 +353,93 @@ class LineSearch(ABC):
         if n <= 0 or not self.reuse or self.done:
             return []
         max_nodes = max_nodes or 64 * n
+        if self._samples:
+            return self._walk(n, exclude, max_nodes)
+        # nothing flown yet: the walk depends only on what the search is, its state and the points it has named
+        # so far (so every line search of a run, and every rehearsal of a plan, starts with the same walk)
+        memo = (self._shape(), self._state, n, max_nodes, tuple(exclude), tuple(self._key_of.items()))
+        known = _FIRST_WALKS.get(memo)
+        if known is None:
+            named = len(self._where)
+            found = self._walk(n, exclude, max_nodes)
+            known = _FIRST_WALKS[memo] = (found, list(self._where.values())[named:])
+            while len(_FIRST_WALKS) > FIRST_WALKS_KEPT:
+                del _FIRST_WALKS[next(iter(_FIRST_WALKS))]
+        found, named = known
+        for x in named:  # the points the walk named, given their keys in the same order
+            self.key(x)
+        return list(found)
+
+    def _shape(self) -> Hashable:
+        """Everything besides the flights that decides what this search asks: its method, interval, tolerance and
+        rules (a method with more parameters adds them)."""
+        return type(self), self.lo, self.hi, self.epsilon, self.reuse, self.refly, self.adaptive
+
+    def _walk(self, n: int, exclude: Sequence[float], max_nodes: int) -> list[float]:
+        """The speculation walk itself (see `speculate`)."""
         taken = {self.key(p) for p in exclude} | {self.key(p) for p in self.ask()}
         score: dict[int, float] = {}
         where: dict[int, float] = {}
         depth_of: dict[int, int] = {}
-        heap: list[tuple[float, int, int, Any, frozenset]] = [(-1.0, 0, 0, self._state, frozenset(taken))]
-        counter, expanded = 1, 0
-        while heap and expanded < max_nodes:
-            neg_p, depth, _, state, flown = heapq.heappop(heap)
-            expanded += 1
+        # The walk visits states in the order of a heap of (−probability, depth, push order); all states of one
+        # (probability, depth) are pushed before the first of them is taken (a parent comes strictly first), so
+        # the walk takes whole classes of (probability, depth) in heap order, each in the order its states were
+        # pushed. What a state scores and where it leads is worked out once per state; the points flown on the
+        # way to a state are a bit mask over the points that can score (unknown and not taken).
+        nodes: dict[State, tuple[list[tuple[float, int, int]], int, list[State]] | None] = {}
+        bits: dict[int, int] = {}
+        classes: dict[tuple[float, int], list[tuple[list[State], int]]] = {(-1.0, 0): [([self._state], 0)]}
+        order: list[tuple[float, int]] = [(-1.0, 0)]
+        left = max_nodes
+        while order and left > 0:
+            neg_p, depth = heapq.heappop(order)
             prob = -neg_p
-            points = self._points(state)
-            if points is None:
-                continue
-            keys = [self.key(p) for p in points]
-            for p, k in zip(points, keys):
-                if not self._samples.get(k) and k not in flown:
-                    score[k] = score.get(k, 0.0) + prob
-                    where[k] = p
-                    depth_of[k] = min(depth_of.get(k, depth), depth)
-            outcomes = list(range(len(points)))
-            if all(self._samples.get(k) for k in keys):
-                best, p_right, _ = self._decide(keys)
-                if self._decided(keys, p_right):
-                    outcomes = [best]
-            now_flown = flown | frozenset(keys)
-            for best in outcomes:
-                child = self._advance(state, best)
-                heapq.heappush(heap, (-prob / len(outcomes), depth + 1, counter, child, now_flown))
-                counter += 1
+            below: dict[int, list] = {}  # outcomes -> the class their states go to
+            for states, path in classes.pop((neg_p, depth)):
+                for state in states:
+                    if left == 0:
+                        break
+                    left -= 1
+                    node = nodes.get(state, False)
+                    if node is False:
+                        node = nodes[state] = self._node(state, taken, bits)
+                    if node is None:
+                        continue
+                    scoring, mask, children = node
+                    for p, k, bit in scoring:
+                        if not path & bit:
+                            score[k] = score.get(k, 0.0) + prob
+                            where[k] = p
+                            depth_of[k] = min(depth_of.get(k, depth), depth)
+                    queue = below.get(len(children))
+                    if queue is None:
+                        child_class = (-prob / len(children), depth + 1)
+                        queue = below[len(children)] = classes.get(child_class)
+                        if queue is None:
+                            queue = below[len(children)] = classes[child_class] = []
+                            heapq.heappush(order, child_class)
+                    queue.append((children, path | mask))
+        self.steps += max_nodes - left + sum(len(node[2]) for node in nodes.values() if node)
         ranked = sorted(score, key=lambda k: (-score[k], depth_of[k], k))
         return [where[k] for k in ranked[:n]]
+
+    def _node(self, state: State, taken: set[int], bits: dict[int, int]):
+        """One state of the speculation walk: the points it would score (point, key, bit: unknown and not
+        taken), the bit mask of them, and the states it leads to (only the decided outcome once decided);
+        None once the search is finished."""
+        points = self._points(state)
+        if points is None:
+            return None
+        keys = [self.key(p) for p in points]
+        scoring, mask = [], 0
+        for p, k in zip(points, keys):
+            if not self._samples.get(k) and k not in taken:
+                bit = bits.setdefault(k, 1 << len(bits))
+                scoring.append((p, k, bit))
+                mask |= bit
+        outcomes = range(len(points))
+        if all(self._samples.get(k) for k in keys):
+            best, p_right, _ = self._decide(keys)
+            if self._decided(keys, p_right):
+                outcomes = [best]
+        return scoring, mask, [self._advance(state, best) for best in outcomes]

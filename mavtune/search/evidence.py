@@ -35,6 +35,7 @@ class NoisePool:
 
     def __init__(self) -> None:
         self._groups: dict[Hashable, list[float]] = {}
+        self._terms: dict[Hashable, tuple[float, int]] = {}  # group -> its (sum of squares, dof), while unchanged
         self._cached: tuple[float, float] | None = None
         self._prior = (0.0, 0.0)  # (sum of squares, dof) known before any flight
 
@@ -47,19 +48,28 @@ class NoisePool:
         return pool
 
     def add(self, group: Hashable, cost: float) -> None:
-        if math.isfinite(cost):
-            self._groups.setdefault(group, []).append(float(cost))
+        self.extend(group, (cost,))
+
+    def extend(self, group: Hashable, costs: Sequence[float]) -> None:
+        """Add flights of one group at once (one update however many)."""
+        finite = list(map(float, filter(math.isfinite, costs)))
+        if finite:
+            self._groups.setdefault(group, []).extend(finite)
+            self._terms.pop(group, None)
             self._cached = None
 
     def _pooled(self) -> tuple[float, float]:
+        """Each group's term is recomputed only when it changed; the sum runs over the groups in the order they
+        were first flown, so the result is the same float as summing everything afresh."""
         if self._cached is None:
             ss, dof = self._prior
-            for costs in self._groups.values():
-                mean = math.fsum(costs) / len(costs)
-                if len(costs) < 2 or mean == 0.0:
-                    continue
-                ss += math.fsum((c / mean - 1.0) ** 2 for c in costs)
-                dof += len(costs) - 1
+            for group, costs in self._groups.items():
+                term = self._terms.get(group)
+                if term is None:
+                    term = self._terms[group] = _spread(costs)
+                if term[1]:
+                    ss += term[0]
+                    dof += term[1]
             self._cached = (math.sqrt(ss / dof) if dof else math.nan, dof)
         return self._cached
 
@@ -74,29 +84,60 @@ class NoisePool:
         return self._pooled()[1]
 
 
+def _spread(costs: Sequence[float]) -> tuple[float, int]:
+    """One group's relative sum of squares about its mean and its degrees of freedom ((0, 0) below two flights
+    or at a zero mean: no information about the relative noise)."""
+    mean = math.fsum(costs) / len(costs)
+    if len(costs) < 2 or mean == 0.0:
+        return 0.0, 0
+    return math.fsum((c / mean - 1.0) ** 2 for c in costs), len(costs) - 1
+
+
 def sample_variance(values: Sequence[float], mean: float) -> float:
     """Sample variance about `mean` (n − 1 in the denominator), scaled by the largest deviation so that huge
     values give a huge (or infinite) variance rather than an OverflowError; NaN below two values."""
     if len(values) < 2:
         return math.nan
-    scale = max(abs(v - mean) for v in values)
+    scale = max(abs(max(values) - mean), abs(min(values) - mean))  # rounding keeps order: the largest |v − mean|
     if scale == 0.0 or not math.isfinite(scale):
         return scale * scale
     return scale * scale * math.fsum(((v - mean) / scale) ** 2 for v in values) / (len(values) - 1)
 
 
-def point_stats(costs: Sequence[float], pool: NoisePool | None = None) -> PointStats:
-    """Mean and standard error of one point's flights; a failed flight makes the mean infinite (the worst)."""
+@dataclass(frozen=True)
+class Moments:
+    """What a point's flights say by themselves: how many, their mean (infinite if one failed) and their sample
+    variance (NaN below two flights)."""
+
+    n: int
+    mean: float
+    var: float
+
+
+def moments(costs: Sequence[float]) -> Moments:
+    """The flights' own mean and sample variance."""
     n = len(costs)
     if n == 0:
-        return PointStats(math.nan, math.nan, 0)
-    if not all(math.isfinite(c) for c in costs):
-        return PointStats(math.inf, 0.0, n)
+        return Moments(0, math.nan, math.nan)
+    if not all(map(math.isfinite, costs)):
+        return Moments(n, math.inf, 0.0)
     mean = math.fsum(costs) / n
+    return Moments(n, mean, sample_variance(costs, mean) if n >= 2 else math.nan)
+
+
+def point_stats(costs: Sequence[float] | Moments, pool: NoisePool | None = None) -> PointStats:
+    """Mean and standard error of one point's flights (or of their `moments`); a failed flight makes the mean
+    infinite (the worst)."""
+    m = costs if isinstance(costs, Moments) else moments(costs)
+    n, mean = m.n, m.mean
+    if n == 0:
+        return PointStats(math.nan, math.nan, 0)
+    if mean == math.inf:  # a failed flight (a finite sum too large for a float raises in fsum instead)
+        return PointStats(math.inf, 0.0, n)
     cv = pool.cv if pool is not None else math.nan
     prior = (cv * mean) ** 2 if math.isfinite(cv) else math.nan
     if n >= 2:
-        own = sample_variance(costs, mean)
+        own = m.var
         var = own if math.isnan(prior) else (PRIOR_DOF * prior + (n - 1) * own) / (PRIOR_DOF + n - 1)
     else:
         var = prior

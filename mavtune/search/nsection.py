@@ -21,6 +21,9 @@ class NSection(LineSearch):
         self.n = int(points)
         super().__init__(lo, hi, epsilon, **options)
 
+    def _shape(self):
+        return super()._shape(), self.n
+
     def _initial(self):
         return (self.lo, self.hi)
 

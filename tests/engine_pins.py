@@ -1,0 +1,105 @@
+"""The engine's behaviour pinned: `make_plan` on a grid of settings and a few seeded tuning runs, bit for bit.
+
+`python -m tests.engine_pins` writes tests/data/engine_pins.json from the code checked out; the file in the
+repository was written on d53656f, before the plan and the per-round engine were made fast
+(tests/test_engine_pins.py checks that nothing moved since).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import random
+import sys
+from pathlib import Path
+
+PINS = Path(__file__).parent / "data" / "engine_pins.json"
+SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
+METHODS = ("eql", "fibonacci", "golden", "dichotomy", "nsection")
+STRATEGIES = ("avg", "split", "groups")
+VEHICLES = (1, 2, 3, 8, 64)
+EPSILONS = (0.2, 0.125, 0.07)
+
+
+def plan_grid() -> list[dict]:
+    """Every combination of method, strategy, vehicles, reuse, adaptive and ε (groups of 2 where 2 divides)."""
+    grid = []
+    for method in METHODS:
+        for strategy in STRATEGIES:
+            for vehicles in VEHICLES:
+                for reuse in (False, True):
+                    for adaptive in (False, True):
+                        for epsilon in EPSILONS:
+                            grid.append(dict(method=method, strategy=strategy, vehicles=vehicles, reuse=reuse,
+                                             adaptive=adaptive, epsilon=epsilon,
+                                             replicates=(2 if vehicles % 2 == 0 else 1) if strategy == "groups"
+                                             else None))
+    return grid
+
+
+def tune_cases() -> list[dict]:
+    """Seeded runs on a noisy bowl: avg and split, few and many vehicles, adaptive or not, both answers."""
+    cases = []
+    for strategy, vehicles in (("avg", 2), ("split", 2), ("split", 8), ("groups", 4), ("avg", 64), ("split", 64)):
+        for adaptive in (False, True):
+            cases.append(dict(method="eql", strategy=strategy, vehicles=vehicles, adaptive=adaptive, epsilon=0.125,
+                              answer="model" if adaptive else "search", seed=vehicles + adaptive))
+    cases.append(dict(method="nsection", strategy="split", vehicles=8, adaptive=True, epsilon=0.05, answer="model",
+                      seed=3))
+    cases.append(dict(method="golden", strategy="split", vehicles=3, adaptive=True, epsilon=0.1, answer="search",
+                      seed=5, refly=True))
+    return cases
+
+
+def plan_numbers(case: dict) -> list[int]:
+    from mavtune.plan import make_plan
+    from mavtune.tuner import Settings
+
+    p = make_plan(Settings(space=SPACE, initial={"kd": 0.2}, **case))
+    return [p.rounds, p.rounds_max, p.evaluations]
+
+
+def digest(data) -> str:
+    """A short fingerprint of a long list (every assignment of every round)."""
+    return hashlib.sha256(json.dumps(data).encode()).hexdigest()
+
+
+def tune_numbers(case: dict) -> dict:
+    """Rounds, flights, every assignment and the gains and intervals as exact hex floats."""
+    import mavtune
+
+    case = dict(case)
+    seed, refly = case.pop("seed"), case.pop("refly", False)
+    draw = random.Random(seed)
+
+    def evaluate(assignments):  # a bowl with 25 % multiplicative noise and an occasional failed flight
+        out = []
+        for g in assignments:
+            c = ((g["kp"] - 0.63) ** 2 + 2 * (g["kd"] - 0.31) ** 2 + 0.02) * (1 + 0.25 * draw.gauss(0, 1))
+            out.append(float("nan") if draw.random() < 0.01 else c)
+        return out
+
+    from mavtune.tuner import Settings, run_tuning
+    from mavtune.fleet import CallableFleet
+
+    settings = Settings(space=SPACE, initial={"kd": 0.2}, bootstraps=2, refly=refly, seed=seed, **case)
+    result = run_tuning(settings, CallableFleet(evaluate, case["vehicles"]), draws=20)
+    return {
+        "rounds": len(result.rounds),
+        "assignments": digest([[a[r.gain].hex() for a in r.assignments] for r in result.rounds]),
+        "gains": {k: v.hex() for k, v in result.gains.items()},
+        "uncertainty": {k: {f: float(x).hex() for f, x in u.items()} for k, u in result.uncertainty.items()},
+        "noise": {k: float(v).hex() for k, v in result.noise.items()},
+        "p_correct": [[float(i.p_correct).hex() for i in s.iterations] for s in result.searches],
+    }
+
+
+def main() -> None:
+    plans = {json.dumps(c, sort_keys=True): plan_numbers(c) for c in plan_grid()}
+    tunes = {json.dumps(c, sort_keys=True): tune_numbers(c) for c in tune_cases()}
+    PINS.write_text(json.dumps({"plans": plans, "tunes": tunes}, indent=0, sort_keys=True) + "\n")
+    print(f"{PINS}: {len(plans)} plans, {len(tunes)} runs", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
