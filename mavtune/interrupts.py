@@ -1,13 +1,17 @@
 """Ctrl-C and SIGTERM for the `mavtune` command: one interrupt, noticed wherever it lands, never lost.
 
 `install()` makes SIGINT and SIGTERM raise KeyboardInterrupt once and remembers that they came (`received()`),
-so an interrupt that lands inside an import and surfaces as another exception is still reported as one.
+so an interrupt that lands inside an import and surfaces as another exception is still reported as one. One
+that lands in a finaliser (`__del__`, a weakref callback run by the garbage collector), where Python prints
+"Exception ignored" and carries on, is delivered again in the code that runs next.
 `deferred()` holds them while the run folder is being written; `time_limit()` bounds work done after one.
 """
 
 from __future__ import annotations
 
+import _thread
 import signal
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -17,6 +21,8 @@ from typing import Any
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _received: list[int] = []
 _first_at: list[float] = []  # time.monotonic() of the first
+_again: list[int] = []  # a signal whose exception a finaliser swallowed, being delivered again
+REDELIVER_S = 0.01  # how long after a swallowed interrupt it comes again: the finaliser is over by then
 
 
 class TimeLimit(BaseException):
@@ -35,6 +41,9 @@ def since_first() -> float:
 
 
 def _interrupt(signum: int, frame: object) -> None:
+    if _again:
+        _again.clear()
+        raise KeyboardInterrupt
     first = not _received
     if first:
         _first_at.append(time.monotonic())
@@ -44,9 +53,37 @@ def _interrupt(signum: int, frame: object) -> None:
 
 
 def install() -> None:
-    """SIGINT and SIGTERM raise KeyboardInterrupt (once), in the main thread."""
+    """SIGINT and SIGTERM raise KeyboardInterrupt (once), in the main thread; one a finaliser swallows is raised
+    again."""
     for s in SIGNALS:
         signal.signal(s, _interrupt)
+    if sys.unraisablehook is not _swallowed:
+        _swallowed.before = sys.unraisablehook
+        sys.unraisablehook = _swallowed
+
+
+def _swallowed(unraisable: Any) -> None:
+    """sys.unraisablehook: an interrupt or time limit raised inside a finaliser would be printed and lost (the
+    run would fly on); instead its signal comes again REDELIVER_S later, from a thread, once the finaliser is over
+    (raised from here it would land in this hook, as lost)."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _received:
+        signum = _received[0]
+        if not _again:
+            _again.append(signum)
+    elif isinstance(unraisable.exc_value, TimeLimit):
+        signum = signal.SIGALRM  # the time_limit's handler, while it is still installed, raises it again
+    else:
+        _swallowed.before(unraisable)
+        return
+    threading.Thread(target=_deliver_later, args=(signum,), name="mavtune-interrupt", daemon=True).start()
+
+
+_swallowed.before = sys.unraisablehook
+
+
+def _deliver_later(signum: int) -> None:
+    time.sleep(REDELIVER_S)
+    _thread.interrupt_main(signum)
 
 
 def _main_thread() -> bool:
