@@ -110,7 +110,7 @@ CASES = [
            lambda t: staged(t)) for f, says in [
         (["--payload", "0.9"], "payload_kg was 0.0, now 0.9"), (["-n", "4"], "vehicles was 2, now 4"),
         (["--seed", "7"], "seed was 0, now 7"), (["--strategy", "split"], "strategy was"),
-        (["--epsilon", "0.1"], "epsilon was 0.125"), (["--no-reuse"], "reuse was"),
+        (["--epsilon", "0.1"], "epsilon was 0.2"), (["--no-reuse"], "reuse was"),
         (["--method", "golden"], "method was"), (["--fleet", "zenoh"], "fleet")]],
     *[Case("resume", f"resume with a config file: {text.strip()}", lambda t, x=text: [
         "tune", "-q", "--config", toml(t, x), "--out", str(t / "run")], "error", says, lambda t: staged(t))
@@ -159,8 +159,11 @@ CASES = [
     Case("bounds", "config file missing", lambda t: ["plan", "--config", str(t / "none.toml")], "error",
          "does not exist"),
     Case("bounds", "-n 10000 plans in bounded time", lambda t: ["plan", "-n", "10000"], "ok"),
-    Case("bounds", "--max-rounds lets a long plan through", lambda t: ["plan", "--epsilon", "0.001", "--bootstraps",
+    Case("bounds", "--max-rounds lets a long plan through", lambda t: ["plan", "--epsilon", "0.01", "--bootstraps",
                                                                         "100", "--max-rounds", "1000000"], "ok"),
+    Case("bounds", "a plan too long to rehearse is refused in bounded time (EQL at ε 0.001: 1 001 points a search)",
+         lambda t: ["plan", "--epsilon", "0.001", "--bootstraps", "100", "--max-rounds", "1000000"], "error",
+         "rehearsed flights"),
     # settings the run will not use, flags for another fleet
     Case("unused", "replicates with avg", lambda t: ["plan", "--replicates", "2"], "warning", "replicates"),
     Case("unused", "[swarm] with the simulator", lambda t: ["plan", "--config", toml(t, "[swarm]\nsession = \"x\"\n")],

@@ -27,7 +27,8 @@ MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal
 NOISE_PROBES = 32  # costs of pure noise rehearsed per line search (seeded: the plan is reproducible)
 EXPECTED_PROBES = 16  # noisy bowls rehearsed for the expected rounds of adaptive averaging
 EXPECTED_NOISE = 0.2  # their flight-to-flight noise, relative (the simulator's is 10–35 %)
-ROUND_STEPS = 30  # a rehearsed round's own work (ask, assign, tell, settle), in the same steps
+ROUND_STEPS = 65  # a rehearsed round's own work (ask, assign, tell, settle), in the same steps (measured: a round of
+# 2 adaptive vehicles takes as long as 65 flights told)
 PLAN_WORK = 4_500_000  # rehearsed flights + other steps a plan may take (about 1.1 µs each: ~5 s); more is refused
 
 
