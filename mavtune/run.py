@@ -253,7 +253,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                         # interrupted run may (the resumed run gives them)
                     result = tuner.snapshot() if tuner is not None else None
                     summary = run_summary(config, plan, result, fleet, status, error, time.time() - started, ignored,
-                                       outcome)
+                                          outcome)
                     if tuner is not None or not (out_dir / "result.json").exists():  # else nothing was flown or
                         # replayed: the folder's result.json and report still describe its journal
                         (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
