@@ -86,7 +86,8 @@ def resample(make: Callable[[NoisePool], LineSearch], assign: Callable[[LineSear
 
     `make(pool)` builds a fresh search like the real one, `assign(search)` the points one round flies
     (with replicates, as the run's strategy does), `pool` is the run's noise and `resolution` how far the
-    answer may sit from the minimiser inside the real search's final bracket (`resolution()`). Unknown (NaN) when the noise was never measured or fewer than two points were.
+    answer may sit from the minimiser inside the real search's final bracket (`resolution()`). Unknown (NaN)
+    when the noise was never measured or fewer than two points were.
     """
     cv = pool.cv
     points = sorted(samples)
