@@ -165,10 +165,7 @@ def tune_command(
         folder = Path("runs") / time.strftime("tune-%Y%m%d-%H%M%S")
     if resume and not (folder / JOURNAL).is_file():
         raise MavtuneError(f"--resume: {folder / JOURNAL} does not exist")
-    if surface is not None:
-        from mavtune.sim.surface import read_csv
-
-        read_csv(surface)  # a missing or malformed surface is named before anything flies
+    _check_surface(surface)
     if stage and stage_rounds is None:
         from mavtune.run import plan_of
 
@@ -185,11 +182,16 @@ def report_command(
     """Draw a run folder's report (report.md and figures) again from its journal, flying nothing."""
     from mavtune.redraw import redraw
 
+    _check_surface(surface)
+    redraw(run_dir, surface)
+
+
+def _check_surface(surface: Path | None) -> None:
+    """A --surface that is missing or malformed is named before anything flies or is written."""
     if surface is not None:
         from mavtune.sim.surface import read_csv
 
-        read_csv(surface)  # a missing or malformed surface is named before anything is written
-    redraw(run_dir, surface)
+        read_csv(surface)
 
 
 bank_app = typer.Typer(help="A bank of tuned gains by vehicle mass, looked up by the mass estimator's reading.",
