@@ -15,9 +15,10 @@ from mavtune.sim.scenario import COST_NAMES, Scenario
 from mavtune.sim.tracker import DT_S, flight_reference
 
 # Batches smaller than this fly on the calling thread: the kernel flies chunks of K.LANES vehicles, one chunk per
-# thread, so a second thread has work from two full chunks on, and below that numba's thread launch costs more than
-# it gains (benchmarks/batch_crossover.py measures the crossover; results in benchmarks/results/).
-PARALLEL_FROM = 2 * K.LANES
+# thread, so a second thread has work from two chunks on (the second may be partly full); with one chunk the thread
+# launch buys nothing. Measured idle (benchmarks/batch_crossover.py): parallel is 0.88x serial's wall time at 33
+# vehicles, 0.52x at 64, and the same at 32 and below.
+PARALLEL_FROM = K.LANES + 1
 
 FAILURE_NAMES = {K.FAIL_NONFINITE: "non-finite state", K.FAIL_GROUND: "hit the ground", K.FAIL_TILT: "tilt > 90 deg"}
 

@@ -651,7 +651,7 @@ def _fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc
 def fly_batch(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
               t_fail):
     """Fly B vehicles (vehicle i: seeds[i], round_ids[i], gains kxz[i], kvz[i]) along `ref` (n, 9: p, v, a), in
-    chunks of LANES spread over numba's threads (worth its thread launch from a few chunks on: `batch.PARALLEL_FROM`)."""
+    chunks of LANES spread over numba's threads (worth its thread launch from two chunks on: `batch.PARALLEL_FROM`)."""
     b = seeds.shape[0]
     for c in prange((b + LANES - 1) // LANES):
         _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
