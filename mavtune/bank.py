@@ -126,7 +126,7 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
     from mavtune.run import run
     from mavtune.sim.airframe import MASS_KG
 
-    console = console or Console()
+    console = console or Console(emoji=False)
     out = Path(out)
     bank = GainBank.load(out / "bank.json", missing_ok=True)
     folders = [out / f"payload-{p:g}kg" for p in payloads_kg]

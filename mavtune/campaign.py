@@ -98,5 +98,5 @@ def run_in_folder(config: Any, files: dict[str, bytes]) -> tuple[dict[str, bytes
     with tempfile.TemporaryDirectory(prefix="mavtune-run-") as tmp:
         folder = Path(tmp) / "run"
         write_files(folder, files)
-        result = run(config, folder, console=Console(file=io.StringIO()), quiet=True)
+        result = run(config, folder, console=Console(file=io.StringIO(), emoji=False), quiet=True)
         return folder_files(folder), result

@@ -106,7 +106,7 @@ def plan_command(
 
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
                             flight__max_rounds=max_rounds, tuning__adaptive=adaptive)
-    console = Console()
+    console = Console(emoji=False)
     warn(console, cfg)
     console.print(plan_panel(cfg, plan_of(cfg)))
 
@@ -216,7 +216,7 @@ def bank_build(
         masses = [float(p) for p in payloads.split(",")]
     except ValueError:
         raise MavtuneError(f"--payloads must be numbers separated by commas, got {payloads!r}") from None
-    console = Console()
+    console = Console(emoji=False)
     bank = build(masses, out, lambda payload: config_from_flags(
         config, vehicles, strategy, None, None, None, None, None, None, tuning__seed=seed, sim__payload_kg=payload),
         scheduler=scheduler, console=console)
@@ -246,7 +246,7 @@ def bank_add(
     bank = GainBank.load(bank_file, missing_ok=True)
     bank.add(mass_kg, summary["gains"], str(run_dir), standard_errors(summary.get("uncertainty")))
     bank.save(bank_file)
-    _print_bank(Console(), bank)
+    _print_bank(Console(emoji=False), bank)
 
 
 @bank_app.command("lookup")

@@ -88,7 +88,7 @@ def redraw(out_dir: str | Path, surface: Path | None = None, console: Console | 
     then says the report is whole. Returns the report's path."""
     from mavtune.report import write_run_report
 
-    out_dir, console = Path(out_dir), console or Console()
+    out_dir, console = Path(out_dir), console or Console(emoji=False)
     result, config, status, summary = replay(out_dir)
     if summary is None:  # the run never wrote result.json: one from the journal, saying so
         summary = run_summary(config, plan_of(config), result, None, status, None if status == "finished" else

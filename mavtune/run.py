@@ -199,7 +199,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     says how it ended (`status`) and the report shows what was done; only a finished run returns its result.
     The report draws the final gains on `surface` (a surface.csv) or on `out_dir/surface.csv` if present.
     """
-    console = console or Console()
+    console = console or Console(emoji=False)
     out_dir = Path(out_dir)
     settings = config.settings()
     plan = plan_of(config)

@@ -80,10 +80,11 @@ def test_ignored_settings_are_warned_and_recorded(tmp_path):
 
     cfg = tmp_path / "c.toml"
     cfg.write_text("[tuning]\nreplicates = 2\nbootstraps = 1\n[swarm]\nsession = \"x\"\n")
-    code, out, _ = cli("tune", "-q", "-c", str(cfg), "--out", str(tmp_path / "run"))
+    code, out, _ = cli("tune", "-q", "-c", str(cfg), "--out", str(tmp_path / "run:rocket:"))
     assert code == 0
     assert "warning: tuning.replicates = 2 is ignored" in out and "warning: the [swarm] table is ignored" in out
-    warnings = json.loads((tmp_path / "run" / "result.json").read_text())["warnings"]
+    assert "run:rocket:" in out  # a name is printed as it is, never turned into an emoji
+    warnings = json.loads((tmp_path / "run:rocket:" / "result.json").read_text())["warnings"]
     assert len(warnings) == 2
 
 

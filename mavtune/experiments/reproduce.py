@@ -105,7 +105,7 @@ def reproduce(out_dir: str | Path, quick: bool = False, seed: int = 0, console: 
     from mavtune.sim import Scenario, SimFleet
     from mavtune.sim import surface as surf
 
-    console = console or Console()
+    console = console or Console(emoji=False)
     camp = campaign or (Campaign.quick(seed) if quick else Campaign.full(seed))
     out = out_folder(Path(out_dir))
     timings: dict[str, float] = {}
@@ -340,7 +340,7 @@ def reproduce_command(
     scheduler: Optional[str] = SchedulerOpt,
 ) -> None:
     """Regenerate the paper's experiments in the simulator, beside the paper's numbers and claims."""
-    console = Console()
+    console = Console(emoji=False)
     rep = reproduce(out, quick=quick, seed=seed, console=console, scheduler=scheduler)
     for c in rep.claims:
         console.print(f"{'[green]holds[/]' if c.holds else '[red]does not hold[/]'}  {c.claim}: {c.measured}",
