@@ -60,8 +60,9 @@ class Round:
 
 @dataclass
 class LineSearchRecord:
-    """One finished line search: which gain, in which bootstrap, its comparisons and result, every flight's
-    cost by point, its last bracket, and why it stopped narrowing early (None when it reached its tolerance)."""
+    """One line search: which gain, in which bootstrap, its comparisons and result, every flight's cost by point,
+    its last bracket, and why it stopped narrowing early (None when it reached its tolerance). The search under
+    way when a run stopped is one too (`TuningResult.in_progress`): result NaN, bracket where it stands."""
 
     bootstrap: int
     gain: str
@@ -77,7 +78,7 @@ class LineSearchRecord:
         return {
             "bootstrap": self.bootstrap, "gain": self.gain, "held": self.held, "result": self.result,
             "evaluations": self.evaluations, "brackets": [list(i.bracket) for i in self.iterations],
-            "stop_reason": self.stop_reason,
+            "bracket": list(self.bracket), "stop_reason": self.stop_reason,
             "comparisons": [
                 {"bracket": list(i.bracket), "points": list(i.points), "means": list(i.costs), "se": list(i.se),
                  "n": list(i.n), "best": i.best, "p_correct": i.p_correct}
@@ -98,6 +99,7 @@ class TuningResult:
     settings: dict[str, Any] = field(default_factory=dict)
     uncertainty: dict[str, dict[str, float]] = field(default_factory=dict)  # gain -> Interval.to_dict()
     noise: dict[str, float] = field(default_factory=dict)  # the pooled flight-to-flight noise: cv and its dof
+    in_progress: LineSearchRecord | None = None  # the line search under way when the run stopped, if any
 
     @property
     def flights(self) -> int:
@@ -115,6 +117,7 @@ class TuningResult:
             "uncertainty": self.uncertainty,
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],
+            "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
         }
 
 
@@ -243,14 +246,28 @@ class Tuner:
         self._dry_rounds = 0
         self.flown = 0  # rounds flown (not replayed) by this process
         self.pool = NoisePool()  # the run's flight-to-flight noise, pooled over every line search
+        self._active: tuple[int, str, Gains, Any] | None = None  # the search under way: bootstrap, gain, held, search
         self._uncertainty: tuple[int, dict[str, dict[str, float]]] = (-1, {})
 
     def snapshot(self) -> TuningResult:
-        """The run so far: final once `run()` has returned."""
+        """The run so far: final once `run()` has returned; else with the search under way as it stands after
+        the last round told (its bracket now, not when that round was planned)."""
+        stop_reason, in_progress = self.stop_reason, None
+        if self._active is not None and not self._active[3].done:  # (a done one is being recorded in searches)
+            bootstrap, name, held, search = self._active
+            in_progress = self._record(bootstrap, name, held, search, math.nan)
+            lo, hi = search.bracket
+            stop_reason = f"stopped in bootstrap {bootstrap} while tuning {name} in [{lo:.4g}, {hi:.4g}]"
         return TuningResult(gains=dict(self.gains), rounds=list(self.rounds), searches=list(self.searches),
-                            bootstraps=self.bootstrap, stop_reason=self.stop_reason,
+                            bootstraps=self.bootstrap, stop_reason=stop_reason,
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
-                            noise={"cv": self.pool.cv, "dof": self.pool.dof})
+                            noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress)
+
+    @staticmethod
+    def _record(bootstrap: int, name: str, held: Gains, search, result: float) -> LineSearchRecord:
+        """What a line search has done: its comparisons, flights by point, bracket and stop reason."""
+        return LineSearchRecord(bootstrap, name, held, list(search.history), result, search.evaluations,
+                                search.samples(), search.bracket, search.stop_reason)
 
     def uncertainty(self) -> dict[str, dict[str, float]]:
         """Per tuned gain its interval, from the flights of the last line search that set it."""
@@ -279,18 +296,15 @@ class Tuner:
             for name, (lo, hi) in s.space.items():
                 search = s.search(lo, hi, self.pool)
                 held = {n: v for n, v in self.gains.items() if n != name}
+                self._active = (self.bootstrap, name, held, search)
                 while not search.done:
-                    lo_now, hi_now = search.bracket
-                    self.stop_reason = (f"stopped in bootstrap {self.bootstrap} while tuning {name} in "
-                                        f"[{lo_now:.4g}, {hi_now:.4g}]")
                     self._round(search, self.bootstrap, name, self.gains)
                 if search.history or search.stop_reason is None:
                     self.gains[name] = search.result  # a search that decided nothing leaves the gain as it was
                 if search.stop_reason is not None:
                     undecided.append(f"{name}: {search.stop_reason}")
-                self.searches.append(LineSearchRecord(self.bootstrap, name, held, list(search.history),
-                                                      self.gains[name], search.evaluations, search.samples(),
-                                                      search.bracket, search.stop_reason))
+                self.searches.append(self._record(self.bootstrap, name, held, search, self.gains[name]))
+                self._active = None
             self.stop_reason = f"ran {limit} bootstraps"
             if undecided:
                 self.stop_reason = f"bootstrap {self.bootstrap}: " + "; ".join(undecided)

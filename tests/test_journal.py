@@ -205,6 +205,33 @@ def test_tuning_in_stages_flies_every_round_once_to_the_same_result(tmp_path):
     assert result.gains == reference.gains
 
 
+@pytest.mark.parametrize("strategy", ["avg", "split"])
+def test_a_stopped_run_states_its_search_as_the_next_round_of_an_uninterrupted_run_finds_it(tmp_path, strategy):
+    """After k rounds the search under way (`in_progress`) is where round k of an uninterrupted run is planned:
+    same gain and bracket, its comparisons so far the first of that search's; the stop reason names that bracket."""
+    from mavtune.tuner import Settings, StageDone, Tuner, run_tuning
+
+    settings = Settings(strategy=strategy, vehicles=2, **SETTINGS)
+    reference = run_tuning(settings, CountingFleet(2))
+    assert reference.in_progress is None and reference.to_dict()["in_progress"] is None
+    for k in range(1, len(reference.rounds)):
+        with Journal(tmp_path / f"{k}.sqlite") as book:
+            book.bind(settings.fingerprint())
+            tuner = Tuner(settings, CountingFleet(2), book, stage_rounds=k)
+            with pytest.raises(StageDone):
+                tuner.run()
+        now, planned = tuner.snapshot(), reference.rounds[k]
+        current = now.in_progress
+        assert (current.bootstrap, current.gain, current.bracket) == (planned.bootstrap, planned.gain,
+                                                                      planned.bracket)
+        assert math.isnan(current.result) and now.to_dict()["in_progress"]["brackets"] == [
+            list(i.bracket) for i in current.iterations]
+        whole = next(s for s in reference.searches if (s.bootstrap, s.gain) == (current.bootstrap, current.gain))
+        assert whole.iterations[:len(current.iterations)] == current.iterations
+        assert now.stop_reason.endswith(f"tuning {planned.gain} in [{planned.bracket[0]:.4g}, "
+                                        f"{planned.bracket[1]:.4g}]")
+
+
 def test_stages_need_a_journal():
     from mavtune.tuner import Settings, run_tuning
 

@@ -65,7 +65,9 @@ def test_the_redrawn_report_is_the_one_the_run_wrote(request, tmp_path, which):
 def test_a_stage_report_shows_the_gains_so_far_not_final(stage):
     text = (stage / "report.md").read_text()
     assert "in progress after 3 rounds" in text and "## Gains so far (not final)" in text
-    assert "## Final gains\n" not in text and "## Line searches so far" in text and "in progress: bracket" in text
+    assert "## Final gains\n" not in text and "## Line searches so far" in text
+    lo, hi = result_of(stage)["in_progress"]["bracket"]  # where the search stands after round 2, not as planned
+    assert f"in progress: bracket [{lo:.4g}, {hi:.4g}] after round 2" in text
 
 
 def test_a_run_killed_before_result_json_gets_one_saying_so(stage, tmp_path):

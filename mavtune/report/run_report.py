@@ -180,6 +180,9 @@ def _line_searches(rep: Report) -> list[str]:
         if v.finished:
             state = f"finished: {md.num(v.result, 4)}" + (f" (stopped narrowing: {v.stop_reason})"
                                                           if v.stop_reason else "")
+        elif all(map(math.isfinite, v.last_bracket)):
+            lo, hi = v.last_bracket
+            state = f"in progress: bracket [{md.num(lo, 4)}, {md.num(hi, 4)}] after round {last}"
         else:
             lo, hi = v.brackets[-1] if v.brackets else (math.nan, math.nan)
             state = f"in progress: bracket [{md.num(lo, 4)}, {md.num(hi, 4)}] as its last round was planned"

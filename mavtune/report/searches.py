@@ -80,7 +80,7 @@ class SearchView:
     comparisons: list[Comparison] = field(default_factory=list)
     result: float = NAN
     brackets: list[tuple[float, float]] = field(default_factory=list)  # of each round when it was planned
-    final_bracket: tuple[float, float] = (NAN, NAN)  # the bracket the search ended with, if recorded
+    last_bracket: tuple[float, float] = (NAN, NAN)  # where it ended, or (unfinished) stands now, if recorded
     stop_reason: str | None = None  # why the search stopped narrowing before its tolerance, if it did
 
     @property
@@ -157,7 +157,8 @@ def search_views(result) -> list[SearchView]:
     """The line searches of `result` (a TuningResult), finished ones with their comparisons, in flight order."""
     rounds = list(getattr(result, "rounds", None) or [])
     records = list(getattr(result, "searches", None) or [])
-    contract = _contract_searches(result)
+    given = _contract(result)
+    contract = [s if isinstance(s, dict) else {} for s in given.get("searches") or []]
     space = (getattr(result, "settings", None) or {}).get("space") or {}
     views, used = [], set()
     for bootstrap, gain, indices in search_rounds(rounds):
@@ -168,21 +169,31 @@ def search_views(result) -> list[SearchView]:
                   if j not in used and s.bootstrap == bootstrap and s.gain == gain), None)
         if j is not None:
             used.add(j)
-            view.result = as_float(records[j].result)
-            end = getattr(records[j], "bracket", None)
-            if isinstance(end, (tuple, list)) and len(end) == 2:
-                view.final_bracket = (as_float(end[0]), as_float(end[1]))
-            reason = getattr(records[j], "stop_reason", None)
-            view.stop_reason = str(reason) if reason else None
-            given = contract[j].get("comparisons") if j < len(contract) else None
-            iterations = list(getattr(records[j], "iterations", None) or [])
-            view.comparisons = (_from_contract(given) if isinstance(given, list)
-                                else _from_iterations(iterations, view.points, width))
-            if len(iterations) == len(view.comparisons):
-                for c, it in zip(view.comparisons, iterations):
-                    c.compared = [as_float(x) for x in it.costs]
+            _fill(view, records[j], contract[j] if j < len(contract) else {}, width)
         views.append(view)
+    current = getattr(result, "in_progress", None)
+    if current is not None and views and not views[-1].finished and \
+            (views[-1].bootstrap, views[-1].gain) == (current.bootstrap, current.gain):
+        _fill(views[-1], current, given.get("in_progress") or {}, _width(space.get(current.gain)))
     return views
+
+
+def _fill(view: SearchView, record, given: dict[str, Any], width: float) -> None:
+    """Set what a line search's record says on its view: result (NaN while under way), last bracket, stop reason
+    and comparisons (as the tuner's dict states them, else from the record's iterations)."""
+    view.result = as_float(record.result)
+    end = getattr(record, "bracket", None)
+    if isinstance(end, (tuple, list)) and len(end) == 2:
+        view.last_bracket = (as_float(end[0]), as_float(end[1]))
+    reason = getattr(record, "stop_reason", None)
+    view.stop_reason = str(reason) if reason else None
+    comparisons = given.get("comparisons") if isinstance(given, dict) else None
+    iterations = list(getattr(record, "iterations", None) or [])
+    view.comparisons = (_from_contract(comparisons) if isinstance(comparisons, list)
+                        else _from_iterations(iterations, view.points, width))
+    if len(iterations) == len(view.comparisons):
+        for c, it in zip(view.comparisons, iterations):
+            c.compared = [as_float(x) for x in it.costs]
 
 
 def _width(bounds: Any) -> float:
@@ -193,13 +204,13 @@ def _width(bounds: Any) -> float:
         return 1.0
 
 
-def _contract_searches(result) -> list[dict[str, Any]]:
-    """`result.to_dict()["searches"]`, or [] when the result cannot say (the tuner's dict is the contract)."""
+def _contract(result) -> dict[str, Any]:
+    """`result.to_dict()`, or {} when the result cannot say (the tuner's dict is the contract)."""
     try:
-        searches = result.to_dict().get("searches") or []
+        given = result.to_dict()
     except (AttributeError, TypeError, ValueError):  # a result that cannot serialise itself still gets a report
-        return []
-    return [s if isinstance(s, dict) else {} for s in searches]
+        return {}
+    return given if isinstance(given, dict) else {}
 
 
 def _from_contract(given: list) -> list[Comparison]:

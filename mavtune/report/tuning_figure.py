@@ -170,15 +170,15 @@ def _cost_panel(ax, view: SearchView | None, colour: dict, bootstrap: int, gain:
 
 
 def _ladder_panel(ax, view: SearchView | None) -> None:
-    """The comparisons top to bottom: bracket (grey), points (ticks) and the point kept (green); then the bracket
-    the search ended with."""
+    """The comparisons top to bottom: bracket (grey), points (ticks) and the point kept (green); then its last
+    bracket (where it ended, or where an unfinished search stands)."""
     ax.tick_params(labelsize=7)
     ax.set_yticks([])
     if view is None:
         return
     rows = [(c.bracket, c.points, c.best) for c in view.comparisons]
-    if rows and all(drawable(b) for b in view.final_bracket):
-        rows.append((view.final_bracket, [], -1))  # where the last comparison left the bracket
+    if rows and all(drawable(b) for b in view.last_bracket):
+        rows.append((view.last_bracket, [], -1))  # where the last comparison left the bracket
     if not rows:  # an unfinished or unrecorded search: the brackets its rounds were planned in
         seen: list[tuple[float, float]] = []
         for br in view.brackets:
