@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections import Counter
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -29,7 +30,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Status
 from mavtune.plan import clock
 from mavtune.report import markdown as md
-from mavtune.report.searches import SearchView, noise, search_views, uncertainty
+from mavtune.report.searches import SearchView, flown_point, noise, search_views, uncertainty
 from mavtune.report.traces import has_traces, vehicle_order
 
 REPORT = "report.md"
@@ -327,7 +328,9 @@ def _settings_section(result, config, summary: dict[str, Any]) -> list[str]:
                  ["space", ", ".join(f"{n} ∈ [{lo:g}, {hi:g}]" for n, (lo, hi) in s.get("space", {}).items())],
                  ["start gains", ", ".join(f"{n} = {v:.4g}" for n, v in (s.get("initial") or {}).items())]]
     rows.append(["bootstraps", f"{result.bootstraps} ({result.stop_reason})"])
-    rows.append(["vehicles", ", ".join(vehicle_order(result.rounds)) or "—"])
+    names = vehicle_order(result.rounds)
+    rows.append(["vehicles", ", ".join(names) or "—" if len(names) <= WIDE_FLEET else
+                 f"{len(names)}: {', '.join(names[:3])}, …, {names[-1]}"])
     fleet = summary.get("fleet") or getattr(getattr(config, "fleet", None), "kind", None)
     if fleet:
         rows.append(["fleet", fleet])
@@ -385,22 +388,53 @@ def _plan(result, config, vehicles: int, round_s: float) -> dict[str, Any] | Non
     return {"rounds": p.rounds, "rounds_max": p.rounds_max, "flight_time_s": p.flight_time_s}
 
 
+WIDE_FLEET = 8  # more vehicles than this: the rounds table gives each point flown, not each vehicle's columns
+
+
 def _rounds_table(rounds: list) -> str:
-    """One row per round: bracket, each vehicle's point and cost, and what went wrong."""
+    """One row per round: bracket, each vehicle's point and cost (for a larger fleet than WIDE_FLEET: each point
+    flown, its flights and their mean cost), and what went wrong."""
     vehicles = vehicle_order(rounds)
-    header = ["round", "bootstrap", "gain", "bracket"] + [f"{v} point" for v in vehicles] + \
-             [f"{v} cost" for v in vehicles] + ["status"]
+    wide = len(vehicles) > WIDE_FLEET
+    header = ["round", "bootstrap", "gain", "bracket"] + (["points flown: flights, mean cost"] if wide else
+                                                          [f"{v} point" for v in vehicles] +
+                                                          [f"{v} cost" for v in vehicles]) + ["status"]
     rows = []
     for r in rounds:
-        by = {f.vehicle: f for f in r.flights}
-        points = [md.num(by[v].gains.get(r.gain, math.nan), 5) if v in by else "—" for v in vehicles]
-        costs = [md.num(by[v].cost, 5) if v in by and by[v].status is not Status.LOST else "—" for v in vehicles]
-        statuses = [f.status.value for f in r.flights]
-        status = "ok" if all(s == "ok" for s in statuses) else ", ".join(
-            f"{f.vehicle} {f.status.value}" for f in r.flights if f.status is not Status.OK)
-        rows.append([r.index, r.bootstrap, r.gain, f"[{r.bracket[0]:.5g}, {r.bracket[1]:.5g}]", *points, *costs,
-                     status + (" (journal)" if getattr(r, "replayed", False) else "")])
-    return md.table(header, rows, ["r", "r", "l", "l"] + ["r"] * (2 * len(vehicles)) + ["l"])
+        if wide:
+            flown = [_points_flown(r)]
+        else:
+            by = {f.vehicle: f for f in r.flights}
+            flown = [md.num(by[v].gains.get(r.gain, math.nan), 5) if v in by else "—" for v in vehicles] + \
+                    [md.num(by[v].cost, 5) if v in by and by[v].status is not Status.LOST else "—" for v in vehicles]
+        rows.append([r.index, r.bootstrap, r.gain, f"[{r.bracket[0]:.5g}, {r.bracket[1]:.5g}]", *flown,
+                     _round_status(r) + (" (journal)" if getattr(r, "replayed", False) else "")])
+    return md.table(header, rows, ["r", "r", "l", "l"] + ["r"] * (len(header) - 5) + ["l"])
+
+
+def _points_flown(rnd) -> str:
+    """Each point of a round, in order: `point ×flights: mean cost` over its flights that returned one."""
+    by_point: dict[float, list] = {}
+    for i, f in enumerate(rnd.flights):
+        by_point.setdefault(flown_point(rnd, i, rnd.gain), []).append(f)
+    parts = []
+    for point, flights in by_point.items():
+        costs = [float(f.cost) for f in flights if f.status is not Status.LOST and math.isfinite(f.cost)]
+        parts.append(f"{md.num(point, 5)} ×{len(flights)}: " + (md.num(math.fsum(costs) / len(costs), 5)
+                                                                  if costs else "—"))
+    return "; ".join(parts)
+
+
+def _round_status(rnd, named: int = WIDE_FLEET) -> str:
+    """`ok`, else the vehicles whose flight was not (the first `named` of them, then the count by status)."""
+    bad = [f for f in rnd.flights if f.status is not Status.OK]
+    if not bad:
+        return "ok"
+    text = ", ".join(f"{f.vehicle} {f.status.value}" for f in bad[:named])
+    if len(bad) > named:
+        counts = Counter(f.status.value for f in bad)
+        text += f" … {len(bad)} in all (" + ", ".join(f"{n} {s}" for s, n in counts.items()) + ")"
+    return text
 
 
 def _events_table(events: list) -> str:

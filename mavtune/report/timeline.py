@@ -28,6 +28,7 @@ from mavtune.report.traces import (  # noqa: E402
 
 VEHICLE_OFFSET_M = 1.0  # the paper lowers the second vehicle's curves by 1 m
 MAX_LOG_TICKS = 6  # labelled ticks on a log axis; more collide on a panel 1.8 in high
+FLOAT_DECADES = 307.0  # a log axis ends within the normal floats (1e-307 to 1e307), whatever the costs
 LABEL_MIN_IN = 0.5  # a line search's band gets its name on top when it is at least this wide, in
 
 
@@ -206,8 +207,11 @@ def log_ticks(low: float, high: float, most: int = MAX_LOG_TICKS) -> list[float]
 def log_axis(ax, low: float, high: float) -> None:
     """A log y axis over [low, high] with a few labelled round numbers that never collide."""
     ax.set_yscale("log")
-    pad = (high / low) ** 0.05 if high > low else 1.5
-    ax.set_ylim(low / pad, high * pad)
-    ax.yaxis.set_major_locator(FixedLocator(log_ticks(low / pad, high * pad)))
+    # padded in decades and kept within the normal floats: high / low can overflow (9e15 / 2e-313 = inf)
+    lo, hi = (min(max(math.log10(v), -FLOAT_DECADES), FLOAT_DECADES) for v in (low, high))
+    pad = 0.05 * (hi - lo) if hi > lo else math.log10(1.5)
+    bottom, top = 10.0 ** max(lo - pad, -FLOAT_DECADES), 10.0 ** min(hi + pad, FLOAT_DECADES)
+    ax.set_ylim(bottom, top)
+    ax.yaxis.set_major_locator(FixedLocator(log_ticks(bottom, top)))
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
     ax.yaxis.set_minor_formatter(NullFormatter())

@@ -175,3 +175,48 @@ def test_a_surface_file_that_does_not_parse_is_one_line_error(tmp_path):
     bad.write_text("kp,kd\n0,0\n")
     with pytest.raises(mavtune.errors.MavtuneError, match="no column 'mean_cost'"):
         write_run_report(tmp_path, _result({"kp": 0.5, "kd": 0.5}, []))
+
+
+class _Crowd:
+    """40 vehicles, more than the rounds table gives columns to; in round 2 the first ten are lost, one fails."""
+
+    size = 40
+
+    def fly(self, assignments, round_id):
+        out = []
+        for i, g in enumerate(assignments):
+            cost, status = _quadratic([g])[0] + 0.001 * i, Status.OK
+            if round_id == 2 and i < 10:
+                cost, status = math.nan, Status.LOST
+            elif round_id == 2 and i == 10:
+                cost, status = 50.0, Status.FAILED
+            out.append(Flight(vehicle=f"uav{i}", gains=dict(g), cost=cost, status=status))
+        return out
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize("strategy", ["avg", "split"])
+def test_a_large_fleet_gets_one_rounds_column_of_points_not_two_per_vehicle(tmp_path, strategy):
+    from mavtune.report.run_report import WIDE_FLEET
+
+    assert _Crowd.size > WIDE_FLEET
+    result = mavtune.tune(_Crowd(), strategy=strategy, bootstraps=1, epsilon=0.02)
+    text = write_run_report(tmp_path, result).read_text()
+    assert "| vehicles | 40: uav0, uav1, uav2, …, uav39 |" in text
+    rows = _table_rows(text, "## Rounds")
+    assert len(rows) == len(result.rounds) >= 3 and all(len(row) == 6 for row in rows)
+    for row, rnd in zip(rows, result.rounds):
+        stated = [re.fullmatch(r"(\S+) ×(\d+): (\S+)", part).groups() for part in row[4].split("; ")]
+        points: dict[float, list] = {}
+        for f in rnd.flights:
+            points.setdefault(f.gains[rnd.gain], []).append(f)
+        assert [float(p) for p, _, _ in stated] == pytest.approx(list(points), rel=1e-4)
+        assert [int(n) for _, n, _ in stated] == [len(fs) for fs in points.values()]
+        returned = [[f.cost for f in fs if f.status is not Status.LOST] for fs in points.values()]
+        assert [m == "—" for _, _, m in stated] == [not c for c in returned]  # a point whose flights were all lost
+        assert [float(m) for _, _, m in stated if m != "—"] == pytest.approx([sum(c) / len(c) for c in returned if c],
+                                                                            rel=1e-4)
+    assert rows[2][-1].startswith("uav0 lost, uav1 lost") and rows[2][-1].endswith("… 11 in all (10 lost, 1 failed)")
+    assert rows[1][-1] == "ok"

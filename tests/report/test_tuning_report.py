@@ -173,6 +173,23 @@ def test_log_ticks_are_few_and_inside_the_range(low, high):
     assert all(low * 0.999 <= t <= high * 1.001 for t in ticks)
 
 
+@given(st.floats(min_value=5e-324, max_value=1.7e308), st.floats(min_value=5e-324, max_value=1.7e308))
+@settings(max_examples=60, deadline=None)
+def test_a_log_axis_spans_any_positive_costs_within_the_normal_floats(a, b):
+    """Costs from 2e-313 to 9e15 once made the axis padding overflow (high / low = inf) and log10(0) fail."""
+    import matplotlib.pyplot as plt
+
+    from mavtune.report.timeline import log_axis
+
+    fig, ax = plt.subplots()
+    try:
+        log_axis(ax, min(a, b), max(a, b))
+        bottom, top = ax.get_ylim()
+        assert 1e-308 < bottom < top < 1e308 and len(ax.yaxis.get_major_locator()()) >= 1
+    finally:
+        plt.close(fig)
+
+
 def _round(k: int, flights: list[Flight], gain: str = "kp", assignments=None, bootstrap: int = 1) -> Round:
     return Round(k, bootstrap, gain, (0.0, 1.0), assignments if assignments is not None else
                  [dict(f.gains) for f in flights], flights, 0.0, 9.0)
