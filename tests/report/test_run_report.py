@@ -84,18 +84,21 @@ def test_surface_in_run_folder_gets_final_gains(tmp_path):
 
 
 class _FlakyFleet:
-    """Two vehicles; vehicle 1 is lost in round 1 and fails (diverges) in round 3."""
+    """`size` vehicles uav1, uav2, …: those at the indices in lost[round] are lost in that round, those in
+    failed[round] fail (diverged: cost 50); vehicle i's cost is raised by spread·i. Default: 2 vehicles, the
+    second lost in round 1 and failed in round 3."""
 
-    size = 2
+    def __init__(self, size=2, lost=None, failed=None, spread=0.0):
+        self.size, self.spread = size, spread
+        self.lost, self.failed = lost if lost is not None else {1: {1}}, failed if failed is not None else {3: {1}}
 
     def fly(self, assignments, round_id):
         out = []
         for i, g in enumerate(assignments):
-            cost = _quadratic([g])[0]
-            status = Status.OK
-            if i == 1 and round_id == 1:
+            cost, status = _quadratic([g])[0] + self.spread * i, Status.OK
+            if i in self.lost.get(round_id, ()):
                 cost, status = math.nan, Status.LOST
-            elif i == 1 and round_id == 3:
+            elif i in self.failed.get(round_id, ()):
                 cost, status = 50.0, Status.FAILED
             out.append(Flight(vehicle=f"uav{i + 1}", gains=dict(g), cost=cost, status=status))
         return out
@@ -177,34 +180,15 @@ def test_a_surface_file_that_does_not_parse_is_one_line_error(tmp_path):
         write_run_report(tmp_path, _result({"kp": 0.5, "kd": 0.5}, []))
 
 
-class _Crowd:
-    """40 vehicles, more than the rounds table gives columns to; in round 2 the first ten are lost, one fails."""
-
-    size = 40
-
-    def fly(self, assignments, round_id):
-        out = []
-        for i, g in enumerate(assignments):
-            cost, status = _quadratic([g])[0] + 0.001 * i, Status.OK
-            if round_id == 2 and i < 10:
-                cost, status = math.nan, Status.LOST
-            elif round_id == 2 and i == 10:
-                cost, status = 50.0, Status.FAILED
-            out.append(Flight(vehicle=f"uav{i}", gains=dict(g), cost=cost, status=status))
-        return out
-
-    def close(self):
-        pass
-
-
 @pytest.mark.parametrize("strategy", ["avg", "split"])
 def test_a_large_fleet_gets_one_rounds_column_of_points_not_two_per_vehicle(tmp_path, strategy):
     from mavtune.report.run_report import WIDE_FLEET
 
-    assert _Crowd.size > WIDE_FLEET
-    result = mavtune.tune(_Crowd(), strategy=strategy, bootstraps=1, epsilon=0.02)
+    crowd = _FlakyFleet(40, lost={2: set(range(10))}, failed={2: {10}}, spread=0.001)  # in round 2: 10 lost, 1 failed
+    assert crowd.size > WIDE_FLEET
+    result = mavtune.tune(crowd, strategy=strategy, bootstraps=1, epsilon=0.02)
     text = write_run_report(tmp_path, result).read_text()
-    assert "| vehicles | 40: uav0, uav1, uav2, …, uav39 |" in text
+    assert "| vehicles | 40: uav1, uav2, uav3, …, uav40 |" in text
     rows = _table_rows(text, "## Rounds")
     assert len(rows) == len(result.rounds) >= 3 and all(len(row) == 6 for row in rows)
     for row, rnd in zip(rows, result.rounds):
@@ -218,5 +202,5 @@ def test_a_large_fleet_gets_one_rounds_column_of_points_not_two_per_vehicle(tmp_
         assert [m == "—" for _, _, m in stated] == [not c for c in returned]  # a point whose flights were all lost
         assert [float(m) for _, _, m in stated if m != "—"] == pytest.approx([sum(c) / len(c) for c in returned if c],
                                                                             rel=1e-4)
-    assert rows[2][-1].startswith("uav0 lost, uav1 lost") and rows[2][-1].endswith("… 11 in all (10 lost, 1 failed)")
+    assert rows[2][-1].startswith("uav1 lost, uav2 lost") and rows[2][-1].endswith("… 11 in all (10 lost, 1 failed)")
     assert rows[1][-1] == "ok"
