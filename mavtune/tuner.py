@@ -246,25 +246,26 @@ class Tuner:
         self._dry_rounds = 0
         self.flown = 0  # rounds flown (not replayed) by this process
         self.pool = NoisePool()  # the run's flight-to-flight noise, pooled over every line search
-        self._active: tuple[int, str, Gains, Any] | None = None  # the search under way: bootstrap, gain, held, search
+        self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[int, dict[str, dict[str, float]]] = (-1, {})
 
     def snapshot(self) -> TuningResult:
         """The run so far: final once `run()` has returned; else with the search under way as it stands after
         the last round told (its bracket now, not when that round was planned)."""
         stop_reason, in_progress = self.stop_reason, None
-        if self._active is not None and not self._active[3].done:  # (a done one is being recorded in searches)
+        if self._active is not None:
             bootstrap, name, held, search = self._active
-            in_progress = self._record(bootstrap, name, held, search, math.nan)
             lo, hi = search.bracket
             stop_reason = f"stopped in bootstrap {bootstrap} while tuning {name} in [{lo:.4g}, {hi:.4g}]"
+            if not search.done:  # (a done one is being added to `searches`)
+                in_progress = self._record(bootstrap, name, held, search, math.nan)
         return TuningResult(gains=dict(self.gains), rounds=list(self.rounds), searches=list(self.searches),
                             bootstraps=self.bootstrap, stop_reason=stop_reason,
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress)
 
     @staticmethod
-    def _record(bootstrap: int, name: str, held: Gains, search, result: float) -> LineSearchRecord:
+    def _record(bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason."""
         return LineSearchRecord(bootstrap, name, held, list(search.history), result, search.evaluations,
                                 search.samples(), search.bracket, search.stop_reason)

@@ -30,7 +30,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Status
 from mavtune.plan import clock
 from mavtune.report import markdown as md
-from mavtune.report.searches import SearchView, flown_point, noise, search_views, uncertainty
+from mavtune.report.searches import SearchView, as_float, flown_point, noise, search_views, uncertainty
 from mavtune.report.traces import has_traces, vehicle_order
 
 REPORT = "report.md"
@@ -419,7 +419,7 @@ def _points_flown(rnd) -> str:
         by_point.setdefault(flown_point(rnd, i, rnd.gain), []).append(f)
     parts = []
     for point, flights in by_point.items():
-        costs = [float(f.cost) for f in flights if f.status is not Status.LOST and math.isfinite(f.cost)]
+        costs = [c for f in flights if f.status is not Status.LOST and math.isfinite(c := as_float(f.cost))]
         parts.append(f"{md.num(point, 5)} ×{len(flights)}: " + (md.num(math.fsum(costs) / len(costs), 5)
                                                                   if costs else "—"))
     return "; ".join(parts)

@@ -16,7 +16,7 @@ from mavtune.sim.tracker import DT_S, flight_reference
 
 # Batches smaller than this fly on the calling thread: the kernel flies chunks of K.LANES vehicles, one chunk per
 # thread, so a second thread has work from two chunks on (the second may be partly full); with one chunk the thread
-# launch buys nothing. Measured idle (benchmarks/batch_crossover.py): parallel is 0.88x serial's wall time at 33
+# launch buys nothing. Measured idle (benchmarks/batch_crossover.py): parallel is 0.84x serial's wall time at 33
 # vehicles, 0.52x at 64, and the same at 32 and below.
 PARALLEL_FROM = K.LANES + 1
 
