@@ -102,6 +102,16 @@ def slowest_imports(argv: list[str], n: int = 12) -> list[tuple[int, str]]:
     return sorted(rows, reverse=True)[:n]
 
 
+def environment() -> str:
+    """Which Python ran the commands: a venv of its own (as .ci/run and the README build) or one that also sees
+    the system's site-packages (more packages: pydantic's plugin scan and site's .pth files take longer)."""
+    if sys.prefix == sys.base_prefix:
+        return "the system Python"
+    cfg = Path(sys.prefix) / "pyvenv.cfg"
+    shared = cfg.exists() and "include-system-site-packages = true" in cfg.read_text()
+    return "a venv that also sees the system site-packages" if shared else "a venv of its own (as .ci/run builds)"
+
+
 def main(repeats: int = 15, before: str | None = None) -> None:
     if before:
         COMMANDS.update({f"before: mavtune {a}": from_folder(before, a) for a in ("--help", "plan")})
@@ -116,7 +126,9 @@ def main(repeats: int = 15, before: str | None = None) -> None:
     lines = ["# CLI start-up", "",
              f"`{' '.join(Path(a).name if a == PYTHON else a for a in [PYTHON, *sys.argv])}`, {repeats} runs each, "
              f"interleaved; {os.cpu_count()} cores; load average {load_before[0]:.1f} before, "
-             f"{load_after[0]:.1f} after ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).", "",
+             f"{load_after[0]:.1f} after ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}); {environment()}."
+             + (" `before:` runs its folder with runpy, without the editable install's import hook." if before else ""),
+             "",
              "| command | median wall, s | median CPU, s | CPU minus bare Python, s | CPU minus the floor, s |",
              "| --- | ---: | ---: | ---: | ---: |"]
     bare_cpu = statistics.median(c for _, c in samples["python -c pass"])
