@@ -6,10 +6,10 @@ Each command runs REPEATS times, interleaved so that load drifts hit all of them
 wall time and the median CPU time (user + sys of the child, from resource.getrusage), with the load average.
 The slowest imports of `mavtune plan` come from `python -X importtime`. With `--before DIR` (a folder holding
 another version's `mavtune/` package, e.g. `git archive BASE mavtune | tar -x -C DIR`) that version's `--help` and
-`plan` are timed in the same interleaved rounds, so the comparison shares the load. Writes
-benchmarks/results/cli_startup.md.
+`plan` are timed in the same interleaved rounds, so the comparison shares the load (repeat it for several versions).
+Writes benchmarks/results/cli_startup.md.
 
-    .venv/bin/python benchmarks/cli_startup.py [REPEATS] [--before DIR]
+    .venv/bin/python benchmarks/cli_startup.py [REPEATS] [--before DIR]...
 """
 
 from __future__ import annotations
@@ -69,9 +69,10 @@ COMMANDS = {
 
 def from_folder(folder: str, *args: str) -> list[str]:
     """argv running `mavtune ARGS` from the package in `folder` instead of the installed (editable) one."""
+    start = ("runpy.run_module('mavtune', run_name='__main__')" if (Path(folder) / "mavtune" / "__main__.py").exists()
+             else "from mavtune.cli import main; main()")  # the entry point before mavtune/__main__.py existed
     code = ("import runpy, sys; sys.meta_path = [f for f in sys.meta_path if 'editable' not in repr(f).lower()]; "
-            f"sys.path.insert(0, {folder!r}); sys.argv = ['mavtune', *sys.argv[1:]]; "
-            "runpy.run_module('mavtune', run_name='__main__')")
+            f"sys.path.insert(0, {folder!r}); sys.argv = ['mavtune', *sys.argv[1:]]; {start}")
     return [PYTHON, "-c", code, *args]
 
 
@@ -112,9 +113,10 @@ def environment() -> str:
     return "a venv that also sees the system site-packages" if shared else "a venv of its own (as .ci/run builds)"
 
 
-def main(repeats: int = 15, before: str | None = None) -> None:
-    if before:
-        COMMANDS.update({f"before: mavtune {a}": from_folder(before, a) for a in ("--help", "plan")})
+def main(repeats: int = 15, befores: list[str] | None = None) -> None:
+    for before in befores or []:
+        label = f"before ({Path(before).name})" if len(befores) > 1 else "before"
+        COMMANDS.update({f"{label}: mavtune {a}": from_folder(before, a) for a in ("--help", "plan")})
     load_before = os.getloadavg()
     samples: dict[str, list[tuple[float, float]]] = {name: [] for name in COMMANDS}
     for name, argv in COMMANDS.items():
@@ -127,7 +129,7 @@ def main(repeats: int = 15, before: str | None = None) -> None:
              f"`{' '.join(Path(a).name if a == PYTHON else a for a in [PYTHON, *sys.argv])}`, {repeats} runs each, "
              f"interleaved; {os.cpu_count()} cores; load average {load_before[0]:.1f} before, "
              f"{load_after[0]:.1f} after ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}); {environment()}."
-             + (" `before:` runs its folder with runpy, without the editable install's import hook." if before else ""),
+             + (" `before` runs its folder with runpy, without the editable install's import hook." if befores else ""),
              "",
              "| command | median wall, s | median CPU, s | CPU minus bare Python, s | CPU minus the floor, s |",
              "| --- | ---: | ---: | ---: | ---: |"]
@@ -147,6 +149,6 @@ def main(repeats: int = 15, before: str | None = None) -> None:
 
 if __name__ == "__main__":
     argv = sys.argv[1:]
-    folder = argv[argv.index("--before") + 1] if "--before" in argv else None
-    numbers = [a for a in argv if a.isdigit()]
-    main(int(numbers[0]) if numbers else 15, folder)
+    folders = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--before"]
+    numbers = [a for i, a in enumerate(argv) if a.isdigit() and (i == 0 or argv[i - 1] != "--before")]
+    main(int(numbers[0]) if numbers else 15, folders)

@@ -61,6 +61,17 @@ def interrupt(folder: Path, anchor: str, after: float, args: list[str], signum: 
     return {"code": proc.returncode, "err": err.strip(), "exit_s": took, "cpu_s": cpu} | folder_state(folder, err)
 
 
+def states_search_under_way(text: str, result: dict) -> bool:
+    """The report puts the search under way where result.json's `in_progress` has it: its bracket after the last
+    round (when that search has flown a round; when none, there is nothing to state)."""
+    current = result.get("in_progress")
+    log = result.get("rounds_log") or []
+    if not current or not log or (log[-1]["bootstrap"], log[-1]["gain"]) != (current["bootstrap"], current["gain"]):
+        return True
+    lo, hi = current["bracket"]
+    return f"in progress: bracket [{lo:.4g}, {hi:.4g}] after round {log[-1]['index']}" in text
+
+
 def folder_state(folder: Path, err: str) -> dict:
     """The journal's rounds (every checksum verified on a copy), result.json's status and rounds, the report."""
     state = {"journal": None, "status": None, "rounds": None, "report": None, "consistent_report": False,
@@ -91,6 +102,8 @@ def folder_state(folder: Path, err: str) -> dict:
                 state["problems"].append("report.md describes other rounds")
             elif result["rounds"] != state["journal"] or "## Final gains\n" in text:
                 state["problems"].append("report.md claims final gains or other rounds than the journal")
+            elif not states_search_under_way(text, result):
+                state["problems"].append("report.md's search in progress is not result.json's in_progress")
             else:
                 state["consistent_report"] = True
         elif result["rounds"]:
@@ -114,7 +127,8 @@ def main(signum: int = signal.SIGINT) -> None:
              f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Exit time is wall time from the signal to "
              f"the process's end; CPU is the whole run's (user + sys). Target: {TARGET_S:g} s, one line, status "
              "130, journal intact, result.json and report.md consistent (once a round is recorded, a report.md "
-             "that says interrupted after the journal's rounds and claims no final gains).", ""]
+             "that says interrupted after the journal's rounds, claims no final gains and puts the search under way where "
+             "result.json's in_progress has it).", ""]
     with tempfile.TemporaryDirectory() as tmp:
         for vehicles, args in FLEETS.items():
             rows = []
