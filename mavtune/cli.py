@@ -35,6 +35,9 @@ LAZY = {
                     "Coordinate a swarm over Zenoh — `mavtune tune --fleet zenoh` with the swarm's settings as flags."),
     "agent": ("mavtune.swarm.cli", "agent_command",
               "Run one vehicle's agent: wait for assignments from the coordinator, fly them, report the costs."),
+    "swarm-key": ("mavtune.swarm.cli", "swarm_key_command",
+                  "Write each vehicle its own key file from the swarm key: an agent holding only its own acts as "
+                  "no other."),
     "mavsim": ("mavtune.vehicles.mavlink.mavsim.cli", "mavsim_command",
                "Serve the simulator as a PX4 or ArduPilot vehicle over MAVLink on UDP loopback (like SITL)."),
 }

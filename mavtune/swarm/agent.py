@@ -27,7 +27,7 @@ from typing import Any
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
-from mavtune.swarm.config import SwarmConfig, require_key
+from mavtune.swarm.config import SwarmConfig, is_vehicle_key, key_source, own_key, require_key
 from mavtune.swarm.messages import (VEHICLE_PATTERN, Ack, AgentState, Assignment, Codec, Finish, Hello, Probe,
                                     Rejected, Result, Start, State, result_from_flight)
 from mavtune.swarm.ratelog import RateLimitedLog
@@ -87,10 +87,11 @@ class Agent:
     """One vehicle's agent: subscribes to its assignments and the start signal, flies, reports."""
 
     def __init__(self, vehicle_id: str, vehicle: Vehicle, config: SwarmConfig, link: Link, key: str | None = None):
+        """`key`: this vehicle's key line or the swarm key (default: the configured one)."""
         self.id = vehicle_id
         self.vehicle = vehicle
         self.config = config
-        self.codec = Codec(config.session, key if key is not None else require_key(config))
+        self.codec = Codec(config.session, own_key(key if key is not None else require_key(config), vehicle_id))
         self.keys = Keys(config.session)
         self.link = link
         self.state = AgentState.IDLE
@@ -114,6 +115,11 @@ class Agent:
         if not re.match(VEHICLE_PATTERN, vehicle_id):
             raise MavtuneError(f"vehicle id {vehicle_id!r} must be 1-64 letters, digits, '_' or '-'")
         key = require_key(config)
+        own_key(key, vehicle_id, key_source(config))  # another vehicle's key is refused here, saying whose it is
+        if not is_vehicle_key(key):
+            log.warning("agent %s holds the swarm key, with which it could act as any vehicle; give it only its own "
+                        "(`mavtune swarm-key %s --key-file SWARM_KEY` on the coordinator, then --key-file %s.key)",
+                        vehicle_id, vehicle_id, vehicle_id)
         link = open_client(endpoint, lease_ms=config.lease_ms, connect_timeout_s=config.connect_timeout_s,
                            tls=config.tls)
         return cls(vehicle_id, vehicle, config, link, key)
@@ -129,7 +135,7 @@ class Agent:
     def _on_sample(self, key: str, payload: bytes) -> None:
         """Zenoh's callback: queue an authenticated payload; anything else is dropped here, before any parsing."""
         if not self.codec.authentic(payload):
-            self._drops("unauthenticated", "agent %s dropped a message on %s: not authenticated by the session key",
+            self._drops("unauthenticated", "agent %s dropped a message on %s: not authenticated by its key",
                         self.id, key)
             return
         try:

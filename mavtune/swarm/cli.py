@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -44,8 +44,9 @@ def agent_command(
     mavlink: Optional[str] = typer.Option(None, "--mavlink", help="mavlink: the vehicle's URL, e.g. udp:127.0.0.1:14540."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="Config file (TOML): [swarm] table (or top level), [mavlink] for mavlink."),
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
-    key_file: Optional[Path] = typer.Option(None, "--key-file", help="The swarm key (the coordinator's swarm.key); "
-                                            "or key_file in the config, or $MAVTUNE_SWARM_KEY."),
+    key_file: Optional[Path] = typer.Option(None, "--key-file", help="This vehicle's key (ID.key, from `mavtune "
+                                            "swarm-key`; the swarm key works too, with a warning); or key_file in "
+                                            "the config, or $MAVTUNE_SWARM_KEY."),
     min_flight_s: float = typer.Option(0.0, "--min-flight-s", help="Make each flight last at least this wall time."),
     state_dir: Optional[Path] = typer.Option(None, "--state-dir", help="mavlink: where the original gains are kept "
                                              "until restored [$XDG_STATE_HOME/mavtune/agent-ID]."),
@@ -112,4 +113,19 @@ def coordinator_command(
     run(cfg, out, quiet=True)
 
 
-__all__ = ["agent_command", "coordinator_command", "MavtuneError"]
+def swarm_key_command(
+    vehicles: List[str] = typer.Argument(..., help="The vehicle ids to make a key for (each agent's --id)."),
+    key_file: Optional[Path] = typer.Option(None, "--key-file", help="The swarm key (the coordinator's swarm.key); "
+                                            "or key_file in the config, or $MAVTUNE_SWARM_KEY."),
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help="Config file (TOML): its [swarm] key_file."),
+    out: Path = typer.Option(Path("."), "--out", help="Folder for the ID.key files (owner-only)."),
+) -> None:
+    """Write each vehicle its own key file from the swarm key: an agent holding only its own acts as no other."""
+    from mavtune.swarm.config import require_key, write_vehicle_keys
+
+    cfg = load_swarm_config(config, key_file=key_file)
+    for path in write_vehicle_keys(require_key(cfg), vehicles, out):
+        print(f"{path}  (copy to vehicle {path.stem}; its agent: --id {path.stem} --key-file {path.name})")
+
+
+__all__ = ["agent_command", "coordinator_command", "swarm_key_command", "MavtuneError"]

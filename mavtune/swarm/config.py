@@ -1,14 +1,17 @@
 """Settings of a swarm session (shared by the coordinator and the agents): session id, key, timing, envelope, TLS.
 
-Read from a TOML file (the `[swarm]` table, or the top level) and/or overridden from the command line. The shared
-key authenticates every message (messages.Codec); there is no default: it comes from `key`, `key_file` or the
-MAVTUNE_SWARM_KEY environment variable, and a coordinator without one makes one (`ensure_key`).
+Read from a TOML file (the `[swarm]` table, or the top level) and/or overridden from the command line. The swarm key
+stays with the coordinator; each vehicle gets its own, derived from it (`write_vehicle_keys`, `mavtune swarm-key`),
+which authenticates every message to or from that vehicle (messages.Codec). There is no default key: it comes from
+`key`, `key_file` or the MAVTUNE_SWARM_KEY environment variable, and a coordinator without one makes one
+(`ensure_key`). An agent given the swarm key itself derives its own from it, and is warned.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import re
 import secrets
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -17,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mavtune.config import read_toml, validated
 from mavtune.errors import MavtuneError
-from mavtune.swarm.messages import SESSION_PATTERN, VEHICLE_PATTERN
+from mavtune.swarm.messages import SESSION_PATTERN, VEHICLE_PATTERN, vehicle_key
 
 log = logging.getLogger(__name__)
 
@@ -28,6 +31,9 @@ KEY_FILE = "swarm.key"
 """Where a coordinator that was given no key writes the one it made, in its run folder."""
 
 MIN_KEY_CHARS = 16
+
+VEHICLE_KEY_PREFIX = "mavtune-vehicle-key"
+"""A vehicle's key file holds `mavtune-vehicle-key/<vehicle id>/<64 hex digits>` (ids hold no '/')."""
 
 
 class SwarmConfig(BaseModel):
@@ -41,7 +47,7 @@ class SwarmConfig(BaseModel):
     """Agent side: the coordinator's endpoint (e.g. tcp/10.0.0.1:7447)."""
     session: Annotated[str, Field(pattern=SESSION_PATTERN)] = "mavtune"
     key: Annotated[str, Field(min_length=MIN_KEY_CHARS, max_length=1024)] | None = None
-    """The shared secret that authenticates every message (never sent); prefer key_file or MAVTUNE_SWARM_KEY."""
+    """The coordinator's swarm key, or an agent's own key line (never sent); prefer key_file or MAVTUNE_SWARM_KEY."""
     key_file: Path | None = None
     """A file holding the shared secret (its first line)."""
     lease_ms: Annotated[int, Field(ge=500, le=60_000)] = 2000
@@ -98,17 +104,69 @@ def load_swarm_config(path: str | Path | None = None, **overrides: Any) -> Swarm
 
 def read_key(config: SwarmConfig) -> str | None:
     """The configured key: `key`, else the first line of `key_file`, else $MAVTUNE_SWARM_KEY; None if none is set."""
+    found = _key_and_source(config)
+    return found[0] if found is not None else None
+
+
+def _key_and_source(config: SwarmConfig) -> tuple[str, str] | None:
+    """The configured key and where it came from (for error lines)."""
     if config.key is not None:
-        return config.key
+        return config.key, "the config's key"
     if config.key_file is not None:
         try:
             text = config.key_file.read_text().strip()
         except OSError as exc:
             raise MavtuneError(f"swarm key file {config.key_file}: {exc.strerror or exc}") from None
-        return _checked(text.splitlines()[0] if text else "", f"key file {config.key_file}")
+        where = f"key file {config.key_file}"
+        return _checked(text.splitlines()[0] if text else "", where), where
     if os.environ.get(KEY_ENV):
-        return _checked(os.environ[KEY_ENV].strip(), f"${KEY_ENV}")
+        return _checked(os.environ[KEY_ENV].strip(), f"${KEY_ENV}"), f"${KEY_ENV}"
     return None
+
+
+def key_source(config: SwarmConfig) -> str:
+    """Where the configured key comes from, for error lines ('' when none is configured)."""
+    found = _key_and_source(config)
+    return found[1] if found is not None else ""
+
+
+def is_vehicle_key(material: str) -> bool:
+    """True for a vehicle's key line (`mavtune swarm-key` writes them), False for a swarm key."""
+    return material.startswith(VEHICLE_KEY_PREFIX + "/")
+
+
+def own_key(material: str, vehicle: str, where: str = "the key given") -> str:
+    """Vehicle `vehicle`'s own key from what it was given: its key line, or the swarm key (derived from it)."""
+    if not is_vehicle_key(material):
+        return vehicle_key(material, vehicle)
+    parts = material.split("/")
+    if len(parts) != 3 or not re.fullmatch(r"[0-9a-f]{64}", parts[2]):
+        raise MavtuneError(f"swarm key from {where} is not a vehicle key line ({VEHICLE_KEY_PREFIX}/ID/64 hex "
+                           "digits, as `mavtune swarm-key` writes it)")
+    if parts[1] != vehicle:
+        raise MavtuneError(f"swarm key from {where} is the key of vehicle {parts[1]!r}, not of {vehicle!r}: give "
+                           "each agent its own key file")
+    return parts[2]
+
+
+def write_vehicle_keys(swarm_key: str, vehicles: list[str], out_dir: Path) -> list[Path]:
+    """Write out_dir/<id>.key (owner-only) for each vehicle: its own key line, derived from the swarm key. A file
+    already there is kept if it holds the same line, else refused (never overwritten)."""
+    if is_vehicle_key(swarm_key):
+        raise MavtuneError("that is a vehicle's key: vehicle keys are made from the swarm key (the coordinator's "
+                           f"{KEY_FILE})")
+    bad = [v for v in vehicles if not re.match(VEHICLE_PATTERN, v)]
+    if bad:
+        raise MavtuneError(f"vehicle id {bad[0]!r} must be 1-64 letters, digits, '_' or '-'")
+    lines = {v: f"{VEHICLE_KEY_PREFIX}/{v}/{vehicle_key(swarm_key, v)}" for v in vehicles}
+    paths = {v: Path(out_dir) / f"{v}.key" for v in vehicles}
+    for v, path in paths.items():
+        if path.exists() and path.read_text().strip() != lines[v]:
+            raise MavtuneError(f"{path} exists and holds another key; remove it or write elsewhere (--out)")
+    for v, path in paths.items():
+        if not path.exists():
+            _write_secret(path, lines[v])
+    return list(paths.values())
 
 
 def require_key(config: SwarmConfig) -> str:
@@ -134,16 +192,21 @@ def ensure_key(config: SwarmConfig, out_dir: Path | None) -> str:
         log.warning("swarm key: %s (from the earlier run in this folder); agents: --key-file %s", path, path)
         return key
     key = secrets.token_hex(32)
+    _write_secret(path, key)
+    log.warning("no swarm key configured: made one in %s; give each vehicle its own key (`mavtune swarm-key ID... "
+                "--key-file %s`) and start its agent with --key-file ID.key", path, path)
+    return key
+
+
+def _write_secret(path: Path, text: str) -> None:
+    """Create `path` (owner-only, never over an existing file) holding one line."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "w") as f:
-            f.write(key + "\n")
+            f.write(text + "\n")
     except OSError as exc:
-        raise MavtuneError(f"cannot write the swarm key to {path}: {exc.strerror or exc}") from None
-    log.warning("no swarm key configured: made one in %s; copy it to every vehicle and start the agents with "
-                "--key-file %s (or set $%s)", path, KEY_FILE, KEY_ENV)
-    return key
+        raise MavtuneError(f"cannot write the key to {path}: {exc.strerror or exc}") from None
 
 
 def _checked(key: str, where: str) -> str:

@@ -20,7 +20,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
 from mavtune.swarm.config import SwarmConfig, ensure_key
 from mavtune.swarm.messages import (Ack, AgentState, Assignment, Codec, Finish, Hello, Probe, Rejected, Result, Start,
-                                    State)
+                                    State, vehicle_key)
 from mavtune.swarm.ratelog import RateLimitedLog
 from mavtune.swarm.transport import Keys, Link, open_router
 from mavtune.vehicles.parammap import ParamMap
@@ -69,7 +69,7 @@ class ZenohFleet:
         self.config = config
         self.expected = expected  # vehicles to wait for before round 1 (the paper's semaphore)
         self.tuned: Gains | None = None  # set when the run finished: agents configured to keep gains keep these
-        self.codec = Codec(config.session, key if key is not None else ensure_key(config, None))
+        self._swarm_key = key if key is not None else ensure_key(config, None)  # vehicles' keys derive from it
         self.run = secrets.token_hex(16)
         self._quorum = False
         self._finishing: set[str] = set()  # vehicles asked to release that have not answered yet
@@ -187,8 +187,8 @@ class ZenohFleet:
     # --- event handling ---------------------------------------------------------------------------------------
     def _on_sample(self, key: str, payload: bytes) -> None:
         """Zenoh's callback: queue an authenticated payload; anything else is dropped here, before any parsing."""
-        if not self.codec.authentic(payload):
-            self._drops("unauthenticated", "dropped a message on %s: not authenticated by the session key", key)
+        if not self._codec(Keys.last_chunk(key)).authentic(payload):
+            self._drops("unauthenticated", "dropped a message on %s: not authenticated by that vehicle's key", key)
             return
         self._offer(("msg", key, payload))
 
@@ -296,7 +296,7 @@ class ZenohFleet:
         """Validate one agent message and book it into the round; anything unexpected is dropped and counted."""
         sender = Keys.last_chunk(key)
         try:
-            msg = self.codec.decode(payload)
+            msg = self._codec(sender).decode(payload)
         except Rejected as exc:
             self._drops("invalid", "dropped a message on %s: %s", key, exc)
             return
@@ -392,7 +392,12 @@ class ZenohFleet:
                 return
             fields["agent"] = hello.agent
         msg = kind(session=self.config.session, run=self.run, vehicle=vid, **fields)
-        self.link.put(self.keys.to(vid), self.codec.encode(msg))
+        self.link.put(self.keys.to(vid), self._codec(vid).encode(msg))
+
+    def _codec(self, vid: str) -> Codec:
+        """The codec of vehicle `vid`'s messages: its own key (made anew each time: a flood of made-up ids costs
+        an HMAC each, and no memory)."""
+        return Codec(self.config.session, vehicle_key(self._swarm_key, vid))
 
 
 class _Round:

@@ -1,6 +1,8 @@
 """Wire messages between the coordinator and the vehicle agents: versioned, validated (pydantic), authenticated.
 
-On the wire a message is `HMAC-SHA256(key, body) ‖ body`, the body its JSON. The key never travels. Every body names
+On the wire a message is `HMAC-SHA256(key, body) ‖ body`, the body its JSON, and the key is the vehicle's own
+(`vehicle_key`: derived from the swarm key and the vehicle's id), so a vehicle that holds only its own key can act
+as no other. No key travels. Every body names
 the session, the coordinator's run nonce (`run`, fresh for every coordinator start) and — except a Probe — the
 agent's nonce (`agent`, fresh for every run an agent joins), so a message of an earlier run, or one made for another
 agent, is refused where it is replayed. `Codec.decode()` refuses (`Rejected`, with the reason) anything too
@@ -21,8 +23,9 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError,
 from mavtune.fleet import Flight, Status, Trace
 from mavtune.vehicles.parammap import ParamMap
 
-PROTOCOL_VERSION = 3
-"""Bumped on any incompatible change of the messages below; other versions are dropped."""
+PROTOCOL_VERSION = 4
+"""Bumped on any incompatible change of the messages below or their keys (4: each vehicle's own key); other
+versions are dropped."""
 
 MAX_MESSAGE_BYTES = 1_000_000
 """Payloads larger than this are dropped before anything else (a decimated trace is a few kB)."""
@@ -63,7 +66,7 @@ class _Message(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")
 
-    v: Literal[3] = PROTOCOL_VERSION
+    v: Literal[4] = PROTOCOL_VERSION
     session: Annotated[str, Field(pattern=SESSION_PATTERN)]
     run: Nonce
     round: Annotated[int, Field(ge=-1)] = -1
@@ -185,8 +188,15 @@ Message = Annotated[Union[Hello, Probe, Assignment, Ack, Start, Finish, Result, 
 _ADAPTER: TypeAdapter[Message] = TypeAdapter(Message)
 
 
+def vehicle_key(swarm_key: str, vehicle: str) -> str:
+    """Vehicle `vehicle`'s own key, HMAC-SHA256 of its id under the swarm key (hex): every message to or from that
+    vehicle is sealed with it. The coordinator derives it; the vehicle is given only it (`mavtune swarm-key`)."""
+    return hmac.new(swarm_key.encode(), b"mavtune vehicle key\x00" + vehicle.encode(), hashlib.sha256).hexdigest()
+
+
 class Codec:
-    """Seals and opens the messages of one session with its shared key (HMAC-SHA256 over the JSON body)."""
+    """Seals and opens the messages of one session with one key (HMAC-SHA256 over the JSON body): a vehicle's
+    own (`vehicle_key`) for everything to or from it."""
 
     def __init__(self, session: str, key: str | bytes):
         self.session = session
@@ -213,7 +223,7 @@ class Codec:
         if len(payload) > MAX_MESSAGE_BYTES:
             raise Rejected(f"{len(payload)} bytes is over the {MAX_MESSAGE_BYTES}-byte limit")
         if not self.authentic(payload):
-            raise Rejected("not authenticated by the session key")
+            raise Rejected("not authenticated by the vehicle's key")
         try:
             msg = _ADAPTER.validate_json(payload[MAC_BYTES:])
         except ValidationError as exc:

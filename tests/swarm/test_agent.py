@@ -8,13 +8,13 @@ import pytest
 
 from mavtune.swarm.agent import Agent, check_envelope, decimate
 from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.messages import Ack, Assignment, Codec, Finish, Hello, Probe, Result, Start
+from mavtune.swarm.messages import Ack, Assignment, Codec, Finish, Hello, Probe, Result, Start, vehicle_key
 from mavtune.swarm.transport import Keys
 from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
 from mavtune.fleet import Trace
 
 KEY = "test key of at least 16 chars"
-CODEC = Codec("s", KEY)
+CODEC = Codec("s", vehicle_key(KEY, "v0"))  # the agent v0 is given the swarm key: it seals with its own
 RUN = "1" * 32
 
 

@@ -14,7 +14,7 @@ import pytest
 from mavtune.swarm.agent import Agent
 from mavtune.swarm.config import SwarmConfig
 from mavtune.swarm.coordinator import ZenohFleet
-from mavtune.swarm.messages import MAC_BYTES, Assignment, Codec, Finish, Result, Start
+from mavtune.swarm.messages import MAC_BYTES, Assignment, Codec, Finish, Result, Start, vehicle_key
 from mavtune.swarm.transport import Keys, open_client, open_router
 from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
 
@@ -113,6 +113,24 @@ def keep_sending(link, items, stop: threading.Event) -> threading.Thread:
     return t
 
 
+def orders_to_v0(codec: Codec, fields: dict) -> list[tuple[str, bytes]]:
+    """A release, an assignment and a start for vehicle v0, sealed with `codec`."""
+    return [(KEYS.to("v0"), codec.encode(Finish(**fields, gains={"kp": 0.0, "kd": 0.0}))),
+            (KEYS.to("v0"), codec.encode(Assignment(**fields, round=1, gains={"kp": 1.0, "kd": 1.0}))),
+            (KEYS.to("v0"), codec.encode(Start(**fields, round=1)))]
+
+
+def fly_while_sending(swarm, fleet, forgeries, assignments, round_id):
+    """Fly one round while the tap puts the forgeries over and over."""
+    stop = threading.Event()
+    t = keep_sending(swarm.tap, forgeries, stop)
+    try:
+        return fleet.fly(assignments, round_id)
+    finally:
+        stop.set()
+        t.join()
+
+
 def test_the_key_never_travels_and_forgeries_change_nothing(swarm):
     fleet = swarm.fleet()
     swarm.start_agents(2, flight_s=0.3)
@@ -131,17 +149,9 @@ def test_the_key_never_travels_and_forgeries_change_nothing(swarm):
     forgeries = [
         (KEYS.frm(hello["vehicle"]), wrong.encode(forged_result)), (KEYS.frm("v0"), tampered),
         (KEYS.frm("v0"), genuine),  # a replay of round 0 during round 1
-        (KEYS.to("v0"), wrong.encode(Finish(**to_v0, gains={"kp": 0.0, "kd": 0.0}))),
-        (KEYS.to("v0"), wrong.encode(Assignment(**to_v0, round=1, gains={"kp": 1.0, "kd": 1.0}))),
-        (KEYS.to("v0"), wrong.encode(Start(**to_v0, round=1))),
+        *orders_to_v0(wrong, to_v0),
     ]
-    stop = threading.Event()
-    t = keep_sending(swarm.tap, forgeries, stop)
-    try:
-        flights = fleet.fly(B, 1)
-    finally:
-        stop.set()
-        t.join()
+    flights = fly_while_sending(swarm, fleet, forgeries, B, 1)
     assert [f.cost for f in flights] == twin_costs(B, 1) and [f.gains for f in flights] == B
     assert [a.flights_flown for a in swarm.agents] == [2, 2]
     assert [v.released for v in swarm.vehicles] == [[], []]
@@ -150,29 +160,42 @@ def test_the_key_never_travels_and_forgeries_change_nothing(swarm):
 
 
 def test_an_insider_result_with_other_gains_or_after_the_genuine_one_is_not_taken(swarm):
-    """Even a holder of the key cannot answer an assignment with other gains, nor overwrite a result."""
+    """Even a holder of the vehicle's key cannot answer an assignment with other gains, nor overwrite a result."""
     fleet = swarm.fleet()
     swarm.start_agents(1, flight_s=0.3)
     fleet.wait_for(1)
     assert wait_until(lambda: swarm.captured("hello"), 5)
     hello = json.loads(swarm.captured("hello")[0][1][MAC_BYTES:])
-    insider = Codec("h1", KEY)
+    insider = Codec("h1", vehicle_key(KEY, "v0"))
     other_gains = Result(session="h1", run=fleet.run, agent=hello["agent"], round=0, vehicle="v0",
                          gains={"kp": 0.9, "kd": 0.1}, cost=0.001, status="ok")
     extra_key = other_gains.model_copy(update={"gains": {**A[0], "ki": 0.5}})
-    stop = threading.Event()
-    t = keep_sending(swarm.tap, [(KEYS.frm("v0"), insider.encode(m)) for m in (other_gains, extra_key)], stop)
-    try:
-        flights = fleet.fly(A[:1], 0)
-    finally:
-        stop.set()
-        t.join()
+    flights = fly_while_sending(swarm, fleet, [(KEYS.frm("v0"), insider.encode(m)) for m in (other_gains, extra_key)],
+                                A[:1], 0)
     assert [f.cost for f in flights] == twin_costs(A[:1], 0)
     late = other_gains.model_copy(update={"gains": A[0]})  # right gains, after the genuine result
     swarm.tap.put(KEYS.frm("v0"), insider.encode(late))
     time.sleep(0.3)
     assert fleet.fly(B[:1], 1)[0].cost == twin_costs(B[:1], 1)[0]
     assert not [e for e in fleet.events if e["event"] == "late_result"]
+
+
+def test_a_vehicles_own_key_acts_as_that_vehicle_only(swarm):
+    """A taken vehicle's key (v1's) forges nothing for another (v0), either way: results from v0, orders to v0."""
+    fleet = swarm.fleet()
+    swarm.start_agents(2, flight_s=0.3)
+    fleet.wait_for(2)
+    assert [f.cost for f in fleet.fly(A, 0)] == twin_costs(A, 0)
+    assert wait_until(lambda: len(swarm.captured("hello")) >= 2, 5)
+    hellos = {h["vehicle"]: h for h in (json.loads(p[MAC_BYTES:]) for _, p in swarm.captured("hello"))}
+    taken = Codec("h1", vehicle_key(KEY, "v1"))
+    as_v0 = dict(session="h1", run=fleet.run, agent=hellos["v0"]["agent"], vehicle="v0")
+    forged = taken.encode(Result(**as_v0, round=1, gains=B[0], cost=0.0, status="ok"))
+    forgeries = [(KEYS.frm("v0"), forged), (KEYS.frm("v1"), forged), *orders_to_v0(taken, as_v0)]
+    flights = fly_while_sending(swarm, fleet, forgeries, B, 1)
+    assert [f.cost for f in flights] == twin_costs(B, 1) and [f.gains for f in flights] == B
+    assert [a.flights_flown for a in swarm.agents] == [2, 2] and [v.released for v in swarm.vehicles] == [[], []]
+    assert fleet.dropped > 0
 
 
 def test_replays_of_an_earlier_run_are_refused(swarm):

@@ -45,7 +45,7 @@ def _sealed(body: bytes) -> bytes:
     (CODEC.encode(Start(**KW, round=1))[:-1] + b" ", "authenticated"),  # tampered body
     (_sealed(b"null"), "invalid"), (_sealed(b"not json"), "invalid"), (_sealed(b'{"kind": "assignment"}'), "invalid"),
     (CODEC.encode(Start(**{**KW, "session": "other"}, round=1)), "not ours"),
-    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":3', b'"v":2')), "invalid"),
+    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":4', b'"v":3')), "invalid"),
     (_sealed(Hello(**KW).model_dump_json().encode().replace(b'"vehicle":"v0"', b'"vehicle":"a/b"')), "invalid"),
     (_sealed(Hello(**KW).model_dump_json().encode().replace(b"}", b',"extra":1}', 1)), "invalid"),
     (b"{" + b" " * MAX_MESSAGE_BYTES + b"}", "limit"),
@@ -154,3 +154,24 @@ def test_a_hello_with_a_non_finite_range_is_rejected():
     body = Hello(**KW, params=PARAMS).model_dump_json().replace('"hi":8.0', '"hi":Infinity')
     with pytest.raises(Rejected, match=r"finite number at hello\.params\.gains\.kd\.hi"):
         CODEC.decode(_sealed(body.encode()))
+
+
+def test_each_vehicle_gets_its_own_key_and_an_agent_takes_only_its_own(tmp_path):
+    from mavtune.swarm.config import own_key, write_vehicle_keys
+    from mavtune.swarm.messages import vehicle_key
+
+    paths = write_vehicle_keys(KEY, ["v0", "v1"], tmp_path)
+    assert [p.name for p in paths] == ["v0.key", "v1.key"] and all(p.stat().st_mode & 0o777 == 0o600 for p in paths)
+    line = paths[0].read_text().strip()
+    assert own_key(line, "v0") == vehicle_key(KEY, "v0") == own_key(KEY, "v0")  # given its line, or the swarm key
+    assert len({vehicle_key(KEY, v) for v in ("v0", "v1", "v2")} | {KEY}) == 4 and KEY not in line
+    with pytest.raises(MavtuneError, match="is the key of vehicle 'v0', not of 'v1'"):
+        own_key(line, "v1")
+    with pytest.raises(MavtuneError, match="not a vehicle key line"):
+        own_key(line[:-1], "v0")
+    assert write_vehicle_keys(KEY, ["v0"], tmp_path) == paths[:1]  # the same key again: kept
+    with pytest.raises(MavtuneError, match="holds another key"):
+        write_vehicle_keys(KEY + "!", ["v1"], tmp_path)
+    with pytest.raises(MavtuneError, match="a vehicle's key"):
+        write_vehicle_keys(line, ["v2"], tmp_path)
+    assert paths[1].read_text().strip().endswith(vehicle_key(KEY, "v1"))  # nothing overwritten

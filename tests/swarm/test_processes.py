@@ -135,11 +135,14 @@ def test_tune_command_with_zenoh_fleet_equals_in_process(procs, tmp_path):
     out = tmp_path / "run"
     procs.start("coordinator", ["tune", "--config", str(config), "--fleet", "zenoh", "--listen", endpoint,
                                 "--vehicles", "2", "--seed", "9", "--out", str(out), "--quiet"])
-    # no key configured: the coordinator makes one in its run folder and says how agents get it
+    # no key configured: the coordinator makes one in its run folder and says how vehicles get their own
     assert procs.wait_log("coordinator", "--key-file", 30), procs.log("coordinator")[-2000:]
-    for j in range(2):
+    from mavtune.cli import run_app
+
+    assert run_app(["swarm-key", "v0", "v1", "--key-file", str(out / "swarm.key"), "--out", str(tmp_path)]) == 0
+    for j in range(2):  # each agent holds only its own vehicle's key
         procs.start(f"v{j}", ["agent", "--id", f"v{j}", "--connect", endpoint, *args_of(j), *SESSION,
-                              "--key-file", str(out / "swarm.key")])
+                              "--key-file", str(tmp_path / f"v{j}.key")])
     assert wait_exit(procs, "coordinator", 100) == 0, procs.log("coordinator")[-3000:]
     result = json.loads((tmp_path / "run" / "result.json").read_text())
     assert result["gains"] == mavtune.tune(twin, **TUNE).gains
