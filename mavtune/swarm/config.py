@@ -49,7 +49,7 @@ class SwarmConfig(BaseModel):
     key: Annotated[str, Field(min_length=MIN_KEY_CHARS, max_length=1024)] | None = None
     """The coordinator's swarm key, or an agent's own key line (never sent); prefer key_file or MAVTUNE_SWARM_KEY."""
     key_file: Path | None = None
-    """A file holding the shared secret (its first line)."""
+    """A file holding the key (its first line): the swarm key on the coordinator, its own on an agent."""
     lease_ms: Annotated[int, Field(ge=500, le=60_000)] = 2000
     """Zenoh link lease: a frozen vehicle is noticed after about 3/4 of it."""
     connect_timeout_s: float = -1.0
@@ -189,7 +189,8 @@ def ensure_key(config: SwarmConfig, out_dir: Path | None) -> str:
     path = Path(out_dir) / KEY_FILE
     if path.exists():
         key = _checked(path.read_text().strip(), f"key file {path}")
-        log.warning("swarm key: %s (from the earlier run in this folder); agents: --key-file %s", path, path)
+        log.warning("swarm key: %s (from the earlier run in this folder); vehicles' own keys: `mavtune swarm-key "
+                    "ID... --key-file %s`", path, path)
         return key
     key = secrets.token_hex(32)
     _write_secret(path, key)
