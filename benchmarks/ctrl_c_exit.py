@@ -127,8 +127,8 @@ def main(signum: int = signal.SIGINT) -> None:
              f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Exit time is wall time from the signal to "
              f"the process's end; CPU is the whole run's (user + sys). Target: {TARGET_S:g} s, one line, status "
              "130, journal intact, result.json and report.md consistent (once a round is recorded, a report.md "
-             "that says interrupted after the journal's rounds, claims no final gains and puts the search under way where "
-             "result.json's in_progress has it).", ""]
+             "that says interrupted after the journal's rounds, claims no final gains and puts the search under "
+             "way where result.json's in_progress has it).", ""]
     with tempfile.TemporaryDirectory() as tmp:
         for vehicles, args in FLEETS.items():
             rows = []
