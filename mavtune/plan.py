@@ -129,29 +129,33 @@ class Work:
         adaptive plan's flat rehearsal flies each point of each comparison `cap` times."""
         s = self.settings
         slots = s.strategy_rule.slots(s.vehicles)
-        self.add(rehearsals * math.ceil(search.budget() / slots) * s.vehicles, tally=False)
+        self._within(rehearsals * math.ceil(search.budget() / slots) * s.vehicles)
         if search.reuse and slots > 1:
-            self.add(64 * slots * (1 + len(search.ask())), tally=False)
+            self._within(64 * slots * (1 + len(search.ask())))
         if s.adaptive_rule is not None:  # the flat rehearsal flies every point of every comparison to the cap
             flights = len(search.needs()) * len(search.ask()) * s.adaptive_rule.cap
-            self.add(flights + ROUND_STEPS * math.ceil(flights / s.vehicles), tally=False)
+            self._within(flights + ROUND_STEPS * math.ceil(flights / s.vehicles))
 
-    def add(self, steps: int, tally: bool = True) -> None:
-        """Count `steps` done (or, without `tally`, check that they alone fit); past the limit the plan is refused."""
-        if (self.done + steps if tally else steps) > self.limit:
+    def add(self, steps: int) -> None:
+        """Count `steps` done; past the limit the plan is refused."""
+        self._within(self.done + steps)
+        self.done += steps
+
+    def _within(self, steps: int) -> None:
+        """Refuse the plan (one line naming what to change) when `steps` exceed the limit."""
+        if steps > self.limit:
             s = self.settings
             raise MavtuneError(f"planning {counted(s.vehicles, 'vehicle')} ({s.strategy}, {s.method}, ε = {s.epsilon:g}"
                                f"{f', cap {s.adaptive_rule.cap}' if s.adaptive_rule else ''}) takes more than "
                                f"{self.limit:,} rehearsed flights and speculation steps; use fewer vehicles, a larger "
                                "epsilon" + (" or a smaller cap" if s.adaptive_rule else ""))
-        self.done += steps if tally else 0
 
 
-def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float], speculate: bool = True,
-              work: Work | None = None) -> int:
-    """Rounds one line search takes, speculation included (unless told not to), on the cost `cost`."""
+def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float], work: Work,
+              speculate: bool = True) -> int:
+    """Rounds one line search takes, speculation included (unless told not to), on the cost `cost`; its steps
+    are counted in `work`."""
     search = settings.search(lo, hi)
-    work = work if work is not None else Work(settings)
     rounds = 0
     while not search.done:
         steps = search.steps
@@ -175,11 +179,11 @@ def _noisy_bowl(minimum: float, seed: int) -> Callable[[float], float]:
 def _adaptive_rounds(settings: Settings, lo: float, hi: float, work: Work) -> tuple[int, int]:
     """Expected and worst rounds of one adaptive line search: the mean over noisy bowls, and the most over a
     flat cost (no comparison ever decided before the cap), a pure-noise cost and no speculation."""
-    expected = [_rehearse(settings, lo, hi, _noisy_bowl((i + 0.5) / EXPECTED_PROBES, i), work=work)
+    expected = [_rehearse(settings, lo, hi, _noisy_bowl((i + 0.5) / EXPECTED_PROBES, i), work)
                 for i in range(EXPECTED_PROBES)]
     flat = lambda _: 1.0  # noqa: E731
-    worst = max(_rehearse(settings, lo, hi, flat, work=work), _rehearse(settings, lo, hi, flat, False, work),
-                *(_rehearse(settings, lo, hi, _noise(seed), work=work) for seed in range(2)))
+    worst = max(_rehearse(settings, lo, hi, flat, work), _rehearse(settings, lo, hi, flat, work, speculate=False),
+                *(_rehearse(settings, lo, hi, _noise(seed), work) for seed in range(2)))
     return math.ceil(sum(expected) / len(expected)), max(worst, *expected)
 
 
@@ -198,7 +202,7 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
         per_search, per_search_max = _adaptive_rounds(settings, lo, hi, work)
     else:
         costs = [lambda x, m=m: abs(x - m) for m in minimisers] + [_noise(seed) for seed in range(NOISE_PROBES)]
-        per_search = max(_rehearse(settings, lo, hi, cost, work=work) for cost in costs)
+        per_search = max(_rehearse(settings, lo, hi, cost, work) for cost in costs)
         per_search_max = max(per_search, _rounds_without_speculation(settings, lo, hi))
     evaluations = settings.search(lo, hi).budget()
     searches = len(settings.space) * bootstraps
