@@ -27,7 +27,7 @@ from typing import Any
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
-from mavtune.swarm.config import SwarmConfig, is_vehicle_key, key_source, own_key, require_key
+from mavtune.swarm.config import SwarmConfig, agent_key
 from mavtune.swarm.messages import (VEHICLE_PATTERN, Ack, AgentState, Assignment, Codec, Finish, Hello, Probe,
                                     Rejected, Result, Start, State, result_from_flight)
 from mavtune.swarm.ratelog import RateLimitedLog
@@ -87,11 +87,11 @@ class Agent:
     """One vehicle's agent: subscribes to its assignments and the start signal, flies, reports."""
 
     def __init__(self, vehicle_id: str, vehicle: Vehicle, config: SwarmConfig, link: Link, key: str | None = None):
-        """`key`: this vehicle's key line or the swarm key (default: the configured one)."""
+        """`key`: this vehicle's own key (default: from the configured one, `agent_key`)."""
         self.id = vehicle_id
         self.vehicle = vehicle
         self.config = config
-        self.codec = Codec(config.session, own_key(key if key is not None else require_key(config), vehicle_id))
+        self.codec = Codec(config.session, key if key is not None else agent_key(config, vehicle_id)[0])
         self.keys = Keys(config.session)
         self.link = link
         self.state = AgentState.IDLE
@@ -114,9 +114,8 @@ class Agent:
         """Open a Zenoh client to the coordinator at `endpoint` and build the agent on it."""
         if not re.match(VEHICLE_PATTERN, vehicle_id):
             raise MavtuneError(f"vehicle id {vehicle_id!r} must be 1-64 letters, digits, '_' or '-'")
-        key = require_key(config)
-        own_key(key, vehicle_id, key_source(config))  # another vehicle's key is refused here, saying whose it is
-        if not is_vehicle_key(key):
+        key, given_swarm_key = agent_key(config, vehicle_id)
+        if given_swarm_key:
             log.warning("agent %s holds the swarm key, with which it could act as any vehicle; give it only its own "
                         "(`mavtune swarm-key %s --key-file SWARM_KEY` on the coordinator, then --key-file %s.key)",
                         vehicle_id, vehicle_id, vehicle_id)

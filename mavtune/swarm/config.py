@@ -124,10 +124,11 @@ def _key_and_source(config: SwarmConfig) -> tuple[str, str] | None:
     return None
 
 
-def key_source(config: SwarmConfig) -> str:
-    """Where the configured key comes from, for error lines ('' when none is configured)."""
-    found = _key_and_source(config)
-    return found[1] if found is not None else ""
+def agent_key(config: SwarmConfig, vehicle: str) -> tuple[str, bool]:
+    """Agent `vehicle`'s own key from the configured one (read once), and whether that was the swarm key (which
+    then sits on the vehicle: it could act as any vehicle); another vehicle's key is refused, saying whose."""
+    given, where = _required(config)
+    return own_key(given, vehicle, where), not is_vehicle_key(given)
 
 
 def is_vehicle_key(material: str) -> bool:
@@ -171,11 +172,16 @@ def write_vehicle_keys(swarm_key: str, vehicles: list[str], out_dir: Path) -> li
 
 def require_key(config: SwarmConfig) -> str:
     """An agent's key; MavtuneError saying where to put it when none is configured."""
-    key = read_key(config)
-    if key is None:
+    return _required(config)[0]
+
+
+def _required(config: SwarmConfig) -> tuple[str, str]:
+    """The configured key and where it came from; MavtuneError saying where to put it when there is none."""
+    found = _key_and_source(config)
+    if found is None:
         raise MavtuneError(f"no swarm key: give --key-file PATH (the coordinator's {KEY_FILE}), set ${KEY_ENV}, "
                            "or key_file in the [swarm] table")
-    return key
+    return found
 
 
 def ensure_key(config: SwarmConfig, out_dir: Path | None) -> str:
