@@ -8,7 +8,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from contextlib import contextmanager
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -100,6 +100,11 @@ class Relay:
         self.vehicle: tuple[str, int] | None = None
         self.sent: Counter = Counter()  # (message type, its target_system or None) the ground sent, counted
         self._parser = mavlink.MAVLink(None)
+        self._up_parser = mavlink.MAVLink(None)
+        self.last_seq: dict[tuple[int, int], int] = {}  # (system, component) → its last packet sequence number
+        self.streaming: set[tuple[str, int]] = set()  # vehicle-side addresses that sent a LOCAL_POSITION_NED
+        self._as_vehicle: dict[tuple[int, int], tuple] = {}  # (system, component) → (MAVLink, queued messages)
+        self._lock = threading.Lock()
         self.stop = threading.Event()
         self.threads = [threading.Thread(target=f, daemon=True) for f in (self._up, self._down)]
         for t in self.threads:
@@ -113,6 +118,21 @@ class Relay:
             except OSError:
                 continue
             self.ground_side.sendto(data, self.ground)
+            try:
+                msgs = self._up_parser.parse_buffer(data) or []
+            except mavlink.MAVError:
+                continue
+            for msg in msgs:
+                me = (msg.get_srcSystem(), msg.get_srcComponent())
+                self.last_seq[me] = msg.get_seq()
+                if msg.get_type() == "LOCAL_POSITION_NED":
+                    self.streaming.add(self.vehicle)
+                with self._lock:
+                    queued = self._as_vehicle.get(me)
+                    while queued and queued[1]:
+                        mav = queued[0]
+                        mav.seq = msg.get_seq()  # in the vehicle's own stream, as its own message would be
+                        self.ground_side.sendto(queued[1].popleft().pack(mav), self.ground)
 
     def _down(self):
         self.ground_side.settimeout(0.05)
@@ -135,9 +155,17 @@ class Relay:
 
     @contextmanager
     def inject(self, system: int, component: int, send, hz: float = 50.0):
-        """A hostile component (system, component) on the link: `send(mav)` `hz` times a second in the block."""
+        """A hostile component (system, component) on the link: `send(mav)` `hz` times a second in the block.
+        Speaking as a (system, component) the vehicle has, each message goes out right after one of the vehicle's
+        own, with its packet sequence number, as a message of that component's would."""
         mav = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)
-        mav.send = lambda msg, force_mavlink1=False: self.ground_side.sendto(msg.pack(mav), self.ground)
+        if (system, component) in self.last_seq:
+            queued: deque = deque()
+            with self._lock:
+                self._as_vehicle[(system, component)] = (mav, queued)
+            mav.send = lambda msg, force_mavlink1=False: queued.append(msg)
+        else:
+            mav.send = lambda msg, force_mavlink1=False: self.ground_side.sendto(msg.pack(mav), self.ground)
         stop = threading.Event()
 
         def loop():
@@ -171,3 +199,11 @@ def relayed_mavsim(**kw):
             yield f"udpin:127.0.0.1:{ground_port}", relay
     finally:
         relay.close()
+
+
+def wait_streaming(relay: "Relay", senders: int) -> None:
+    """Until `senders` simulated vehicles stream positions through the relay (a loaded machine starts them slowly)."""
+    deadline = time.monotonic() + 60
+    while len(relay.streaming) < senders:
+        assert time.monotonic() < deadline, "the simulated vehicles did not start"
+        time.sleep(0.05)

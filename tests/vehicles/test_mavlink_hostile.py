@@ -17,7 +17,8 @@ from mavtune.errors import MavtuneError
 from mavtune.vehicles.mavlink import MavlinkVehicle
 from mavtune.vehicles.mavlink.config import GainParam
 
-from mavlink_harness import fast_config, free_udp_port, mavsim, read_params, relayed_mavsim, tune_mavlink
+from mavlink_harness import (fast_config, free_udp_port, mavsim, read_params, relayed_mavsim, tune_mavlink,
+                             wait_streaming)
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
 
@@ -48,6 +49,7 @@ def forward_rangefinder(mav):
 
 def test_only_the_autopilot_is_listened_to_and_only_a_downward_rangefinder(tmp_path):
     with relayed_mavsim(autopilot="px4", speed=5.0) as (url, relay):  # 5× real time: keeps up on a loaded machine
+        wait_streaming(relay, 1)  # the forward rangefinder speaks in the autopilot's own stream
         with relay.inject(1, 100, camera), relay.inject(2, 1, tracker), relay.inject(1, 191, companion), \
                 relay.inject(1, 1, forward_rangefinder, hz=20):
             time.sleep(0.5)  # the hostile components speak first

@@ -16,7 +16,7 @@ from mavtune.fleet import Status
 from mavtune.vehicles.mavlink import MavlinkVehicle
 from mavtune.vehicles.mavlink.link import SeqWatch, split_target
 
-from mavlink_harness import Relay, fast_config, free_udp_port, mavsim_on, read_params, relayed_mavsim
+from mavlink_harness import Relay, fast_config, free_udp_port, mavsim_on, relayed_mavsim, wait_streaming
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
 
@@ -31,8 +31,9 @@ def other_autopilot(mav):
 
 def test_two_systems_and_no_target_is_refused_naming_them_and_nothing_is_sent():
     with relayed_mavsim(autopilot="px4") as (url, relay):
+        wait_streaming(relay, 1)
         with relay.inject(2, 1, other_autopilot, hz=10):
-            time.sleep(0.3)  # system 2 speaks first
+            time.sleep(0.3)
             with pytest.raises(MavtuneError) as err:
                 MavlinkVehicle(url, fast_config(discover_s=2.5))
     text = str(err.value)
@@ -44,7 +45,7 @@ def test_two_systems_and_no_target_is_refused_naming_them_and_nothing_is_sent():
 def test_with_a_target_system_only_it_is_tuned():
     with relayed_mavsim(autopilot="px4") as (url, relay):
         with relay.inject(2, 1, other_autopilot, hz=10):
-            time.sleep(0.3)
+            time.sleep(0.3)  # system 2 speaks first
             with MavlinkVehicle(url + "?target_system=1", fast_config(discover_s=2.5)) as vehicle:
                 flight = vehicle.fly({"kp": 0.3, "kd": 0.5}, 0)
     assert flight.status is Status.OK, flight.info
@@ -55,8 +56,7 @@ def test_with_a_target_system_only_it_is_tuned():
 
 def test_a_configured_target_that_is_not_heard_is_named():
     with relayed_mavsim(autopilot="px4") as (url, relay):
-        read_params(url, ["MPC_Z_P"])  # the vehicle is up
-        relay.sent.clear()
+        wait_streaming(relay, 1)
         with pytest.raises(MavtuneError, match="no HEARTBEAT from target_system 7 within 2 s; heard 1 \\(PX4"):
             MavlinkVehicle(url, fast_config(target_system=7, heartbeat_wait_s=2.0))
     assert not any(kind in ACTING for kind, _ in relay.sent), relay.sent
@@ -67,6 +67,7 @@ def test_two_autopilots_with_one_system_id_on_one_port_are_refused():
     url = f"udpin:127.0.0.1:{relay.ground[1]}"
     try:
         with mavsim_on(relay.port, autopilot="px4", seed=1), mavsim_on(relay.port, autopilot="px4", seed=2):
+            wait_streaming(relay, 2)
             with pytest.raises(MavtuneError) as err:
                 MavlinkVehicle(url, fast_config(discover_s=2.5))
     finally:
