@@ -100,12 +100,15 @@ def test_restore_after_a_kill_9_between_rounds_puts_the_originals_back(tmp_path)
     assert [r["restored"] for r in records()] == [True]
 
 
-def test_a_new_run_after_a_kill_9_takes_the_recorded_originals_not_the_candidates(tmp_path):
+def test_a_new_run_after_a_kill_9_takes_the_recorded_originals_not_the_candidates(tmp_path, caplog):
     with mavsim(autopilot="px4") as url:
-        kill_tune(url, tmp_path / "first", tmp_path, lambda out: rounds(out) >= 1)
+        held = kill_tune(url, tmp_path / "first", tmp_path, lambda out: rounds(out) >= 1)
         with MavlinkFleet([url], fast_config(), out_dir=tmp_path / "second") as fleet:
             assert fleet.original_params == {url: PX4_ORIGINALS}
             assert fleet.vehicles[0].current_params == PX4_ORIGINALS  # restored before anything else
+        said = [r.getMessage() for r in caplog.records if "restored the originals" in r.getMessage()]
+        changed = ", ".join(f"{p} {held[p]:g} → {v:g}" for p, v in PX4_ORIGINALS.items() if held[p] != v)
+        assert len(said) == 1 and said[0].endswith(f"read back: {changed}"), said
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
     saved = json.loads((tmp_path / "second" / "original_params.json").read_text())
     assert saved == {url: PX4_ORIGINALS}

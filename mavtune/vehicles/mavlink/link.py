@@ -387,14 +387,7 @@ class MavlinkLink:
 
     def wait_for_heard(self, predicate: Callable[[dict[int, Heard]], bool], timeout_s: float) -> bool:
         """Block until predicate(autopilots heard) holds or timeout_s passes (wall time, Ctrl-C honoured)."""
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            while not predicate(self.heard):
-                left = deadline - time.monotonic()
-                if left <= 0 or self._closed.is_set():
-                    return False
-                self._cond.wait(min(left, 0.1))
-            return True
+        return self._wait_until(lambda: predicate(self.heard), timeout_s)
 
     def request_version(self, timeout_s: float) -> tuple[int, bytes] | None:
         """Ask the target for AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE, twice); its (uid, uid2), or None."""
@@ -410,9 +403,13 @@ class MavlinkLink:
 
     def wait_for(self, predicate: Callable[[VehicleState], bool], timeout_s: float) -> bool:
         """Block until predicate(state) holds (checked under the state lock) or the timeout passes."""
+        return self._wait_until(lambda: predicate(self.state), timeout_s)
+
+    def _wait_until(self, check: Callable[[], bool], timeout_s: float) -> bool:
+        """Block until check() holds (under the state lock, woken by every change) or timeout_s passes."""
         deadline = time.monotonic() + timeout_s
         with self._cond:
-            while not predicate(self.state):
+            while not check():
                 left = deadline - time.monotonic()
                 if left <= 0 or self._closed.is_set():
                     return False
