@@ -4,8 +4,9 @@ or a new run in another folder: does the vehicle get its true originals back eve
 Per autopilot one SITL vehicle hovers for the whole benchmark; a pilot link (ArduCopter SERIAL0, PX4's GCS link)
 watches the gains while mavtune tunes on the tuner link (ArduCopter SERIAL1, PX4's API link 14540+N). Moments:
 after the run's originals file is written (before the first PARAM_SET), right after the first PARAM_SET is seen
-on the vehicle, mid-primitive (half a settle + primitive later), during the final restore (Ctrl-C, then SIGKILL
-0.1 s later) and between rounds (the journal holds a round). The vehicle's records live in a fresh state folder.
+on the vehicle, mid-primitive (half a settle + primitive later), during the final restore (Ctrl-C, then SIGKILL as
+soon as the pilot's link sees the first original announced back) and between rounds (the journal holds a
+round). The vehicle's records live in a fresh state folder.
 
     python benchmarks/kill_restore.py [--autopilot ardupilot px4] [--followups restore new-run]
 """
@@ -60,8 +61,7 @@ class Pilot:
     def read(self, names: list[str], timeout_s: float = 10.0) -> dict[str, float]:
         """The parameters as the autopilot answers now (PARAM_VALUEs it broadcast earlier, on every PARAM_SET,
         are drained first: they would tell an old value)."""
-        while self.conn.recv_match(blocking=False) is not None:
-            pass
+        self.drain()
         got: dict[str, float] = {}
         deadline = time.monotonic() + timeout_s
         while len(got) < len(names) and time.monotonic() < deadline:
@@ -74,6 +74,20 @@ class Pilot:
                 if msg is not None and msg.param_id in names and msg.param_id not in got:
                     got[msg.param_id] = float(msg.param_value)
         return got
+
+    def drain(self) -> None:
+        """Forget every message received so far."""
+        while self.conn.recv_match(blocking=False) is not None:
+            pass
+
+    def wait_value(self, values: dict[str, float], timeout_s: float) -> None:
+        """Until the autopilot announces (PARAM_VALUE, sent on every link when a parameter is set) one of
+        `values`: the moment a restore has set its first parameter."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            msg = self.conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.05)
+            if msg is not None and values.get(msg.param_id) == float(msg.param_value):
+                return
 
     def beat(self) -> None:
         self.conn.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
@@ -193,7 +207,7 @@ def trial(autopilot: str, url: str, pilot: Pilot, moment: str, followup: str, tm
     pilot.hover()
     before = pilot.read(names)
     cfg = tune_config(tmp / "tune.toml", url, autopilot)
-    first, second = tmp / f"{moment}-{followup}-a", tmp / f"{moment}-{followup}-b"
+    first, second = tmp / f"{autopilot}-{moment}-{followup}-a", tmp / f"{autopilot}-{moment}-{followup}-b"
     started = time.monotonic()
     proc = subprocess.Popen([*MAVTUNE, "tune", "-c", str(cfg), "--out", str(first), "--quiet"], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -211,8 +225,9 @@ def trial(autopilot: str, url: str, pilot: Pilot, moment: str, followup: str, tm
                 break
             if moment in ("between_rounds", "during_restore") and journal_rounds(first) >= 1:
                 if moment == "during_restore":
+                    pilot.drain()
                     proc.send_signal(signal.SIGINT)  # Ctrl-C: the run restores the originals...
-                    time.sleep(0.1)  # ...and is killed while it does
+                    pilot.wait_value(stock, 10.0)  # ...the first is seen back on the vehicle: SIGKILL now
                 break
             time.sleep(0.05)
         else:
