@@ -134,3 +134,18 @@ def test_restore_of_a_folder_without_originals_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"error: {tmp_path} records no vehicle originals (no original_params.json): nothing to restore",
                    f"error: {tmp_path / 'nowhere'} is not a folder (give a run folder or an agent state folder)"]
+
+
+def test_an_agent_with_another_state_folder_after_a_kill_9_restores_the_recorded_originals(tmp_path):
+    """The agent's own folder knows nothing of the killed run; the vehicle's record in the state folder does."""
+    from mavtune.swarm.vehicles import mavlink_vehicle
+
+    with mavsim(autopilot="px4") as url:
+        kill_tune(url, tmp_path / "run", tmp_path, lambda out: rounds(out) >= 1)
+        agent = mavlink_vehicle(url, fast_config().model_dump(), tmp_path / "agent-state")
+        try:
+            assert agent._fleet.original_params == {url: PX4_ORIGINALS}
+        finally:
+            agent.close()
+        assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
+    assert [r["restored"] for r in records()] == [True]
