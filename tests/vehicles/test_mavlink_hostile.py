@@ -4,7 +4,6 @@ an extra pymavlink client injecting the hostile traffic."""
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from contextlib import contextmanager

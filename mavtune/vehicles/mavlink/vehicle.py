@@ -113,7 +113,8 @@ class MavlinkVehicle:
         for p in unrestored:
             if p not in present:
                 raise MavtuneError(f"{self.name}: {self.store.path(self.identity)} records an unrestored original "
-                                   f"{p}, which this vehicle does not have; if it is another vehicle, delete the record")
+                                   f"{p}, which this vehicle does not have; if it is another vehicle, delete the "
+                                   "record")
         base = unrestored if record is not None else {k: float(v) for k, v in (originals or {}).items()
                                                       if math.isfinite(float(v))}
         self.original_params: dict[str, float] = {
