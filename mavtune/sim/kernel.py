@@ -12,8 +12,9 @@ and state.
 Layout, for speed (issue 11): a struct of arrays. A vehicle is a lane, a column of X (NX, lanes) holding its state,
 parameters, normals and cost accumulators, plus its column of the latency buffer L; `fly_*` fly chunks of LANES
 vehicles, the time loop outside and loops over the lanes inside, so LLVM vectorises them (4 float64 lanes per AVX2
-instruction, 8 per AVX-512 one where LLVM uses 512-bit vectors: `simd.float64_lanes`; branch-free bodies, selects instead of min/max, sqrt as LLVM's intrinsic, one written array per loop
-where a row offset is known only at run time). Chunks go over numba's threads. fastmath here only ignores the sign of
+instruction, 8 per AVX-512 one where LLVM uses 512-bit vectors: `simd.float64_lanes`; branch-free bodies, selects
+instead of min/max, sqrt as LLVM's intrinsic, one written array per loop where a row offset is known only at run
+time). Chunks go over numba's threads. fastmath here only ignores the sign of
 zero: no FMA contraction, reciprocal or approximate-function rewrites, whose results depend on how LLVM compiled
 a call site (the parallel path's copy of `fly_chunk` is compiled apart from the serial one's, and with them the
 two differed in the 14th digit depending on compile order); about 7 % slower, and a vehicle flies bit for bit the

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import subprocess
 import sys
 
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 
 from mavtune.sim import batch
@@ -64,6 +66,19 @@ def test_the_vector_width_divides_a_chunk():
     assert 1 <= lanes <= K.LANES and K.LANES % lanes == 0
 
 
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86-64 CPU names")
+@pytest.mark.parametrize(("cpu", "features", "lanes"), [("generic", "", 2),
+                                                        ("haswell", "+sse4.2,+avx,+avx2,+fma,+f16c,+bmi2", 4)])
+def test_the_vector_width_is_the_one_llvm_compiles_for(cpu, features, lanes):
+    """The width follows the target numba compiles for (NUMBA_CPU_NAME/FEATURES), not the CPU running the test:
+    SSE2 holds 2 float64, AVX2 4."""
+    env = {**os.environ, "NUMBA_CPU_NAME": cpu, "NUMBA_CPU_FEATURES": features}
+    code = "from mavtune.sim.simd import float64_lanes; print(float64_lanes())"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert int(out.stdout.split()[-1]) == lanes
+
+
 @settings(max_examples=8, deadline=None)
 @given(n=st.integers(1, 9), seed0=st.integers(0, 2**40), simd=st.sampled_from([1, 2, 4, 8, 16, 32]))
 def test_padding_a_chunk_changes_no_flight(n, seed0, simd):
@@ -79,7 +94,8 @@ def test_padding_a_chunk_changes_no_flight(n, seed0, simd):
     n_trace = -(-ref.shape[0] // 10)
     out = []
     for pad in (float64_lanes(), simd):
-        costs, status, t_fail, traces = np.empty((n, K.NCOST)), np.empty(n, np.int64), np.empty(n), np.full((n, n_trace), np.nan)
+        costs, status, t_fail = np.empty((n, K.NCOST)), np.empty(n, np.int64), np.empty(n)
+        traces = np.full((n, n_trace), np.nan)
         K.fly_serial(seeds, rounds, batch.kernel_array(kx), batch.kernel_array(kv), ref, batch.settle_steps(sc), cp,
                      mix, alloc, 10, traces, costs, status, t_fail, pad)
         out.append((costs, status, t_fail, traces))
