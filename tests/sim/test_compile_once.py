@@ -32,7 +32,7 @@ from mavtune.sim.scenario import Scenario
 from numba.core.registry import CPUDispatcher
 
 code = run_app(["tune", "--out", sys.argv[1], "--quiet", "--stage-rounds", "3"])
-sc = Scenario(settle_s=0.1, primitive_s=0.5)
+sc = Scenario(settle_s=0.1, primitive_s=1.0)
 batch.fly(sc, 10.0, 6.0, [3], 1)
 batch.fly(sc, [10.0, 11.0], np.array([6.0, 5.0]), np.arange(2), [1, 2], trace_hz=10)
 if sys.argv[2] == "parallel":
