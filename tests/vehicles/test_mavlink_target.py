@@ -96,7 +96,18 @@ def test_one_sender_losing_messages_is_never_taken_for_two(start, gaps):
     for i, gap in enumerate(gaps):
         seq = (seq + gap) % 256
         watch.add(seq, i * 0.01)
-    assert not watch.interleaved
+    assert not watch.interleaved(len(gaps) * 0.01)
+
+
+def test_a_burst_of_lost_messages_only_pauses_a_vehicle():
+    """129+ messages lost in a row step the count back once; even LIMIT such bursts clear after WINDOW_S."""
+    watch, seq = SeqWatch(), 0
+    for burst in range(SeqWatch.LIMIT):
+        watch.add(seq, burst * 1.0)
+        seq = (seq + 200) % 256
+        watch.add(seq, burst * 1.0 + 0.5)
+    assert watch.interleaved(SeqWatch.LIMIT)
+    assert not watch.interleaved(SeqWatch.LIMIT + SeqWatch.WINDOW_S)
 
 
 @given(a=st.integers(0, 255), b=st.integers(0, 255), every=st.integers(1, 20))
@@ -111,4 +122,4 @@ def test_a_second_sender_answering_as_the_first_is_seen_within_a_few_of_its_mess
     # an impostor message steps the count back (in or out) unless the two counters are within BACK_MIN of each other
     apart = [i for i in range(0, 199, every)
              if SeqWatch.BACK_MIN < ((b + i // every) - (a + i)) % 256 <= 256 - SeqWatch.BACK_MIN]
-    assert watch.interleaved == (len(apart) >= SeqWatch.LIMIT)
+    assert watch.interleaved(t) == (len(apart) >= SeqWatch.LIMIT)

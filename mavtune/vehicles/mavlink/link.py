@@ -105,11 +105,12 @@ class SeqWatch:
 
     BACK_MIN = 8  # a step back by fewer is a reordered packet, not another sender
     WINDOW_S = 10.0
-    LIMIT = 2  # steps back within WINDOW_S that mean two senders
+    LIMIT = 3  # steps back within WINDOW_S that mean two senders (a burst of 129+ lost messages looks like one)
 
     def __init__(self) -> None:
         self.last: int | None = None
         self.backs: deque[float] = deque()
+        self.flagged = False  # interleaved when last looked at (said once per episode)
 
     def add(self, seq: int, now_s: float) -> None:
         """Count one message's sequence number, received at wall time now_s."""
@@ -121,10 +122,10 @@ class SeqWatch:
         while self.backs and now_s - self.backs[0] > self.WINDOW_S:
             self.backs.popleft()
 
-    @property
-    def interleaved(self) -> bool:
-        """True when two senders seem to share this (system, component)."""
-        return len(self.backs) >= self.LIMIT
+    def interleaved(self, now_s: float) -> bool:
+        """True when two senders seem to share this (system, component): LIMIT steps back within WINDOW_S of
+        now_s (it clears again after WINDOW_S without one, so bursts of lost messages only pause a vehicle)."""
+        return sum(now_s - t <= self.WINDOW_S for t in self.backs) >= self.LIMIT
 
 
 @dataclass(frozen=True)
@@ -314,9 +315,12 @@ class MavlinkLink:
             if len(self._seq) >= 64:  # a flood of invented senders: keep following those already known
                 return
             watch = self._seq[key] = SeqWatch()
-        watch.add(msg.get_seq(), time.monotonic())
-        if watch.interleaved and src not in self._conflicts:
-            self._conflict(src, f"two senders answer as {src}/{comp} (their packet sequence numbers interleave)")
+        now = time.monotonic()
+        watch.add(msg.get_seq(), now)
+        if watch.interleaved(now) and not watch.flagged:
+            log.warning("%s: two senders answer as %d/%d (their packet sequence numbers interleave)", self.url,
+                        src, comp)
+        watch.flagged = watch.interleaved(now)
         if msg.get_type() == "AUTOPILOT_VERSION":
             ids = self._uids.setdefault(src, set())
             ids.add((int(msg.uid), bytes(getattr(msg, "uid2", b"") or b"").rstrip(b"\0")))
@@ -341,6 +345,11 @@ class MavlinkLink:
         """Why the target system cannot be trusted to be one autopilot (one line), or None."""
         with self._cond:
             why = self._conflicts.get(self.target_system) if self.target_system is not None else None
+            comp = self.state.component if self.chosen else (self.heard[self.target_system].component
+                                                              if self.target_system in self.heard else None)
+        watch = self._seq.get((self.target_system, comp)) if comp is not None else None
+        if why is None and watch is not None and watch.interleaved(time.monotonic()):
+            why = f"two senders answer as {self.target_system}/{comp} (their packet sequence numbers interleave)"
         if why is None:
             return None
         return (f"{why}: two vehicles seem to use system id {self.target_system} on {split_target(self.url)[0]}; "
