@@ -71,6 +71,7 @@ def tune(
     confidence: float = DEFAULT,
     cap: int | None = DEFAULT,
     answer: str = DEFAULT,
+    edges: bool = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
 ) -> TuningResult:
@@ -83,7 +84,8 @@ def tune(
     groups strategy, `points` the points per iteration of nsection (None: one per slot), `adaptive` flies close
     comparisons again until the kept point is right with probability `confidence` or each point has `cap`
     flights (None: 4 rounds' worth), `answer` is each line search's answer ("search" or "model": a local fit of
-    all its flights), `on_round` sees every round as it ends, `draws` resampled searches give each gain's
+    all its flights), `edges` whether a line search ending against an edge of its range flies the edge (an optimum
+    there can be the answer), `on_round` sees every round as it ends, `draws` resampled searches give each gain's
     interval (0: none).
     """
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
@@ -102,5 +104,5 @@ def tune(
         vehicles if vehicles is not None else fleet.size, space=space, method=method, epsilon=epsilon,
         bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial=initial, replicates=replicates, points=points,
         max_bootstraps=max_bootstraps, seed=seed if seed is not None else DEFAULT, adaptive=adaptive,
-        confidence=confidence, cap=cap, answer=answer)
+        confidence=confidence, cap=cap, answer=answer, edges=edges)
     return run_tuning(settings, fleet, journal, on_round, draws=draws)

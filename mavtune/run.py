@@ -228,7 +228,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
             status = "finished"
             if hasattr(fleet, "tuned"):
                 fleet.tuned = tuner.gains  # a real fleet keeps these on the vehicles only when told to
-            outcome = tuned_outcome(fleet, tuner.gains, settings, out_dir)
+            outcome = tuned_outcome(fleet, tuner.snapshot(), settings, out_dir)
         except StageDone:
             status = "stage"
         except BaseException as exc:  # an interrupt can surface as another error from inside an import
@@ -386,14 +386,16 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     os.replace(partial, path)
 
 
-def tuned_outcome(fleet: Fleet, gains: dict[str, float], settings, out_dir: Path) -> dict[str, Any]:
+def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path) -> dict[str, Any]:
     """What a finished run says beyond the gains: the range edges they lie at and, for vehicles that map the gains
     to autopilot parameters (MAVLink, directly or behind swarm agents), the gains as each vehicle's parameters
-    (± the search tolerance) and the ground-station parameter files written."""
+    (± the search tolerance) and the ground-station parameter files written; an edge is said with what the
+    flights there say (`LineSearch.edge_evidence`)."""
     from mavtune.vehicles.tuned import tuned_outcome as outcome
 
     maps = fleet.param_maps() if hasattr(fleet, "param_maps") else {}
-    return outcome(maps, gains, settings.space, settings.epsilon, out_dir)
+    evidence, flown = result.edges()
+    return outcome(maps, result.gains, settings.space, settings.epsilon, out_dir, evidence, flown)
 
 
 def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
@@ -406,7 +408,7 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
         console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
                       f"{', '.join(outcome['param_files'])}", highlight=False)
     for edge in outcome.get("range_edges", []):
-        console.print(f"[yellow]range edge:[/] {edge['message']}", highlight=False)
+        console.print(f"[yellow]range edge:[/] {escape(edge['message'])}", highlight=False)
 
 
 def _fleet_line(config: Config) -> str:

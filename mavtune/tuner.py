@@ -22,6 +22,7 @@ from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
 from mavtune.search.interval import DRAWS, resample, resolution
+from mavtune.search.model import flown_span
 from mavtune.strategy import Strategy
 
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
@@ -73,12 +74,15 @@ class LineSearchRecord:
     samples: dict[float, list[float]] = field(default_factory=dict)
     bracket: tuple[float, float] = (math.nan, math.nan)
     stop_reason: str | None = None
+    edge: dict[str, Any] | None = None  # the answer at the end of the span flown: the evidence there (edge_evidence)
+    beside_failure: float | None = None  # a failed point next to the answer, if any
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "bootstrap": self.bootstrap, "gain": self.gain, "held": self.held, "result": self.result,
             "evaluations": self.evaluations, "brackets": [list(i.bracket) for i in self.iterations],
-            "bracket": list(self.bracket), "stop_reason": self.stop_reason,
+            "bracket": list(self.bracket), "stop_reason": self.stop_reason, "edge": self.edge,
+            "beside_failure": self.beside_failure,
             "comparisons": [
                 {"bracket": list(i.bracket), "points": list(i.points), "means": list(i.costs), "se": list(i.se),
                  "n": list(i.n), "best": i.best, "p_correct": i.p_correct}
@@ -100,6 +104,13 @@ class TuningResult:
     uncertainty: dict[str, dict[str, float]] = field(default_factory=dict)  # gain -> Interval.to_dict()
     noise: dict[str, float] = field(default_factory=dict)  # the pooled flight-to-flight noise: cv and its dof
     in_progress: LineSearchRecord | None = None  # the line search under way when the run stopped, if any
+
+    def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
+        """Per gain, from the last line search that set it: the evidence at the end of its span flown
+        (`LineSearch.edge_evidence`) and that span (`flown_span`), for `mavtune.edges.range_edges`."""
+        last = {s.gain: s for s in self.searches}
+        spans = {name: flown_span(s.samples) for name, s in last.items()}
+        return {name: s.edge for name, s in last.items()}, {n: span for n, span in spans.items() if span is not None}
 
     @property
     def flights(self) -> int:
@@ -143,6 +154,7 @@ class Settings:
     refly: bool = False
     stop_undecided: bool = False
     answer: str = "search"
+    edges: bool = False
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -185,7 +197,7 @@ class Settings:
         """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool`."""
         return make_search(self.method, lo, hi, self.epsilon, reuse=self.reuse, points=self.points,
                            adaptive=self.adaptive_rule, pool=pool, refly=self.refly and self.reuse,
-                           answer=self.answer)
+                           answer=self.answer, edges=self.edges)
 
     def start_gains(self) -> Gains:
         """The gains before tuning: the given initial values, mid-range for the rest."""
@@ -209,7 +221,7 @@ class Settings:
                                                                   "cap": self.adaptive_rule.cap,
                                                                   "stop": self.adaptive_rule.stop},
             "answer": self.answer if self.answer != "search" else None,
-        }
+        } | ({"edges": True} if self.edges else {})  # absent when off: journals from before edges still resume
 
 
 class StageDone(Exception):
@@ -267,8 +279,10 @@ class Tuner:
     @staticmethod
     def _record(bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason."""
+        done = search.done and (bool(search.history) or search.stop_reason is None)
         return LineSearchRecord(bootstrap, name, held, list(search.history), result, search.evaluations,
-                                search.samples(), search.bracket, search.stop_reason)
+                                search.samples(), search.bracket, search.stop_reason,
+                                search.edge_evidence() if done else None, search.beside_failure() if done else None)
 
     def uncertainty(self) -> dict[str, dict[str, float]]:
         """Per tuned gain its interval, from the flights of the last line search that set it."""
