@@ -392,13 +392,18 @@ class Tuner:
 
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,
                on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None,
-               draws: int = DRAWS) -> TuningResult:
+               draws: int = DRAWS, resume: bool = False) -> TuningResult:
     """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds); with
-    `stage_rounds`, StageDone ends the call after that many newly flown rounds."""
+    `stage_rounds`, StageDone ends the call after that many newly flown rounds. A fleet that can evaluate a round
+    again (a user's cost function: `same_costs`) must give the journal's first round its recorded costs, unless
+    `resume` says to continue without that check."""
     book = Journal(journal) if journal is not None else None
     try:
         if book is not None:
             book.bind(settings.fingerprint())
+            if not resume and len(book) and hasattr(fleet, "same_costs"):
+                first = book.rounds()[0]
+                fleet.same_costs(first.flights, first.assignments, 0, f"journal {book.path}")
         return Tuner(settings, fleet, book, on_round, stage_rounds, draws).run()
     finally:
         if book is not None:
