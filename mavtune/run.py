@@ -275,6 +275,8 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console.print(f"tuned after {counted(len(result.rounds), 'round')}, {counted(result.flights, 'flight')} "
                   f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
     console.print(_result_table(result))
+    for line in result.cautions():
+        console.print(f"[yellow]caution:[/] {escape(line)}", highlight=False)
     print_outcome(console, outcome)
     console.print(f"run folder: {out_dir}")
     return result
@@ -436,8 +438,11 @@ def _result_table(result: TuningResult) -> Table:
     cv = result.noise.get("cv", math.nan)
     caption = (f"noise: {cv:.0%} of the cost per flight ({result.noise.get('dof', 0):g} repeats)"
                if math.isfinite(cv) else "noise unknown: no point was flown twice")
+    caption += ("; each interval is its gain's last line search's (the other gains held), widened by what its "
+                "flights cannot rule out and its last move between bootstraps; p ≥ 0.9: comparisons whose kept "
+                "point was the best with that probability (not the answer's accuracy)")
     table = Table(caption=caption)
-    for column in ("gain", "value", "interval", "sure comparisons"):
+    for column in ("gain", "value", "interval", "comparisons p ≥ 0.9"):
         table.add_column(column, justify="left" if column == "gain" else "right")
     last = {s.gain: s for s in result.searches}
     for name, value in result.gains.items():

@@ -21,10 +21,13 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
-from mavtune.search.interval import DRAWS, resample, resolution
+from mavtune.search.interval import DRAWS, joint, plausible_span, resample, resolution
 from mavtune.search.model import flown_span
 from mavtune.strategy import Strategy
 
+INTERVAL_NOTE = ("each gain's interval is from its last line search, flown with the other gains held (coordinate "
+                 "search), joined with every gain its flights cannot rule out and widened by its last move between "
+                 "bootstraps, towards an interval with the other gains free")
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 
 
@@ -105,6 +108,31 @@ class TuningResult:
     noise: dict[str, float] = field(default_factory=dict)  # the pooled flight-to-flight noise: cv and its dof
     in_progress: LineSearchRecord | None = None  # the line search under way when the run stopped, if any
 
+    def cautions(self) -> list[str]:
+        """What a user must know before trusting the gains, one line each: an answer still moving between
+        bootstraps by more than the search's tolerance, an interval spanning most of its range, an answer next to
+        a flight that failed."""
+        out = []
+        space, epsilon = self.settings.get("space", {}), self.settings.get("epsilon", math.nan)
+        last = {s.gain: s for s in self.searches}
+        for name, u in self.uncertainty.items():
+            lo, hi = space.get(name, (math.nan, math.nan))
+            width, moved = hi - lo, u.get("moved", math.nan)
+            if math.isfinite(moved) and abs(moved) > epsilon * width:
+                out.append(f"{name} still moved {moved:+.3g} between its last two line searches, more than the "
+                           f"search's tolerance {epsilon * width:.3g}: the coordinate search has not settled (its "
+                           "interval is widened by that move; another bootstrap would tell)")
+            if math.isfinite(u.get("lo", math.nan)) and u["hi"] - u["lo"] > 0.5 * width:
+                out.append(f"{name}'s {u.get('level', 0.9):.0%} interval {u['lo']:.3g} – {u['hi']:.3g} spans "
+                           f"{(u['hi'] - u['lo']) / width:.0%} of its range: the flights do not pin it down (more "
+                           "flights per point, or less noise)")
+        for name, rec in last.items():
+            if rec.beside_failure is not None:
+                out.append(f"{name} = {self.gains.get(name, rec.result):.4g} lies next to {rec.beside_failure:.4g}, "
+                           "where a flight failed (diverged): no gain beyond it was answered, but the margin to it "
+                           "is one step of the search")
+        return out
+
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
         """Per gain, from the last line search that set it: the evidence at the end of its span flown
         (`LineSearch.edge_evidence`) and that span (`flown_span`), for `mavtune.edges.range_edges`."""
@@ -126,6 +154,8 @@ class TuningResult:
             "stop_reason": self.stop_reason,
             "settings": self.settings,
             "uncertainty": self.uncertainty,
+            "uncertainty_note": INTERVAL_NOTE,
+            "cautions": self.cautions(),
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
@@ -298,7 +328,10 @@ class Tuner:
                                 lambda search: rule.assign(search, int(s.vehicles), speculate=False),
                                 rec.samples, self.pool, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
-            out[name] = interval.to_dict()
+            before = [r.result for r in self.searches[:i] if r.gain == name]
+            moved = rec.result - before[-1] if before else math.nan
+            plausible = plausible_span(rec.samples, self.pool, (lo, hi), interval.level) if self.draws else None
+            out[name] = joint(interval, plausible, moved, (lo, hi)).to_dict()
         self._uncertainty = (len(self.searches), out)
         return out
 
