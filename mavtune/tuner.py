@@ -122,9 +122,10 @@ class TuningResult:
                 out.append(f"{name} still moved {moved:+.3g} between its last two line searches, more than the "
                            f"search's tolerance {epsilon * width:.3g}: the coordinate search has not settled (its "
                            "interval is widened by that move; another bootstrap would tell)")
-            if math.isfinite(u.get("lo", math.nan)) and u["hi"] - u["lo"] > 0.5 * width:
-                out.append(f"{name}'s {u.get('level', 0.9):.0%} interval {u['lo']:.3g} – {u['hi']:.3g} spans "
-                           f"{(u['hi'] - u['lo']) / width:.0%} of its range: the flights do not pin it down (more "
+            ulo, uhi = u.get("lo", math.nan), u.get("hi", math.nan)
+            if uhi - ulo > 0.5 * width:  # (False where either is unknown)
+                out.append(f"{name}'s {u.get('level', 0.9):.0%} interval {ulo:.3g} – {uhi:.3g} spans "
+                           f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more "
                            "flights per point, or less noise)")
         for name, rec in last.items():
             if rec.beside_failure is not None:
