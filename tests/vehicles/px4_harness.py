@@ -123,20 +123,22 @@ def pilot_link(url: str, timeout_s: float = 20.0) -> mavutil.mavfile:
 
 def hold_hover(master: mavutil.mavfile, altitude_m: float = HOVER_M, timeout_s: float = 120.0) -> None:
     """What a pilot does before tuning: set the takeoff height, arm (retried until accepted), take off (NaN
-    position: above home) and wait until PX4 holds in Hold (AUTO.LOITER) near the height."""
+    position: above home) and wait until PX4 holds still in Hold (AUTO.LOITER), most of the way up."""
     master.mav.param_set_send(master.target_system, master.target_component, b"MIS_TAKEOFF_ALT", altitude_m,
                               mavlink.MAV_PARAM_TYPE_REAL32)
     master.mav.request_data_stream_send(master.target_system, master.target_component,
                                         mavlink.MAV_DATA_STREAM_ALL, 10, 1)
-    deadline, next_try, alt_m, mode = time.monotonic() + timeout_s, 0.0, 0.0, ""
+    deadline, next_try, alt_m, mode, still_since = time.monotonic() + timeout_s, 0.0, 0.0, "", None
     while time.monotonic() < deadline:
         msg = master.recv_match(type=["HEARTBEAT", "LOCAL_POSITION_NED"], blocking=True, timeout=0.2)
         if msg is not None and msg.get_type() == "LOCAL_POSITION_NED":
             alt_m = -msg.z
+            hovering = mode == "LOITER" and master.motors_armed() and alt_m > 0.6 * altitude_m and abs(msg.vz) < 0.2
+            still_since = (still_since or time.monotonic()) if hovering else None
+            if still_since is not None and time.monotonic() - still_since > 2.0:  # held still for 2 s: hovering
+                return
         elif msg is not None and msg.get_srcComponent() == master.target_component:
             mode = master.flightmode
-        if mode == "LOITER" and abs(alt_m - altitude_m) < 0.3 and master.motors_armed():
-            return
         if time.monotonic() < next_try:
             continue
         next_try = time.monotonic() + 2.0

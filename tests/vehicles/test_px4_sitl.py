@@ -115,8 +115,11 @@ def test_two_agents_under_the_zenoh_coordinator_give_each_vehicles_parameters(tm
     kp, kd = result["gains"]["kp"], result["gains"]["kd"]
     expected = pytest.approx({"MPC_Z_P": 0.1 + 1.4 * kp, "MPC_Z_VEL_P_ACC": 2.0 + 13.0 * kd})
     assert result["tuned_params"] == {"p0": expected, "p1": expected}
-    assert sorted(result["param_file_vehicles"]) == ["tuned-1.parm", "tuned-1.params", "tuned-2.parm",
-                                                     "tuned-2.params"]  # PX4 instances 0 and 1: system ids 1, 2
+    sysids = sorted(v.sysid for v in vehicles)  # PX4 instance N is system N + 1: a file pair each
+    assert set(result["param_file_vehicles"]) == {f"tuned-{k}.{ext}" for k in (1, 2) for ext in ("parm", "params")}
+    for k, sysid in zip((1, 2), sysids):
+        rows = [r.split("\t") for r in (out / f"tuned-{k}.params").read_text().splitlines() if r[:1] != "#"]
+        assert {r[0] for r in rows} == {str(sysid)}
 
 
 class _Pilot(threading.Thread):
