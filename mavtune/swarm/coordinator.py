@@ -111,6 +111,7 @@ class ZenohFleet:
         self._accepted: dict[str, tuple[int, str]] = {}  # vehicle → (challenge seq, nonce) of its latest hello taken
         self._nonces: dict[str, deque[str]] = {}  # vehicle → nonces of its earlier hellos in this run
         self._knocked: dict[str, float] = {}  # vehicle → when a knock of it last earned a probe
+        self._asked: dict[str, float] = {}  # vehicle that said hello → when Zenoh was last asked for its token
         self._duplicate: dict[str, float] = {}  # vehicle → until when it is left out (two agents answer for it)
         self._param_maps: dict[str, ParamMap] = {}  # vehicle → its parameter map, from its latest hello in this run
         self._lost_open: OrderedDict[tuple[int, str], dict] = OrderedDict()  # (round, vehicle) lost → gains owed
@@ -251,6 +252,7 @@ class ZenohFleet:
 
     def _drain(self) -> None:
         """Handle every event waiting now, without blocking."""
+        self._tend()
         while True:
             try:
                 item = self._inbox.get_nowait()
@@ -293,7 +295,7 @@ class ZenohFleet:
 
     def _pump(self, deadline: float) -> bool:
         """Handle one event (waiting until `deadline` for it); False once the deadline has passed."""
-        self._expire_duplicates()
+        self._tend()
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             return False
@@ -336,6 +338,11 @@ class ZenohFleet:
             return None
         return seq if (time.monotonic() - self._t0) * 1e6 - seq <= CHALLENGE_TTL_S * 1e6 else None
 
+    def _tend(self) -> None:
+        """The timed duties, done whenever events are handled: duplicates' holds, unconfirmed tokens."""
+        self._expire_duplicates()
+        self._ask_again()
+
     def _expire_duplicates(self) -> None:
         """Probe again a vehicle id left out for two agents once DUPLICATE_HOLD_S passed without a sign of two."""
         now = time.monotonic()
@@ -354,7 +361,10 @@ class ZenohFleet:
     def _on_liveliness(self, vid: str, alive: bool) -> None:
         """A token of a vehicle that said hello is confirmed (it is present) or went away (its open flight is LOST)."""
         if alive:
-            self._mark_alive(vid)
+            if vid in self._hello:
+                self._mark_alive(vid)
+            elif vid not in self._duplicate:  # it left and came back (a restarted agent): a new hello is due
+                self._probe(vid)
             return
         self._leave(vid, "liveliness token deleted")
 
@@ -476,6 +486,9 @@ class ZenohFleet:
         if (seq == last_seq and msg.agent != last_nonce) or (seq > last_seq and msg.agent in earlier):
             self._on_duplicate(sender)
             return
+        if seq <= last_seq and msg.agent == last_nonce:
+            log.debug("%s: hello answering an older probe (answers crossed)", sender)
+            return
         if seq <= last_seq or sender in self._duplicate:
             self._drops("stale", "dropped hello from %s: it answers an older probe (a replay?)", sender)
             return
@@ -492,7 +505,20 @@ class ZenohFleet:
                 self._event("joined", None if self._round is None else self._round.id, sender,
                             f"backend {msg.backend or '?'}")
         else:  # present once Zenoh confirms its token (a hello may outlive its sender)
-            self.link.check_liveliness(self.keys.alive(sender), lambda k: self._offer(("live", k, True)))
+            self._ask_liveliness(sender)
+
+    def _ask_liveliness(self, vid: str) -> None:
+        """Ask Zenoh whether the token of `vid` (which said hello) is there; the answer comes as a liveliness event."""
+        self._asked[vid] = time.monotonic()
+        self.link.check_liveliness(self.keys.alive(vid), lambda k: self._offer(("live", k, True)))
+
+    def _ask_again(self) -> None:
+        """Ask again, every PROBE_EVERY_S, for the tokens of vehicles that said hello and are not confirmed yet (an
+        answer may have been lost)."""
+        now = time.monotonic()
+        for vid in [v for v in self._hello if v not in self._alive]:
+            if now - self._asked.get(vid, -math.inf) >= PROBE_EVERY_S:
+                self._ask_liveliness(vid)
 
     def _on_duplicate(self, vid: str) -> None:
         """Two agents answer for vehicle id `vid`: name it, leave it out until only one answers."""
@@ -501,6 +527,8 @@ class ZenohFleet:
                         f"two agents claim vehicle id {vid!r} (two nonces answered its probes): give each vehicle "
                         f"its own --id; {vid} is left out of the run until only one answers")
         self._duplicate[vid] = time.monotonic() + DUPLICATE_HOLD_S
+        self._accepted[vid] = (self._accepted.get(vid, (-1, ""))[0], "")  # whoever answers alone later is taken
+        self._nonces.pop(vid, None)
         self._leave(vid, "two agents claim its id")
 
     def _event(self, event: str, round_id: int | None, vehicle: str | None, detail: str, **extra: Any) -> None:
