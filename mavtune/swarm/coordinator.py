@@ -376,7 +376,7 @@ class ZenohFleet:
         if was_present:
             self._event("left", None if self._round is None else self._round.id, vid, why)
         if self._round is not None and vid in self._round.crew and self._round.open(vid):
-            self._lose(self._round, [vid], f"vehicle left during the round ({why})")
+            self._lose(self._round, [vid], f"vehicle left during the round: {why}")
 
     def _on_message(self, key: str, payload: bytes) -> None:
         """Validate one agent message and book it into the round; anything unexpected is dropped and counted."""

@@ -2,14 +2,15 @@
 
 On the wire a message is `HMAC-SHA256(key, body) ‖ body`, the body its JSON, and the key is the vehicle's own
 (`vehicle_key`: derived from the swarm key and the vehicle's id), so a vehicle that holds only its own key can act
-as no other. No key travels. Every body names
-the session, the coordinator's run nonce (`run`, fresh for every coordinator start) and — except a Probe — the
-agent's nonce (`agent`, fresh for every agent process and run), so a message of an earlier run, or one made for another
-agent, is refused where it is replayed. Joining is a challenge–response both ways: a Probe carries the coordinator's
-fresh `challenge`, which the Hello echoes (an old hello is refused), and the agent commits to a run only once a
-message sealed with its key carries its fresh nonce back (a Welcome; a replayed probe gets a hello nobody answers). `Codec.decode()` refuses (`Rejected`, with the reason) anything too
-large, unauthenticated, malformed or foreign; a Result also has to be self-consistent: a finite cost ≥ 0 unless the
-flight failed or was lost (then NaN or +inf), and trace arrays of equal length with finite samples.
+as no other. No key travels. Every body names the session, the coordinator's run nonce (`run`, fresh for every
+coordinator start) and — except a Knock or a Probe — the agent's nonce (`agent`, fresh for every agent process and
+run), so a message of an earlier run, or one made for another agent, is refused where it is replayed. Joining is a
+challenge–response both ways: a Probe carries the coordinator's fresh `challenge`, which the Hello echoes (an old
+hello is refused), and the agent commits to a run only once a message sealed with its key carries its fresh nonce
+back (a Welcome; a replayed probe gets a hello nobody answers). `Codec.decode()` refuses (`Rejected`, with the
+reason) anything too large, unauthenticated, malformed or foreign; a Result also has to be self-consistent: a finite
+cost ≥ 0 unless the flight failed or was lost (then NaN or +inf), and trace arrays of equal length with finite
+samples.
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ class _Bound(_Message):
 
 class Probe(_Message):
     """Coordinator → agent: 'introduce yourself, echoing `challenge`' (sent when a liveliness token appears or the
-    agent knocks; no secret in it). The challenge is fresh for every probe: a hello that echoes an old one is refused."""
+    agent knocks; no secret in it). The challenge is fresh for every probe: a hello echoing an old one is refused."""
 
     kind: Literal["probe"] = "probe"
     challenge: Nonce
@@ -214,7 +215,8 @@ class State(_Bound):
     state: AgentState
 
 
-Message = Annotated[Union[Knock, Hello, Probe, Welcome, Assignment, Ack, Start, Finish, Result, State], Field(discriminator="kind")]
+Message = Annotated[Union[Knock, Hello, Probe, Welcome, Assignment, Ack, Start, Finish, Result, State],
+                    Field(discriminator="kind")]
 _ADAPTER: TypeAdapter[Message] = TypeAdapter(Message)
 
 
@@ -257,6 +259,10 @@ class Codec:
         try:
             msg = _ADAPTER.validate_json(payload[MAC_BYTES:])
         except ValidationError as exc:
+            version = claimed(payload).get("v")
+            if isinstance(version, int) and version != PROTOCOL_VERSION:
+                raise Rejected(f"protocol version {version!r}, not {PROTOCOL_VERSION}: run the same mavtune version "
+                               "on the coordinator and every vehicle") from None
             first = exc.errors()[0] if exc.errors() else {}
             raise Rejected(f"invalid message ({first.get('msg', '?')} at "
                            f"{'.'.join(str(p) for p in first.get('loc', ()))})") from None

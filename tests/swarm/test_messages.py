@@ -46,8 +46,9 @@ def _sealed(body: bytes) -> bytes:
     (CODEC.encode(Start(**KW, round=1))[:-1] + b" ", "authenticated"),  # tampered body
     (_sealed(b"null"), "invalid"), (_sealed(b"not json"), "invalid"), (_sealed(b'{"kind": "assignment"}'), "invalid"),
     (CODEC.encode(Start(**{**KW, "session": "other"}, round=1)), "not ours"),
-    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":5', b'"v":4')), "invalid"),
-    (_sealed(Hello(**KW, challenge=CHALLENGE).model_dump_json().encode().replace(b'"vehicle":"v0"', b'"vehicle":"a/b"')), "invalid"),
+    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":5', b'"v":4')), "protocol version 4, not 5"),
+    (_sealed(Hello(**KW, challenge=CHALLENGE).model_dump_json().encode().replace(b'"vehicle":"v0"', b'"vehicle":"x/"')),
+     "invalid"),
     (_sealed(Hello(**KW, challenge=CHALLENGE).model_dump_json().encode().replace(b"}", b',"extra":1}', 1)), "invalid"),
     (b"{" + b" " * MAX_MESSAGE_BYTES + b"}", "limit"),
 ])
