@@ -44,37 +44,37 @@ def agents():
         a.close(timeout_s=5)
 
 
+@pytest.fixture
+def coordinator():
+    """A coordinator of session d1 listening on a free port: (endpoint, fleet)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    fleet = ZenohFleet(endpoint, SwarmConfig(session="d1", key=KEY))
+    yield endpoint, fleet
+    fleet.close()
+
+
 def lines(caplog, text: str) -> list[str]:
     return [r.getMessage() for r in caplog.records if text in r.getMessage()]
 
 
-def test_another_swarms_key_is_named_by_the_agent_and_the_coordinator_once(agents, caplog):
+def test_another_swarms_key_is_named_by_the_agent_and_the_coordinator_once(coordinator, agents, caplog):
     caplog.set_level(logging.WARNING)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    fleet = ZenohFleet(endpoint, SwarmConfig(session="d1", key=KEY))
-    try:
-        agents("v7", endpoint, session="d1", key=OTHER_KEY)
-        assert wait_until(lambda: lines(caplog, "another swarm's key") and fleet.dropped >= 3, 60), caplog.text
-        agent_says = lines(caplog, "agent v7: a probe on mavtune/d1/to/v7 is not sealed with this vehicle's key")
-        coordinator_says = lines(caplog, "cannot authenticate vehicle 'v7'")
-        assert len(agent_says) == 1 and "coordinator has another swarm's key" in agent_says[0], caplog.text
-        assert len(coordinator_says) == 1, caplog.text  # its knocks go on: named once
-        assert fleet.present == []
-    finally:
-        fleet.close()
+    endpoint, fleet = coordinator
+    agents("v7", endpoint, session="d1", key=OTHER_KEY)
+    assert wait_until(lambda: lines(caplog, "another swarm's key") and fleet.dropped >= 3, 60), caplog.text
+    agent_says = lines(caplog, "agent v7: a probe on mavtune/d1/to/v7 is not sealed with this vehicle's key")
+    coordinator_says = lines(caplog, "cannot authenticate vehicle 'v7'")
+    assert len(agent_says) == 1 and "coordinator has another swarm's key" in agent_says[0], caplog.text
+    assert len(coordinator_says) == 1, caplog.text  # its knocks go on: named once
+    assert fleet.present == []
 
 
-def test_another_session_is_named_by_the_agent(agents, caplog):
+def test_another_session_is_named_by_the_agent(coordinator, agents, caplog):
     caplog.set_level(logging.WARNING)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    fleet = ZenohFleet(endpoint, SwarmConfig(session="d1", key=KEY))
-    try:
-        agents("v0", endpoint, session="d2", key=KEY)
-        assert wait_until(lambda: lines(caplog, "check --session"), 60), caplog.text
-        said = lines(caplog, "check --session")
-        assert len(said) == 1 and "session 'd2'" in said[0] and "session 'd1'" in said[0], said
-    finally:
-        fleet.close()
+    agents("v0", coordinator[0], session="d2", key=KEY)
+    assert wait_until(lambda: lines(caplog, "check --session"), 60), caplog.text
+    said = lines(caplog, "check --session")
+    assert len(said) == 1 and "session 'd2'" in said[0] and "session 'd1'" in said[0], said
 
 
 def test_no_coordinator_at_all_is_said(agents, caplog):
