@@ -119,6 +119,7 @@ class Agent:
         self._secret = secrets.token_bytes(32)  # the nonces offered to other runs derive from it; renewed at commit
         self._latest = -1  # the latest round assigned in this run
         self._drops = RateLimitedLog(log)
+        self._foreign = RateLimitedLog(log, level=logging.ERROR)  # probes sealed with another swarm's key
         self._inbox: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=INBOX_SIZE)
         self._gone: set[str] = set()  # the served run, once its coordinator's liveliness token went away
         self._orphaned = False  # the served run's coordinator went away (until a commit or its Welcome)
@@ -164,7 +165,7 @@ class Agent:
             said = claimed(payload)
             if said.get("kind") == "probe" and said.get("session") == self.config.session:
                 self._foreign_probe = True
-                self._drops("foreign_key", "agent %s: a probe on %s is not sealed with this vehicle's key: the "
+                self._foreign("foreign_key", "agent %s: a probe on %s is not sealed with this vehicle's key: the "
                             "coordinator has another swarm's key (give this agent the %s.key that `mavtune swarm-key "
                             "%s` makes from the coordinator's swarm key)", self.id, key, self.id, self.id)
             else:

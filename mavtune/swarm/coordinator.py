@@ -101,6 +101,7 @@ class ZenohFleet:
         self._drops = RateLimitedLog(log)
         self._strangers = RateLimitedLog(log, level=logging.ERROR)  # senders it cannot authenticate, named once
         self._named: set[str] = set()
+        self._named_again = RateLimitedLog(log, level=logging.DEBUG)  # their later messages: counted
         self._t0 = time.monotonic()
         self._inbox: queue.Queue[tuple[str, str, Any]] = queue.Queue(maxsize=INBOX_SIZE)
         self._secret = secrets.token_bytes(32)  # seals the challenges of this run's probes
@@ -144,7 +145,7 @@ class ZenohFleet:
     @property
     def dropped(self) -> int:
         """Messages dropped so far (unauthenticated, malformed, foreign, replayed, unexpected, or over the inbox)."""
-        return self._drops.total + self._strangers.total
+        return self._drops.total + self._strangers.total + self._named_again.total
 
     def report(self) -> dict[str, Any]:
         """What result.json keeps of this fleet: the session, every drop-out event, the dropped messages."""
@@ -220,7 +221,9 @@ class ZenohFleet:
         (the sender's claimed id named once: an agent with another swarm's key, or a forger)."""
         sender = Keys.last_chunk(key)
         if not self._codec(sender).authentic(payload):
-            if sender not in self._named and len(self._named) < MAX_NAMED:
+            if sender in self._named:
+                self._named_again("named", "dropped a message on %s: not authenticated (named before)", key)
+            elif len(self._named) < MAX_NAMED:
                 self._named.add(sender)
                 self._strangers("stranger", "cannot authenticate vehicle %r (on %s): its messages are not sealed "
                                 "with that vehicle's key — an agent given another swarm's key, or a forger", sender,
