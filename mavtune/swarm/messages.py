@@ -58,6 +58,9 @@ MAX_GAINS = 64
 
 WireGains = Annotated[dict[GainName, float], Field(max_length=MAX_GAINS)]
 
+MAX_INFO_BYTES = 16_000
+"""A result's `info` (flight details, kept in result.json) is at most this large as JSON (a flight's is ~100 B)."""
+
 
 class Rejected(ValueError):
     """A payload that is not a valid message of this session; the text says why (one line)."""
@@ -196,6 +199,8 @@ class Result(_Bound):
             raise ValueError(f"negative cost {self.cost!r} (a cost sums absolute errors)")
         if not all(math.isfinite(g) for g in self.gains.values()):
             raise ValueError("non-finite gains")
+        if _info_bytes(self.info) > MAX_INFO_BYTES:
+            raise ValueError(f"info of {_info_bytes(self.info)} bytes, over the {MAX_INFO_BYTES}-byte limit")
         return self
 
     def to_flight(self) -> Flight:
@@ -293,9 +298,17 @@ def result_from_flight(flight: Flight, *, session: str, run: str, agent: str, ro
         trace = TraceMsg(t_s=[float(r[0]) for r in rows], z_ref_m=[float(r[1]) for r in rows],
                          z_m=[float(r[2]) for r in rows])
     cost = float(flight.cost)
+    info = _jsonable(flight.info)
+    if _info_bytes(info) > MAX_INFO_BYTES:  # never refuse to report a flight over its details
+        info = {"info_dropped": f"{_info_bytes(info)} bytes of flight details, over the {MAX_INFO_BYTES}-byte limit"}
     return Result(session=session, run=run, agent=agent, round=round_id, vehicle=vehicle, gains=dict(flight.gains),
                   cost=cost, status=flight.status if math.isfinite(cost) or flight.status is not Status.OK
-                  else Status.FAILED, trace=trace, info=_jsonable(flight.info))
+                  else Status.FAILED, trace=trace, info=info)
+
+
+def _info_bytes(info: dict[str, Any]) -> int:
+    """The size of a result's info as JSON (NaN and inf as constants)."""
+    return len(json.dumps(info, default=repr))
 
 
 def _jsonable(info: dict[str, Any]) -> dict[str, Any]:

@@ -177,3 +177,14 @@ def test_each_vehicle_gets_its_own_key_and_an_agent_takes_only_its_own(tmp_path)
     with pytest.raises(MavtuneError, match="a vehicle's key"):
         write_vehicle_keys(line, ["v2"], tmp_path)
     assert paths[1].read_text().strip().endswith(vehicle_key(KEY, "v1"))  # nothing overwritten
+
+
+def test_a_results_flight_details_are_bounded_and_an_agent_still_reports_a_flight_with_too_many():
+    from mavtune.swarm.messages import MAX_INFO_BYTES
+
+    with pytest.raises(Rejected, match="invalid"):
+        CODEC.decode(_result_json(info={"junk": "x" * MAX_INFO_BYTES}))
+    flight = Flight(vehicle="x", gains={"kp": 0.5}, cost=1.0, status=Status.OK, info={"log": "y" * MAX_INFO_BYTES})
+    res = CODEC.decode(CODEC.encode(result_from_flight(flight, session="s1", run=RUN, agent=AGENT, round_id=2,
+                                                       vehicle="v1")))
+    assert res.cost == 1.0 and list(res.info) == ["info_dropped"]
