@@ -121,6 +121,7 @@ class ZenohFleet:
         self.link = link if link is not None else open_router(listen, lease_ms=config.lease_ms, tls=config.tls)
         self.link.subscribe(self.keys.frm("*"), self._on_sample)
         self.link.watch_liveliness(self.keys.alive("*"), self._on_token)
+        self.link.watch_liveliness(Keys.any_alive(), self._on_foreign_token)
         self.link.declare_token(self.keys.coordinator(self.run))  # agents release their vehicles when it goes
         log.info("coordinator listening on %s, session %s, run %s", listen, config.session, self.run[:8])
 
@@ -245,6 +246,18 @@ class ZenohFleet:
                 self._probe(vid)
             else:
                 self._drops("not_allowed", "ignored vehicle %r: not in the configured vehicle list", vid)
+
+    def _on_foreign_token(self, key: str, alive: bool) -> None:
+        """Zenoh's liveliness callback for every session: an agent on another session is named once (a --session
+        typo); nothing else is kept."""
+        session, vid = Keys.session_of(key), Keys.last_chunk(key)
+        if not alive or session == self.config.session:
+            return
+        name = f"{session}/{vid}"
+        if name not in self._named and len(self._named) < MAX_NAMED:
+            self._named.add(name)
+            self._strangers("other_session", "vehicle %r is on session %r, not this one (%r): check its --session",
+                            vid, session, self.config.session)
 
     def _offer(self, item: tuple[str, str, Any]) -> None:
         """Queue one event without ever blocking Zenoh's thread."""

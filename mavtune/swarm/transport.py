@@ -70,6 +70,11 @@ class Keys:
         return f"{ROOT}/*/coordinator/*"
 
     @staticmethod
+    def any_alive() -> str:
+        """The liveliness tokens of every vehicle, in any session (a coordinator names agents on another one)."""
+        return f"{ROOT}/*/alive/*"
+
+    @staticmethod
     def last_chunk(key: str) -> str:
         """The vehicle id at the end of a key."""
         return key.rsplit("/", 1)[-1]

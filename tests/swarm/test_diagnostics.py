@@ -73,8 +73,11 @@ def test_another_session_is_named_by_the_agent(coordinator, agents, caplog):
     caplog.set_level(logging.WARNING)
     agents("v0", coordinator[0], session="d2", key=KEY)
     assert wait_until(lambda: lines(caplog, "check --session"), 60), caplog.text
+    assert wait_until(lambda: lines(caplog, "check its --session"), 60), caplog.text
     said = lines(caplog, "check --session")
     assert len(said) == 1 and "session 'd2'" in said[0] and "session 'd1'" in said[0], said
+    heard = lines(caplog, "check its --session")  # and the coordinator names it
+    assert heard == ["vehicle 'v0' is on session 'd2', not this one ('d1'): check its --session"]
 
 
 def test_no_coordinator_at_all_is_said(agents, caplog):
