@@ -10,44 +10,21 @@ from mavtune.swarm.coordinator import ZenohFleet
 from mavtune.swarm.messages import Codec, Hello, Probe, Welcome, vehicle_key
 from mavtune.swarm.transport import Keys
 
+from .conftest import LinkStub
+
 KEY = "admission test swarm key, 32 ch"
 KEYS = Keys("a1")
 
 
-class Wire:
-    """Stands in for the Zenoh link: keeps what the coordinator publishes, answers liveliness queries for v0."""
-
-    def __init__(self):
-        self.sent: list[tuple[str, bytes]] = []
-
-    def put(self, key, payload):
-        self.sent.append((key, payload))
-
-    def check_liveliness(self, key, on_alive):
-        on_alive(key)
-
-    def subscribe(self, *a):
-        pass
-
-    def watch_liveliness(self, *a):
-        pass
-
-    def declare_token(self, *a):
-        pass
-
-    def close(self):
-        pass
-
-
-def fleet() -> tuple[ZenohFleet, Wire]:
-    wire = Wire()
+def fleet() -> tuple[ZenohFleet, LinkStub]:
+    wire = LinkStub()
     return ZenohFleet("tcp/127.0.0.1:1", SwarmConfig(session="a1", key=KEY), link=wire), wire
 
 
 CODEC = Codec("a1", vehicle_key(KEY, "v0"))
 
 
-def probe(f: ZenohFleet, wire: Wire) -> str:
+def probe(f: ZenohFleet, wire: LinkStub) -> str:
     """Probe v0; the challenge it carries."""
     f._probe("v0")
     return CODEC.decode(wire.sent[-1][1]).challenge
@@ -57,7 +34,7 @@ def hello(f: ZenohFleet, challenge: str, nonce: str) -> bytes:
     return CODEC.encode(Hello(session="a1", run=f.run, agent=nonce, vehicle="v0", challenge=challenge))
 
 
-def welcomed(wire: Wire) -> list[str]:
+def welcomed(wire: LinkStub) -> list[str]:
     return [m.agent for m in (CODEC.decode(p) for _, p in wire.sent) if isinstance(m, Welcome)]
 
 

@@ -13,31 +13,18 @@ from mavtune.swarm.transport import Keys
 from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
 from mavtune.fleet import Trace
 
+from .conftest import LinkStub
+
 KEY = "test key of at least 16 chars"
 CODEC = Codec("s", vehicle_key(KEY, "v0"))  # the agent v0 is given the swarm key: it seals with its own
 RUN = "1" * 32
 
 
-class Recorder:
-    """Stands in for the Zenoh link: keeps what the agent publishes."""
-
-    def __init__(self):
-        self.sent = []
+class Recorder(LinkStub):
+    """Stands in for the Zenoh link: keeps the messages the agent publishes."""
 
     def put(self, key, payload):
         self.sent.append(CODEC.decode(payload))
-
-    def subscribe(self, *a):
-        pass
-
-    def declare_token(self, *a):
-        pass
-
-    def watch_liveliness(self, *a):
-        pass
-
-    def close(self):
-        pass
 
 
 CHALLENGE = "c" * 32
