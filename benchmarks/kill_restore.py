@@ -34,20 +34,12 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from common import write_results  # noqa: E402
+from px4_harness import hold_hover, px4_root, px4_vehicles  # noqa: E402
 from sitl_harness import _connect_tcp, guided_hover, sitl_binary, sitl_vehicles  # noqa: E402
 
 MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
 STOCK = {"ardupilot": {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}, "px4": {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}}
 MOMENTS = ("before_first_set", "after_first_set", "mid_primitive", "during_restore", "between_rounds")
-PX4_INSTANCE = 5  # vsafe's PX4 SITL instances are 5..9: API link 14545, GCS link 18575
-
-
-def px4_root() -> Path | None:
-    """The PX4 SITL folder ($MAVTUNE_PX4 or ../shared/px4sitl), or None."""
-    for c in (os.environ.get("MAVTUNE_PX4"), REPO.parent / "shared" / "px4sitl"):
-        if c and (Path(c) / "bin" / "px4").is_file():
-            return Path(c)
-    return None
 
 
 class Pilot:
@@ -104,31 +96,12 @@ class Pilot:
                 guided_hover(self.conn)
             return
         self.beat()
-        self.conn.mav.param_set_send(self.conn.target_system, 1, b"MIS_TAKEOFF_ALT", 5.0,
-                                     mavlink.MAV_PARAM_TYPE_REAL32)
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            self.beat()
-            hb = self.conn.recv_match(type="HEARTBEAT", blocking=True, timeout=1.0)
-            pos = self.conn.messages.get("GLOBAL_POSITION_INT")
-            alt = pos.relative_alt / 1000 if pos is not None else 0.0
-            if hb is None or hb.get_srcComponent() != 1:
-                continue
-            armed = bool(hb.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-            mode = mavutil.mode_string_v10(hb)
-            if armed and alt > 4.0 and mode == "LOITER":
-                return
-            if armed and alt > 4.0:
-                self.conn.set_mode("LOITER")
-            elif not armed:
-                self.conn.mav.command_long_send(self.conn.target_system, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
-                                                0, 1, 0, 0, 0, 0, 0, 0)
-                self.conn.mav.command_long_send(self.conn.target_system, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0,
-                                                0, 0, 0, float("nan"), float("nan"), float("nan"), float("nan"))
-            elif mode not in ("TAKEOFF", "LOITER"):
-                self.conn.mav.command_long_send(self.conn.target_system, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0,
-                                                0, 0, 0, float("nan"), float("nan"), float("nan"), float("nan"))
-        raise RuntimeError("PX4 did not get back into a hover")
+        self.drain()
+        hb = self.conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+        pos = self.conn.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=5)
+        if hb is None or pos is None or mavutil.mode_string_v10(hb) != "LOITER" or -pos.z < 3.0 \
+                or not hb.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
+            hold_hover(self.conn)
 
 
 @contextmanager
@@ -143,43 +116,10 @@ def ardupilot_vehicle():
 
 
 @contextmanager
-def px4_vehicle(root: Path):
-    """One PX4 SIH quadrotor (instance PX4_INSTANCE, a fresh working folder, a private copy with its command
-    links) in a Hold hover: (tuner URL, Pilot); stopped by its process id."""
-    work = Path(tempfile.mkdtemp(prefix="mavtune-px4-"))
-    copy = work / "px4sitl"
-    shutil.copytree(root, copy)
-    for p in (copy / "bin").iterdir():  # the command links px4's startup script calls
-        if p.name.startswith("px4-") and p.name != "px4-alias.sh":
-            p.chmod(0o700)
-            p.unlink()
-            p.symlink_to("px4")
-    run = work / "run"
-    run.mkdir()
-    env = {**os.environ, "PX4_SIM_MODEL": "sihsim_quadx", "PX4_PARAM_SDLOG_BACKEND": "0"}
-    proc = subprocess.Popen([str(copy / "bin" / "px4"), "-d", "-i", str(PX4_INSTANCE), str(copy / "etc")], cwd=run,
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    conn = None
-    try:
-        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{18570 + PX4_INSTANCE}", source_system=250)
-        for _ in range(50):
-            conn.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-            if conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2) is not None:
-                break
-        pilot = Pilot(conn, "px4")
-        conn.mav.request_data_stream_send(conn.target_system, 1, mavlink.MAV_DATA_STREAM_ALL, 5, 1)
-        pilot.hover()
-        yield f"udpin:127.0.0.1:{14540 + PX4_INSTANCE}", pilot
-    finally:
-        if conn is not None:
-            conn.close()
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        shutil.rmtree(work, ignore_errors=True)
+def px4_hover():
+    """One PX4 SIH quadrotor (tests/vehicles/px4_harness.py) in a Hold hover: (tuner URL, Pilot)."""
+    with px4_vehicles(1) as (px4,):
+        yield px4.tuner_url, Pilot(px4.pilot, "px4")
 
 
 def tune_config(path: Path, url: str, autopilot: str) -> Path:
@@ -282,7 +222,7 @@ def main() -> None:
         if autopilot == "px4" and px4_root() is None:
             print("PX4 SITL not found: skipped")
             continue
-        vehicle = ardupilot_vehicle() if autopilot == "ardupilot" else px4_vehicle(px4_root())
+        vehicle = ardupilot_vehicle() if autopilot == "ardupilot" else px4_hover()
         with vehicle as (url, pilot):
             for moment in args.moments:
                 for followup in args.followups:
