@@ -144,7 +144,7 @@ def tune_command(
                                               "vehicles at the end (default: restore the originals)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No per-round lines or progress bar."),
 ) -> None:
-    """Tune the gains: the paper's setting on 2 simulated vehicles unless told otherwise."""
+    """Tune the gains with the default settings (those of mavtune.tune()) unless told otherwise."""
     from mavtune.run import JOURNAL, run, saved_config
 
     if out is not None and not out.strip():

@@ -15,10 +15,10 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
 from mavtune.errors import MavtuneError
-from mavtune.fleet import CallableFleet, Evaluate, Fleet, Flight, Gains
+from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
 from mavtune.search.interval import DRAWS, resample, resolution
@@ -374,58 +374,6 @@ class Tuner:
         if not same:
             raise MavtuneError(f"journal round {record.index} does not match this run's round "
                                f"(recorded {record.assignments}, now {assignments}); use a new journal")
-
-
-def tune(
-    evaluate: Evaluate | Fleet | None = None,
-    space: Mapping[str, tuple[float, float]] | None = None,
-    method: str = "eql",
-    epsilon: float = 0.125,
-    bootstraps: int | None = 2,
-    vehicles: int | None = None,
-    strategy: str = "avg",
-    reuse: bool = True,
-    initial: Gains | None = None,
-    journal: str | Path | None = None,
-    seed: int | None = None,
-    *,
-    replicates: int | None = None,
-    points: int | None = None,
-    max_bootstraps: int = 10,
-    adaptive: bool = False,
-    confidence: float = 0.9,
-    cap: int | None = None,
-    answer: str = "search",
-    on_round: Callable[[Round], None] | None = None,
-    draws: int = DRAWS,
-) -> TuningResult:
-    """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
-
-    `evaluate` is a function (one round: list of assignments → one cost per vehicle), a `Fleet`, or None
-    for the built-in simulator (`vehicles` simulated vehicles, default scenario, `seed`). `replicates` is r
-    of the groups strategy, `points` the points per iteration of nsection (default: one per slot),
-    `max_bootstraps` caps the paper's stop rule (`bootstraps=None`), `adaptive` flies close comparisons again
-    until the kept point is right with probability `confidence` or each point has `cap` flights, `answer` is
-    each line search's answer ("search" or "model": a local fit of all its flights), `on_round`
-    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none).
-    """
-    space = dict(space if space is not None else {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
-    if evaluate is None:
-        from mavtune.sim import SimFleet
-
-        fleet: Fleet = SimFleet(vehicles or 2, seed=seed or 0)
-    elif isinstance(evaluate, Fleet):
-        fleet = evaluate
-    elif callable(evaluate):
-        fleet = CallableFleet(evaluate, vehicles or 2)
-    else:
-        raise MavtuneError(f"evaluate must be a function, a Fleet or None, got {type(evaluate).__name__}")
-    settings = Settings(space=space, method=method, epsilon=epsilon, bootstraps=bootstraps,
-                        vehicles=vehicles if vehicles is not None else fleet.size, strategy=strategy, reuse=reuse,
-                        initial=dict(initial or {}), replicates=replicates, points=points,
-                        max_bootstraps=max_bootstraps, seed=seed, adaptive=adaptive, confidence=confidence, cap=cap,
-                        answer=answer)
-    return run_tuning(settings, fleet, journal, on_round, draws=draws)
 
 
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,

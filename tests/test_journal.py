@@ -43,7 +43,9 @@ class CountingFleet:
         pass
 
 
-SETTINGS = dict(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, initial={"kd": 0.2}, bootstraps=2)
+# the paper's search (strategy and reuse given by each test)
+SETTINGS = dict(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, initial={"kd": 0.2}, bootstraps=2, method="eql",
+                epsilon=0.125, adaptive=False, answer="search")
 
 
 @given(st.integers(0, 19), st.sampled_from(["avg", "split"]), st.integers(1, 4))
@@ -123,7 +125,7 @@ def test_resume_with_other_settings_is_refused_and_keeps_the_journal(tmp_path):
     mavtune.tune(CountingFleet(2), journal=path, **SETTINGS)
     size = path.stat().st_size
     with pytest.raises(MavtuneError, match="epsilon was 0.125, now 0.1"):
-        mavtune.tune(CountingFleet(2), journal=path, epsilon=0.1, **SETTINGS)
+        mavtune.tune(CountingFleet(2), journal=path, **{**SETTINGS, "epsilon": 0.1})
     assert path.stat().st_size == size
     with Journal(path) as j:
         assert len(j.rounds()) == 36

@@ -59,14 +59,18 @@ def noisy_bowl(seed, cv=0.2):
     return evaluate
 
 
+PLAIN = dict(epsilon=0.125, adaptive=False)  # one flight per vehicle and point: the replicates are the vehicles
+
+
 def spread(result, key):
     return sum(u["hi"] - u["lo"] if key == "width" else u[key] for u in result.uncertainty.values())
 
 
 @pytest.mark.parametrize("answer", ["search", "model"])
 def test_intervals_shrink_with_replicates(answer):
-    few = [mavtune.tune(noisy_bowl(s), vehicles=2, strategy="avg", bootstraps=1, seed=s, answer=answer) for s in range(4)]
-    many = [mavtune.tune(noisy_bowl(s), vehicles=32, strategy="avg", bootstraps=1, seed=s, answer=answer)
+    few = [mavtune.tune(noisy_bowl(s), vehicles=2, strategy="avg", bootstraps=1, seed=s, answer=answer, **PLAIN)
+           for s in range(4)]
+    many = [mavtune.tune(noisy_bowl(s), vehicles=32, strategy="avg", bootstraps=1, seed=s, answer=answer, **PLAIN)
             for s in range(4)]
     assert all(math.isfinite(spread(r, "width")) for r in few + many)
     assert sum(spread(r, "se") for r in many) < 0.6 * sum(spread(r, "se") for r in few)
@@ -82,10 +86,10 @@ def test_interval_holds_the_value_and_stays_in_the_range():
 
 def test_noise_free_interval_is_the_search_resolution_and_unknown_without_repeats():
     result = mavtune.tune(lambda gs: [(g["kp"] - 0.3) ** 2 for g in gs], space={"kp": (0.0, 1.0)}, vehicles=2,
-                          bootstraps=1)
+                          bootstraps=1, answer="search", **PLAIN)
     u = result.uncertainty["kp"]
     assert u["se"] == 0.0 and u["lo"] < u["value"] < u["hi"] and u["hi"] - u["lo"] <= 2 * 0.125
-    single = mavtune.tune(noisy_bowl(0), method="dichotomy", vehicles=1, bootstraps=1)  # no point flown twice
+    single = mavtune.tune(noisy_bowl(0), method="dichotomy", vehicles=1, bootstraps=1, **PLAIN)  # no point flown twice
     assert all(math.isnan(u["se"]) and math.isnan(u["lo"]) for u in single.uncertainty.values())
     assert math.isnan(single.noise["cv"])
 
