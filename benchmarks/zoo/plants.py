@@ -317,7 +317,7 @@ def _plants() -> dict[str, Plant]:
               judge_cap=128, chunk=256),
         Plant("crazyflow", "Crazyflow Crazyflie, Mellinger z gains, climbing circle, OU gust forces", ("kp", "kd"),
               crazyflow_fly, {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()},
-              judge_cap=256, chunk=1024),
+              judge_cap=128, chunk=1024),
         Plant("analytic valley", "curved asymmetric valley, heteroscedastic noise", ("kp", "kd"), valley_fly),
         Plant("analytic edge", "optimum on the kp edge, asymmetric kd valley, heteroscedastic noise", ("kp", "kd"),
               edge_fly),
