@@ -133,32 +133,28 @@ def _pool_map(ex):
 
 def evaluate(plants: list[str], methods: list[Method], seeds: list[int], sizes: dict[str, int], ex,
              runs: Runs, engine: str, default: Method) -> dict[str, Any]:
-    """Truth, runs (the default's first: the peers get its flights run by run), judging, summaries."""
+    """Plant by plant (so an interrupted run leaves whole plants cached): truth, the mavtune runs (the default's
+    first: the peers get its flights run by run), the peers' runs, judging, summaries."""
     from mavtune.plan import make_plan
 
     pm = _pool_map(ex)
-    truths = {}
-    for p in plants:
-        truths[p] = Truth(p, CACHE if sizes is FULL else None)
-        truths[p].build(sizes, pm, _progress)
     mavtune_methods = [m for m in methods if not m.peer]
-    fly_runs(ex, runs, [(p, m, s, None) for p in plants for m in mavtune_methods for s in seeds], engine)
-    rows: dict[str, dict[str, list[dict[str, Any]]]] = {p: {} for p in plants}
-    for p in plants:
-        for m in mavtune_methods:
-            settings = m.settings(PLANTS[p], 0)
-            expected = make_plan(settings).flights
-            rows[p][m.label] = [{**runs.rows[Runs.key(p, m, s, None, engine)], "expected_flights": expected}
-                                for s in seeds]
-    budgets = {(p, s): r["flights"] for p in plants for r, s in zip(rows[p][default.label], seeds)}
     peers = [m for m in methods if m.peer]
-    fly_runs(ex, runs, [(p, m, s, budgets[(p, s)]) for p in plants for m in peers for s in seeds], engine)
-    for p in plants:
-        for m in peers:
-            rows[p][m.label] = [runs.rows[Runs.key(p, m, s, budgets[(p, s)], engine)] for s in seeds]
+    rows: dict[str, dict[str, list[dict[str, Any]]]] = {}
     table, truth_info = {}, {}
     for p in plants:
-        t = truths[p]
+        t = Truth(p, CACHE if sizes is FULL else None)
+        t.build(sizes, pm, _progress)
+        fly_runs(ex, runs, [(p, m, s, None) for m in mavtune_methods for s in seeds], engine)
+        rows[p] = {}
+        for m in mavtune_methods:
+            expected = make_plan(m.settings(PLANTS[p], 0)).flights
+            rows[p][m.label] = [{**runs.rows[Runs.key(p, m, s, None, engine)], "expected_flights": expected}
+                                for s in seeds]
+        budgets = {s: r["flights"] for r, s in zip(rows[p][default.label], seeds)}
+        fly_runs(ex, runs, [(p, m, s, budgets[s]) for m in peers for s in seeds], engine)
+        for m in peers:
+            rows[p][m.label] = [runs.rows[Runs.key(p, m, s, budgets[s], engine)] for s in seeds]
         answers = [tuple(r["x"]) for rs in rows[p].values() for r in rs]
         _progress(f"{p}: judging {len(answers)} answers")
         t.judge(answers, sizes["judge_repeats"], pm)
@@ -170,6 +166,9 @@ def evaluate(plants: list[str], methods: list[Method], seeds: list[int], sizes: 
         truth_info[p] = {**t.info, "cpu_s": t.cpu_s, "flights": int(sum(c.size for c in t.costs.values())),
                          "gains": list(PLANTS[p].gains), "units": PLANTS[p].units,
                          "description": PLANTS[p].description}
+        d = table[p][default.label]
+        _progress(f"{p}: default within 2 % {d['within']:.0%}, flights {d['flights_mean']:.0f}, coverage "
+                  f"{d['coverage']}, fly-away answers {d['fly_away_answers']}")
     return {"rows": rows, "table": table, "truth": truth_info}
 
 

@@ -312,17 +312,17 @@ def _plants() -> dict[str, Plant]:
               sim_fly({}, corner_box), _sim_units(corner_box)),
         Plant("mavsim PX4", "PX4 cascade as mavsim flies it, MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15]",
               ("kp", "kd"), px4_fly, {"kp": ("MPC_Z_P", 0.1, 1.5), "kd": ("MPC_Z_VEL_P_ACC", 2.0, 15.0)}),
+        Plant("analytic valley", "curved asymmetric valley, heteroscedastic noise", ("kp", "kd"), valley_fly),
+        Plant("analytic edge", "optimum on the kp edge, asymmetric kd valley, heteroscedastic noise", ("kp", "kd"),
+              edge_fly),
+        Plant("analytic 4 gains", "4 coupled gains, one optimum on an edge, heteroscedastic noise",
+              ("kp", "kd", "ki", "kf"), four_fly),
         Plant("mavsim ArduPilot", "ArduCopter AC_PosControl z cascade, PSC_POSZ_P [1, 3] x PSC_VELZ_P [1, 8]",
               ("kp", "kd"), ardupilot_fly, {"kp": ("PSC_POSZ_P", 1.0, 3.0), "kd": ("PSC_VELZ_P", 1.0, 8.0)},
               judge_cap=128, chunk=256),
         Plant("crazyflow", "Crazyflow Crazyflie, Mellinger z gains, climbing circle, OU gust forces", ("kp", "kd"),
               crazyflow_fly, {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()},
               judge_cap=128, chunk=1024),
-        Plant("analytic valley", "curved asymmetric valley, heteroscedastic noise", ("kp", "kd"), valley_fly),
-        Plant("analytic edge", "optimum on the kp edge, asymmetric kd valley, heteroscedastic noise", ("kp", "kd"),
-              edge_fly),
-        Plant("analytic 4 gains", "4 coupled gains, one optimum on an edge, heteroscedastic noise",
-              ("kp", "kd", "ki", "kf"), four_fly),
     ]
     return {p.name: p for p in out}
 
