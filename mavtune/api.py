@@ -71,8 +71,10 @@ def tune(
     confidence: float = DEFAULT,
     cap: int | None = DEFAULT,
     answer: str = DEFAULT,
+    edges: bool = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
+    resume: bool = False,
 ) -> TuningResult:
     """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
 
@@ -83,8 +85,11 @@ def tune(
     groups strategy, `points` the points per iteration of nsection (None: one per slot), `adaptive` flies close
     comparisons again until the kept point is right with probability `confidence` or each point has `cap`
     flights (None: 4 rounds' worth), `answer` is each line search's answer ("search" or "model": a local fit of
-    all its flights), `on_round` sees every round as it ends, `draws` resampled searches give each gain's
-    interval (0: none).
+    all its flights), `edges` whether a line search ending against an edge of its range flies the edge (an optimum
+    there can be the answer), `on_round` sees every round as it ends, `draws` resampled searches give each gain's
+    interval (0: none). `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
+    seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs
+    again (another function is refused), unless `resume=True` (a cost noisy by design).
     """
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
         raise MavtuneError(f"seed must be a whole number ≥ 0, got {seed!r}")
@@ -95,12 +100,12 @@ def tune(
     elif isinstance(evaluate, Fleet):
         fleet = evaluate
     elif callable(evaluate):
-        fleet = CallableFleet(evaluate, vehicles or Tuning().vehicles)
+        fleet = CallableFleet(evaluate, vehicles or Tuning().vehicles, seed=seed or 0)
     else:
         raise MavtuneError(f"evaluate must be a function, a Fleet or None, got {type(evaluate).__name__}")
     settings = default_settings(
         vehicles if vehicles is not None else fleet.size, space=space, method=method, epsilon=epsilon,
         bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial=initial, replicates=replicates, points=points,
         max_bootstraps=max_bootstraps, seed=seed if seed is not None else DEFAULT, adaptive=adaptive,
-        confidence=confidence, cap=cap, answer=answer)
-    return run_tuning(settings, fleet, journal, on_round, draws=draws)
+        confidence=confidence, cap=cap, answer=answer, edges=edges)
+    return run_tuning(settings, fleet, journal, on_round, draws=draws, resume=resume)

@@ -39,12 +39,12 @@ class _Section(BaseModel):
 
 PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`mavtune reproduce` flies it)
     "tuning.method": "eql", "tuning.epsilon": 0.125, "tuning.bootstraps": 2, "tuning.reuse": False,
-    "tuning.adaptive": False, "tuning.answer": "search", "tuning.initial": {"kd": 0.2}}
+    "tuning.adaptive": False, "tuning.answer": "search", "tuning.initial": {"kd": 0.2}, "tuning.edges": False}
 
 
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
-                   "refly", "answer")  # what [tuning] gives the engine's Settings
+                   "refly", "answer", "edges")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -75,6 +75,8 @@ class Tuning(_Section):
     refly: StrictBool = Field(False, description="reuse: a point carried into the next comparison is flown again there")
     answer: Literal["search", "model"] = Field("model", description="each line search's answer: the method's own "
                                                 "(search) or a local quadratic fit of all its flights (model)")
+    edges: StrictBool = Field(True, description="a line search that ends against an edge of its range flies the "
+                              "edge itself: an optimum on the edge can be answered, and is said with its evidence")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":
