@@ -151,7 +151,7 @@ def evaluate(plants: list[str], methods: list[Method], seeds: list[int], sizes: 
             expected = make_plan(m.settings(PLANTS[p], 0)).flights
             rows[p][m.label] = [{**runs.rows[Runs.key(p, m, s, None, engine)], "expected_flights": expected}
                                 for s in seeds]
-        budgets = {s: r["flights"] for r, s in zip(rows[p][default.label], seeds)}
+        budgets = {s: r["flights"] for r, s in zip(rows[p][default.label], seeds)} if peers else {}
         fly_runs(ex, runs, [(p, m, s, budgets[s]) for m in peers for s in seeds], engine)
         for m in peers:
             rows[p][m.label] = [runs.rows[Runs.key(p, m, s, budgets[s], engine)] for s in seeds]
@@ -291,6 +291,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--default", default=None, help="label of the method to report as the default (default: the "
                     "selection's choice when it exists, else the first candidate)")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes (1: in-process)")
+    ap.add_argument("--no-peers", action="store_true", help="leave CMA-ES and TPE out (a selection among mavtune's "
+                    "configurations only)")
     ap.add_argument("--quick", action="store_true", help="a smoke run: 2 plants, tiny truth, 2 runs, no cache")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
@@ -301,7 +303,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     unknown = [p for p in plants if p not in PLANTS]
     if unknown:
         ap.error(f"unknown plant(s) {unknown}; the zoo: {', '.join(PLANTS)}")
-    methods = candidates() + PEERS
+    methods = candidates() + ([] if args.no_peers else PEERS)
     if args.methods:
         want = {s.strip() for s in args.methods.split(",")}
         methods = [m for m in methods if m.label in want or m.peer]
@@ -309,7 +311,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     sel_path = args.out / "selection.json"
     default_label = args.default
     if default_label is None and args.half == "report" and sel_path.exists():
-        default_label = json.loads(sel_path.read_text())["chosen"]
+        default_label = json.loads(sel_path.read_text())["selection"]["chosen"]
     by_label = {m.label: m for m in methods}
     default = by_label.get(default_label) or methods[0]
     started, wall0, load0 = datetime.now(timezone.utc), time.perf_counter(), os.getloadavg()

@@ -161,6 +161,7 @@ def candidates() -> list[Method]:
         Method("adaptive, cap 3", {"cap": 3}),
         Method("adaptive, ε 0.25, cap 4", {"epsilon": 0.25, "cap": 4}),
         Method("split, 2 vehicles", {"strategy": "split"}),
+        Method("search's answer (no model)", {"answer": "search"}),
         Method("1 bootstrap", {"bootstraps": 1}),
         Method("1 bootstrap, ε 0.15, cap 8", {"bootstraps": 1, "epsilon": 0.15, "cap": 8}),
         Method("paper (PAPER_TUNING)", _paper()),
