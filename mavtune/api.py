@@ -13,7 +13,7 @@ from mavtune.config import PAPER_TUNING, Tuning
 from mavtune.errors import MavtuneError
 from mavtune.fleet import CallableFleet, Evaluate, Fleet, Gains
 from mavtune.search.interval import DRAWS
-from mavtune.tuner import Round, Settings, TuningResult, run_tuning
+from mavtune.tuner import MAX_ROUNDS, Round, Settings, TuningResult, run_tuning
 
 
 class _Default:
@@ -74,6 +74,7 @@ def tune(
     edges: bool = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
+    max_rounds: int = MAX_ROUNDS,
     resume: bool = False,
 ) -> TuningResult:
     """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
@@ -87,7 +88,8 @@ def tune(
     flights (None: 4 rounds' worth), `answer` is each line search's answer ("search" or "model": a local fit of
     all its flights), `edges` whether a line search ending against an edge of its range flies the edge (an optimum
     there can be the answer), `on_round` sees every round as it ends, `draws` resampled searches give each gain's
-    interval (0: none). `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
+    interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
+    `mavtune tune` refuses them. `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
     seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs
     again (another function is refused), unless `resume=True` (a cost noisy by design).
     """
@@ -108,4 +110,7 @@ def tune(
         bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial=initial, replicates=replicates, points=points,
         max_bootstraps=max_bootstraps, seed=seed if seed is not None else DEFAULT, adaptive=adaptive,
         confidence=confidence, cap=cap, answer=answer, edges=edges)
+    if (fewest := settings.fewest_rounds()) > max_rounds:
+        raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
+                           "raise max_rounds to fly them anyway")
     return run_tuning(settings, fleet, journal, on_round, draws=draws, resume=resume)

@@ -29,6 +29,12 @@ INTERVAL_NOTE = ("each gain's interval is from its last line search, flown with 
                  "search), joined with every gain its flights cannot rule out and widened by its last move between "
                  "bootstraps, towards an interval with the other gains free")
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
+# Bounds of every accepted setting, the same for the Python API and the CLI: each run plans and flies in bounded time.
+MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
+MAX_POINTS = 1_000  # nsection points per iteration
+MAX_BOOTSTRAPS = 1_000
+MIN_EPSILON = 1e-4  # below 1e-4 of a gain's range no flight tells two gains apart; EQL would plan 10^4+ rounds
+MAX_ROUNDS = 2_000  # a run of more rounds (5 h of 9 s rounds) is refused unless its max_rounds is raised
 
 
 @dataclass
@@ -141,6 +147,10 @@ class TuningResult:
         spans = {name: flown_span(s.samples) for name, s in last.items()}
         return {name: s.edge for name, s in last.items()}, {n: span for n, span in spans.items() if span is not None}
 
+    def brackets(self) -> dict[str, tuple[float, float]]:
+        """Per gain, the final bracket of the last line search that set it: where its minimiser can lie."""
+        return {s.gain: tuple(s.bracket) for s in self.searches}
+
     @property
     def flights(self) -> int:
         """Vehicle flights made, lost ones included."""
@@ -202,12 +212,17 @@ class Settings:
                 raise MavtuneError(f"range of gain {name!r} is [{lo}, {hi}]: lo must be below hi")
             space[name] = (lo, hi)
         self.space = space
-        if not 0.0 < float(self.epsilon) < 0.5:
-            raise MavtuneError(f"epsilon {self.epsilon} is outside (0, 0.5)")
-        if self.bootstraps is not None and int(self.bootstraps) < 1:
-            raise MavtuneError(f"bootstraps must be at least 1 (or None for the paper's stop rule), got {self.bootstraps}")
-        if int(self.vehicles) < 1:
-            raise MavtuneError(f"vehicles must be at least 1, got {self.vehicles}")
+        if not MIN_EPSILON <= float(self.epsilon) < 0.5:
+            raise MavtuneError(f"epsilon {self.epsilon} is outside [{MIN_EPSILON:g}, 0.5)")
+        if self.bootstraps is not None and not 1 <= int(self.bootstraps) <= MAX_BOOTSTRAPS:
+            raise MavtuneError(f"bootstraps must be from 1 to {MAX_BOOTSTRAPS} (or None for the paper's stop rule), "
+                               f"got {self.bootstraps}")
+        if not 1 <= int(self.max_bootstraps) <= MAX_BOOTSTRAPS:
+            raise MavtuneError(f"max_bootstraps must be from 1 to {MAX_BOOTSTRAPS}, got {self.max_bootstraps}")
+        if not 1 <= int(self.vehicles) <= MAX_VEHICLES:
+            raise MavtuneError(f"vehicles must be from 1 to {MAX_VEHICLES}, got {self.vehicles}")
+        if self.points is not None and not 2 <= int(self.points) <= MAX_POINTS:
+            raise MavtuneError(f"points must be from 2 to {MAX_POINTS}, got {self.points}")
         for name, value in self.initial.items():
             if name not in self.space:
                 raise MavtuneError(f"initial value given for {name!r}, which is not in the space ({', '.join(self.space)})")
@@ -224,11 +239,18 @@ class Settings:
             self.adaptive_rule = None
         self.search(0.0, 1.0)  # validates
 
-    def search(self, lo: float, hi: float, pool: NoisePool | None = None) -> LineSearch:
-        """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool`."""
+    def search(self, lo: float, hi: float, pool: NoisePool | None = None, edges: bool | None = None) -> LineSearch:
+        """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool` (`edges`: whether
+        it flies a range edge it ends against, if not as the settings say)."""
         return make_search(self.method, lo, hi, self.epsilon, reuse=self.reuse, points=self.points,
                            adaptive=self.adaptive_rule, pool=pool, refly=self.refly and self.reuse,
-                           answer=self.answer, edges=self.edges)
+                           answer=self.answer, edges=self.edges if edges is None else edges)
+
+    def fewest_rounds(self) -> int:
+        """The rounds a run of these settings takes at the least: every line search's budget of evaluations,
+        as many a round as the strategy has slots, per gain and bootstrap (one, for the paper's stop rule)."""
+        rounds = math.ceil(self.search(0.0, 1.0, edges=False).budget() / self.strategy_rule.slots(int(self.vehicles)))
+        return rounds * len(self.space) * (self.bootstraps or 1)
 
     def start_gains(self) -> Gains:
         """The gains before tuning: the given initial values, mid-range for the rest."""

@@ -74,4 +74,23 @@ def test_adaptive_plan_says_the_expected_and_the_worst_case():
     adaptive = make_plan(Settings(space=SPACE, initial={"kd": 0.2}, adaptive=True, cap=4))
     assert plain.rounds <= adaptive.rounds < adaptive.rounds_max
     assert adaptive.rounds_max == 4 * 7 * 2 * 2  # 4 searches × 7 comparisons × 2 points × 2 rounds to the cap
-    assert "expected (at most" in adaptive.describe()
+    assert adaptive.rounds_min <= adaptive.rounds
+    assert f"expected at 20% flight-to-flight noise ({adaptive.rounds_min} if every comparison is clear at once, at most " \
+           f"{adaptive.rounds_max}" in " ".join(adaptive.describe().split())
+
+
+@pytest.mark.parametrize("over", [{}, {"tuning.vehicles": 4}, {"tuning.strategy": "split"}], ids=str)
+def test_the_expected_rounds_are_close_to_the_mean_flown_on_the_simulator(over):
+    """The plan's expected rounds (adaptive, the default) within 15 % of the mean over 16 seeded simulator runs."""
+    from mavtune.config import load_config
+    from mavtune.sim import SimFleet
+    from mavtune.tuner import run_tuning
+
+    expected = make_plan(load_config(None, over).settings()).rounds
+    flown = []
+    for seed in range(16):
+        cfg = load_config(None, {**over, "tuning.seed": seed})
+        result = run_tuning(cfg.settings(), SimFleet(cfg.tuning.vehicles, cfg.scenario(), seed=seed), draws=0)
+        flown.append(len(result.rounds))
+    mean = sum(flown) / len(flown)
+    assert abs(expected - mean) <= 0.15 * mean, (expected, mean)
