@@ -315,7 +315,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     by_label = {m.label: m for m in methods}
     default = by_label.get(default_label) or methods[0]
     started, wall0, load0 = datetime.now(timezone.utc), time.perf_counter(), os.getloadavg()
-    engine = engine_hash()
+    engine, commit = engine_hash(), _git_commit()  # what flies: the code at the start
     runs = Runs(None if args.quick else CACHE / "runs.jsonl")
     ex = (ProcessPoolExecutor(args.workers, mp_context=get_context("spawn"), initializer=_init_worker)
           if args.workers > 1 else None)
@@ -340,7 +340,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     doc["meta"] = {"command": "python benchmarks/quality.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                    "half": args.half, "started_utc": started.isoformat(timespec="seconds"),
                    "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                   "commit": _git_commit(), "engine": engine, "cpu_model": _cpu_model(), "cpus": os.cpu_count(),
+                   "commit": commit, "engine": engine, "cpu_model": _cpu_model(), "cpus": os.cpu_count(),
                    "workers": args.workers, "load_start": load0, "load_end": os.getloadavg(),
                    "wall_s": time.perf_counter() - wall0, "sizes": sizes, "seeds": seeds, "plants": plants,
                    "python": platform.python_version()}
