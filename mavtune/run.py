@@ -372,6 +372,8 @@ def run_summary(config: Config, plan: Plan, result: TuningResult | None, fleet: 
                 "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s}}
     if fleet is not None and hasattr(fleet, "report"):
         summary |= fleet.report()  # e.g. drop-out events, original parameters and whether they were restored
+    if maps := param_maps(fleet):
+        summary["param_maps"] = maps  # the report gives the gains in the autopilot's units
     summary |= outcome
     return summary
 
@@ -384,6 +386,16 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     partial = path.with_suffix(".json.partial")
     partial.write_text("{\n" + lines + "\n}\n" if lines else "{}\n")
     os.replace(partial, path)
+
+
+def param_maps(fleet: Fleet | None) -> dict[str, Any]:
+    """{vehicle: its parameter map as JSON} for vehicles that map the gains to autopilot parameters ({} for others
+    or when a vehicle cannot say: the report then stays in normalised gains)."""
+    try:
+        maps = fleet.param_maps() if fleet is not None and hasattr(fleet, "param_maps") else {}
+        return {str(v): m.model_dump() for v, m in maps.items()}
+    except (MavtuneError, ValueError, AttributeError):  # a vehicle that never connected has no map to give
+        return {}
 
 
 def tuned_outcome(fleet: Fleet, gains: dict[str, float], settings, out_dir: Path) -> dict[str, Any]:
