@@ -413,7 +413,7 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
     tolerance = outcome.get("tuned_params_tolerance", {})
     for vehicle, params in outcome.get("tuned_params", {}).items():
         values = ", ".join(f"{n} = {v:.4g} ± {tolerance.get(vehicle, {}).get(n, 0):.2g}" for n, v in params.items())
-        console.print(f"{vehicle}: {values}", highlight=False)
+        console.print(f"{vehicle}: {values} (± the search tolerance)", highlight=False)
     if outcome.get("param_files"):
         console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
                       f"{', '.join(outcome['param_files'])}", highlight=False)
@@ -447,7 +447,7 @@ def _result_table(result: TuningResult) -> Table:
     caption = (f"noise: {cv:.0%} of the cost per flight ({result.noise.get('dof', 0):g} repeats)"
                if math.isfinite(cv) else "noise unknown: no point was flown twice")
     table = Table(caption=caption)
-    for column in ("gain", "value", "interval", "sure comparisons"):
+    for column in ("gain", "value ± se", "interval", "sure comparisons"):
         table.add_column(column, justify="left" if column == "gain" else "right")
     last = {s.gain: s for s in result.searches}
     for name, value in result.gains.items():

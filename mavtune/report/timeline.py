@@ -135,11 +135,12 @@ def timeline_figure(rounds: Sequence, gain_names: Sequence[str], round_s: float,
     axes["cost"].set_xlabel("flight time, s (round k starts at k × %g s)" % round_s)
     axes["cost"].set_xlim(0, max(end_s, round_s))
     handles = _legend(vehicles, colours, summarise, clipped)
-    columns = min(len(handles), LEGEND_COLUMNS)
-    fig.legend(handles=handles, loc="upper right", ncol=columns, fontsize=8, frameon=False,
-               bbox_to_anchor=(0.995, 0.995))
+    columns = max(min(len(handles), LEGEND_COLUMNS), 1)
+    if handles:
+        fig.legend(handles=handles, loc="upper right", ncol=columns, fontsize=8, frameon=False,
+                   bbox_to_anchor=(0.995, 0.995))
     fig.suptitle(f"tuning timeline: {len(rounds)} rounds, {len(vehicles)} vehicles", x=0.01, ha="left", fontsize=11)
-    legend_rows = -(-len(handles) // columns)
+    legend_rows = max(-(-len(handles) // columns), 1)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.2 * (legend_rows - 1) / fig.get_figheight()))  # the title holds a row
     fit_titles(fig)
     return fig

@@ -13,7 +13,7 @@ import pytest
 import mavtune
 from mavtune.fleet import Flight, Status, Trace
 from mavtune.report.figure_rules import OUTLIER_FACTOR, normal
-from mavtune.report.searches import search_views
+from mavtune.report.searches import PointStats, SearchView, search_views
 from mavtune.report.timeline import timeline_figure
 from mavtune.report.tuning_figure import tuning_figure
 from mavtune.tuner import Round
@@ -129,8 +129,11 @@ def test_a_thousand_vehicles_are_a_median_and_a_band_with_a_bounded_number_of_ar
         assert ax.get_ylim()[1] < 0.2 and "30 flights above it" in ax.get_title(loc="left")
     finally:
         plt.close(fig)
-    views = search_views(_tuned(vehicles=1000))
-    fig = tuning_figure(views, {"kp": 0.3, "kd": 0.3}, {}, SPACE, [f"v{j}" for j in range(1000)])
+    names = [f"v{j}" for j in range(1000)]
+    views = [SearchView(1, g, [0, 1], [PointStats(p, [1.0 + p + 0.001 * j for j in range(1000)], names)
+                                       for p in (0.2, 0.5, 0.8)], result=0.5, brackets=[(0.0, 1.0)] * 2)
+             for g in ("kp", "kd")]
+    fig = tuning_figure(views, {"kp": 0.5, "kd": 0.5}, {}, SPACE, names)
     try:
         assert _artists(fig) < 40 * len(fig.axes)
     finally:
