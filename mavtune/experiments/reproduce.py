@@ -244,8 +244,8 @@ def _surface_figures(out: Path, surfaces: dict[float, Any], runs: list[dict[str,
                                          "alpha": 0.9, "label": f"split ({len(split)} runs)"}, count_at=(5.0, -10.0))
         fig.colorbar(im, ax=ax, label="log10 mean cost", extend="max")
         ax.legend(loc="best", fontsize=7, framealpha=0.8, title="×n: runs ending on one spot", title_fontsize=6)
-        fig.tight_layout()
         fit_titles(fig)
+        fig.tight_layout()
         name = f"surface_{_payload_tag(p)}.png"
         fig.savefig(out / name, dpi=100)
         plt.close(fig)

@@ -327,6 +327,7 @@ def _plot_gains_on_surface(grid, gains: tuple[float, float], path: Path, source:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from mavtune.report.figure_rules import fit_titles
     from mavtune.sim.surface import plot_surface
 
     fig, ax = plt.subplots(figsize=(6.0, 5.0))
@@ -335,6 +336,7 @@ def _plot_gains_on_surface(grid, gains: tuple[float, float], path: Path, source:
                       title=f"final gains on the cost surface ({source})")
     fig.colorbar(im, ax=ax, label="log10 mean cost", extend="max")
     ax.legend(loc="best", fontsize=7)
+    fit_titles(fig)  # a long surface path wraps instead of leaving the image
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -141,8 +141,8 @@ def timeline_figure(rounds: Sequence, gain_names: Sequence[str], round_s: float,
                    bbox_to_anchor=(0.995, 0.995))
     fig.suptitle(f"tuning timeline: {len(rounds)} rounds, {len(vehicles)} vehicles", x=0.01, ha="left", fontsize=11)
     legend_rows = max(-(-len(handles) // columns), 1)
+    fit_titles(fig)  # before the layout, which then makes room for a wrapped title
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.2 * (legend_rows - 1) / fig.get_figheight()))  # the title holds a row
-    fit_titles(fig)
     return fig
 
 
