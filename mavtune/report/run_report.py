@@ -243,17 +243,17 @@ def _timeline(rep: Report) -> list[str]:
     from mavtune.report.timeline import plot_timeline
 
     plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG, units=rep.units)
-    whose = ("the median over the vehicles with its 10–90 % band" if many(len(vehicle_order(rep.rounds)))
+    whose = ("over the vehicles (median and 10–90 % band), the" if many(len(vehicle_order(rep.rounds)))
              else "each vehicle's")
-    what = (f"altitude reference (dashed) and measurement, tracking error |z − z_ref| (thin) with the mean over "
-            f"each flight (bar) — {whose}; both scaled to the normal flights (a diverged or failed flight is clipped, "
-            "marked ^ and counted) — " if has_traces(rep.rounds)
+    what = (f"{whose} altitude reference (dashed) and measurement and tracking error |z − z_ref| (thin) with its "
+            "mean over each flight (bar), both scaled to the normal flights (a diverged or failed flight is "
+            "clipped, marked ^ and counted); " if has_traces(rep.rounds)
             else "no altitude traces were recorded (e.g. a callable fleet); ")
-    gains = ("in the autopilot's units (the normalised gain on the right axis)" if rep.units else "")
+    gains = " in the autopilot's units (normalised on the right axis)" if rep.units else ""
     return parts + [md.image(TIMELINE_PNG, "tuning timeline"), "",
-                    f"Like the paper's Figs. 6–7: {what}the gain each vehicle flew in each round {gains}, and the "
-                    f"cost of each flight (log scale over every flight; red × = failed flight). Shaded bands separate "
-                    "the line searches.".replace("round , and", "round, and"), ""]
+                    f"Like the paper's Figs. 6–7: {what}the gain each vehicle flew in each round{gains}; the cost of "
+                    "each flight (log scale over every flight; red × = failed flight). Shaded bands separate the line "
+                    "searches.", ""]
 
 
 def _cost_surface(rep: Report) -> list[str]:
