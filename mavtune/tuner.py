@@ -129,7 +129,7 @@ class TuningResult:
                            f"search's tolerance {epsilon * width:.3g}: the coordinate search has not settled (its "
                            "interval is widened by that move; another bootstrap would tell)")
             ulo, uhi = u.get("lo", math.nan), u.get("hi", math.nan)
-            if uhi - ulo > 0.5 * width:  # (False where either is unknown)
+            if width > 0 and uhi - ulo > 0.5 * width:  # (False where either is unknown, or the range is a point)
                 out.append(f"{name}'s {u.get('level', 0.9):.0%} interval {ulo:.3g} – {uhi:.3g} spans "
                            f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more "
                            "flights per point, or less noise)")
