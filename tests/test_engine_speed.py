@@ -51,7 +51,7 @@ def test_pooled_noise_kept_up_to_date_equals_it_summed_afresh(events):
 
 def plain_tell(search, points, values) -> None:
     """tell() as it was written first: each flight's key, samples and pool entry one by one, then settle."""
-    current = {search.key(p) for p in (search._points(search._state) or ())}
+    current = {search.key(p) for p in (search._step_points(search._state) or ())}
     for p, c in zip(points, values):
         k = search.key(p)
         if not search.reuse and k not in current:
@@ -110,7 +110,7 @@ def plain_walk(search, n: int, exclude=(), max_nodes: int | None = None) -> list
     while heap and expanded < max_nodes:
         neg_p, depth, _, state, flown = heapq.heappop(heap)
         expanded += 1
-        points = search._points(state)
+        points = search._step_points(state)
         if points is None:
             continue
         keys = [search.key(p) for p in points]
@@ -125,7 +125,7 @@ def plain_walk(search, n: int, exclude=(), max_nodes: int | None = None) -> list
             if search._decided(keys, p_right):
                 outcomes = [best]
         for best in outcomes:
-            heapq.heappush(heap, (neg_p / len(outcomes), depth + 1, counter, search._advance(state, best),
+            heapq.heappush(heap, (neg_p / len(outcomes), depth + 1, counter, search._step_advance(state, best),
                                   flown | frozenset(keys)))
             counter += 1
     ranked = sorted(score, key=lambda k: (-score[k], depth_of[k], k))
