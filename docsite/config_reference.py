@@ -11,6 +11,7 @@ import inspect
 import io
 import json
 import math
+import re
 import textwrap
 import tokenize
 import types
@@ -224,8 +225,12 @@ def markdown() -> str:
         if not fields:
             continue
         out.append("| field | type | default | description |\n| --- | --- | --- | --- |")
+        names = {t.name for t in tables()}
         for row in fields:
             kind = row.type + (" (" + ", ".join(row.constraints) + ")" if row.constraints else "")
-            out.append(f"| `{row.name}` | {_cell(kind)} | `{_cell(row.default)}` | {_cell(row.description)} |")
+            inner = f"{table.name}.{row.name}"
+            default = (f"[`[{inner}]`](#{re.sub(r'[^a-z0-9_-]', '', inner)})" if inner in names
+                       else f"`{_cell(row.default)}`")
+            out.append(f"| `{row.name}` | {_cell(kind)} | {default} | {_cell(row.description)} |")
         out.append("")
     return "\n".join(out)
