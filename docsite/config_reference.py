@@ -198,6 +198,8 @@ def rows(table: Table) -> list[Row]:
         constraints = _constraints(info.metadata)
         kind = type_text(info.annotation, constraints)
         said = info.description or notes.get(name, "")
+        if not said and isinstance(info.annotation, type) and issubclass(info.annotation, BaseModel):
+            said = " ".join((info.annotation.__doc__ or "").split())  # a nested table: what its model is
         flag = FLAGS.get(f"{table.name}.{name}")
         if flag is not None:
             decls, help_text = flags[flag]

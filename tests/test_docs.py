@@ -168,8 +168,8 @@ def parse(argv: tuple[str, ...]):
 
 def run(argv: tuple[str, ...], folder: Path) -> subprocess.CompletedProcess:
     """Run a mavtune command in `folder`, as a user would (a fresh process)."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
-           "COLUMNS": "120"}
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)  # this tree's mavtune
+    env = {**os.environ, "PYTHONPATH": path, "COLUMNS": "120"}
     return subprocess.run([sys.executable, "-m", "mavtune", *argv[1:]], cwd=folder, env=env, capture_output=True,
                           text=True, timeout=600, stdin=subprocess.DEVNULL)
 
@@ -360,7 +360,8 @@ def test_benchmarks_page_says_not_recorded_where_a_result_does_not_say(tmp_path)
     """A result's date and machine come from its files; a file that records neither is "not recorded"."""
     from docsite import benchmarks_page
 
-    (tmp_path / "a.md").write_text("# A\n\n`python benchmarks/a.py`, 2026-01-02 03:04 UTC, 8 cores.\n\n| x |\n| - |\n| 1 |\n")
+    (tmp_path / "a.md").write_text("# A\n\n`python benchmarks/a.py`, 2026-01-02 03:04 UTC, 8 cores.\n\n"
+                                   "| x |\n| - |\n| 1 |\n")
     (tmp_path / "b.md").write_text("# B\n\nno provenance here\n")
     (tmp_path / "b.json").write_text('{"info": {"started_utc": "2026-02-03T04:05:06Z", "cpu_model": "EPYC 9654"}}')
     (tmp_path / "c.json").write_text('{"x": 1}')

@@ -48,7 +48,8 @@ class Scenario(_Model):
 
     primitive: PrimitiveName = "circle"
     cost: CostName = "iae"
-    """What a flight costs: iae (the paper's: integral of |altitude error|), ise, itae, or effort (iae plus effort_weight × the relative thrust change)."""
+    """What a flight costs: iae (the paper's: integral of |altitude error|), ise, itae, or effort (iae plus
+    effort_weight × the relative thrust change)."""
     primitive_s: float = Field(8.0, gt=0, le=120, description="duration of the reference primitive, s")
     settle_s: float = Field(1.0, ge=0, le=60, description="hover after a gain change: flown, not in the cost, s")
     altitude_m: float = Field(2.0, gt=0.2, description="height of the primitive's first point, m")
