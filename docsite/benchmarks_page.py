@@ -98,6 +98,22 @@ def _demote(body: str, levels: int) -> str:
     return "\n".join(out)
 
 
+_LINK = re.compile(r"(!?)\[([^\]]*)\]\(([^)\s]+)\)")
+
+
+def _unlinked(body: str, folder: Path) -> str:
+    """Links and images of a result that point into the repository become their paths as text: the page lives
+    elsewhere, and a link the site cannot resolve would fail `mkdocs build --strict`. Web links stay."""
+    def one(match: re.Match) -> str:
+        bang, text, target = match.groups()
+        if re.match(r"[a-z]+://", target):
+            return match.group(0)
+        path = f"benchmarks/{folder.name}/{target.split('#')[0]}"
+        return f"{text} (`{path}`)" if text and not bang else f"(figure: `{path}`)"
+
+    return _LINK.sub(one, body)
+
+
 def results(folder: Path) -> list[Result]:
     """Every result in `folder`: one per markdown file (with the JSON files that share its stem), then each JSON
     file without a markdown of its own."""
@@ -111,7 +127,7 @@ def results(folder: Path) -> list[Result]:
         lines = text.splitlines()
         title = lines[0].lstrip("# ").strip() if lines and lines[0].startswith("#") else stem
         body = "\n".join(lines[1:] if lines and lines[0].startswith("#") else lines)
-        found.append(Result(stem, title, _demote(body.strip(), 2), tuple(p.name for p in data),
+        found.append(Result(stem, title, _demote(_unlinked(body.strip(), folder), 2), tuple(p.name for p in data),
                             provenance(text, data)))
     for data in sorted(set(folder.glob("*.json")) - claimed):
         found.append(Result(data.stem, data.stem, "", (data.name,), provenance("", [data])))

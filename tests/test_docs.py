@@ -372,7 +372,8 @@ def test_benchmarks_page_says_not_recorded_where_a_result_does_not_say(tmp_path)
 
     (tmp_path / "a.md").write_text("# A\n\n`python benchmarks/a.py`, 2026-01-02 03:04 UTC, 8 cores.\n\n"
                                    "| x |\n| - |\n| 1 |\n")
-    (tmp_path / "b.md").write_text("# B\n\nno provenance here\n")
+    (tmp_path / "b.md").write_text("# B\n\nno provenance here; ![the map](b/surface.png), [raw](b.json), "
+                                   "[paper](https://example.org/p)\n")
     (tmp_path / "b.json").write_text('{"info": {"started_utc": "2026-02-03T04:05:06Z", "cpu_model": "EPYC 9654"}}')
     (tmp_path / "c.json").write_text('{"x": 1}')
     found = {r.name: r for r in benchmarks_page.results(tmp_path)}
@@ -381,6 +382,9 @@ def test_benchmarks_page_says_not_recorded_where_a_result_does_not_say(tmp_path)
     assert found["c"].provenance == benchmarks_page.Provenance("not recorded", "not recorded")
     text = benchmarks_page.markdown(tmp_path)
     assert "| 1 |" in text and "not recorded" in text
+    folder = tmp_path.name  # links into the repository become paths (the site could not resolve them); web links stay
+    assert f"(figure: `benchmarks/{folder}/b/surface.png`)" in text and f"raw (`benchmarks/{folder}/b.json`)" in text
+    assert "[paper](https://example.org/p)" in text
 
 
 def test_how_it_works_round_counts_are_the_plans(tmp_path):
