@@ -109,6 +109,8 @@ def _unlinked(body: str, folder: Path) -> str:
         if re.match(r"[a-z]+://", target):
             return match.group(0)
         path = f"benchmarks/{folder.name}/{target.split('#')[0]}"
+        if bang and target.endswith(".png") and (folder / target).is_file():  # on_files puts it at results/
+            return f"![{text}](results/{target})"
         return f"{text} (`{path}`)" if text and not bang else f"(figure: `{path}`)"
 
     return _LINK.sub(one, body)
@@ -150,6 +152,13 @@ def markdown(folder: Path) -> str:
             out.append(r.body + "\n")
         else:
             out.append("Raw data only (no summary written): read the JSON file.\n")
+    figures = sorted(folder.rglob("*.png"))
+    if figures:
+        out.append("## Figures {#result-figures}\n")
+        for png in figures:
+            where = png.relative_to(folder).as_posix()
+            name = f"benchmarks/{folder.name}/{where}"
+            out.append(f"![{name}](results/{where})\n\n*`{name}`*\n")
     return "\n".join(out)
 
 

@@ -35,6 +35,17 @@ def expand(markdown: str) -> str:
     return MARKER.sub(one, markdown)
 
 
+def on_files(files, config):
+    """mkdocs: the figures in benchmarks/results/ join the site under results/, for the benchmarks page."""
+    from mkdocs.structure.files import File
+
+    results = ROOT / "benchmarks" / "results"
+    for png in sorted(results.rglob("*.png")):
+        files.append(File(f"results/{png.relative_to(results).as_posix()}", str(results.parent), config["site_dir"],
+                          config["use_directory_urls"]))
+    return files
+
+
 def on_page_markdown(markdown: str, page, config, files) -> str:
     """mkdocs: a page's markdown before it is rendered."""
     return expand(markdown)
