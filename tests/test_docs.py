@@ -394,3 +394,14 @@ def test_how_it_works_round_counts_are_the_plans(tmp_path):
         assert done.returncode == 0 and re.search(rf"rounds\s+{rounds}\b", done.stdout), done.stdout
     text = (ROOT / "docs" / "how-it-works.md").read_text()
     assert "56 rounds for avg and 28 for split without reuse" in text
+
+
+def test_every_command_has_an_example():
+    """Each `mavtune` command (and bank subcommand) appears in at least one documented command line."""
+    from mavtune.cli import LAZY, app, bank_app
+
+    names = {c.name or c.callback.__name__ for c in app.registered_commands} | set(LAZY)
+    shown = {c.argv[1] for c in COMMANDS if c.argv[0] == "mavtune" and len(c.argv) > 1}
+    assert names <= shown, f"no example of: {', '.join(sorted(names - shown))}"
+    banked = {c.argv[2] for c in COMMANDS if c.argv[:2] == ("mavtune", "bank") and len(c.argv) > 2}
+    assert {c.name for c in bank_app.registered_commands} <= banked
