@@ -17,7 +17,7 @@ from typer.core import TyperGroup
 
 from mavtune import interrupts
 from mavtune.errors import Interrupted, MavtuneError
-from mavtune.report.folders import usable_path
+from mavtune.runfolder import usable_path
 from mavtune.options import (
     AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MaxRoundsOpt, MethodOpt, ReplicatesOpt, ReuseOpt,
     SchedulerOpt, StrategyOpt,

@@ -21,7 +21,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains
 from mavtune.journal import Journal
 from mavtune.plan import counted
-from mavtune.report.folders import claimed
+from mavtune.runfolder import claimed
 from mavtune.run import JOURNAL, REPORT, plan_of, run_summary, saved_config, write_json
 from mavtune.search.interval import DRAWS
 from mavtune.tuner import StageDone, Tuner, TuningResult

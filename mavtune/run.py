@@ -28,7 +28,7 @@ from mavtune.errors import Interrupted, MavtuneError
 from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal, blank
 from mavtune.plan import Plan, clock as _clock_s, counted, make_plan
-from mavtune.report.folders import claimed
+from mavtune.runfolder import claimed
 from mavtune.tuner import Round, StageDone, Tuner, TuningResult
 
 JOURNAL = "journal.sqlite"

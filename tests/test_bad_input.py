@@ -16,7 +16,7 @@ import pytest
 
 from mavtune.errors import MavtuneError
 from mavtune.journal import Journal
-from mavtune.report.folders import claimed
+from mavtune.runfolder import claimed
 from tests.test_fuzz import cli
 
 MAVTUNE = str(Path(sys.executable).with_name("mavtune"))
