@@ -12,7 +12,7 @@ from typing import Any
 NOT_RECORDED = "not recorded"
 
 _DATE = re.compile(r"\b(20\d\d-\d\d-\d\d)(?:[T ](\d\d:\d\d)(?::\d\d(?:\.\d+)?)?)?(?: ?(?:UTC|Z|\+00:00))?")
-_CPUS = re.compile(r"\b(\d+) (?:CPUs|cpus|cores)\b")
+_CPUS = re.compile(r"\b(?:(\d+) (?:CPUs|cpus|cores)\b|nproc (\d+))")
 _MODEL_KEYS = ("cpu_model", "cpu", "processor", "model_name")
 
 
@@ -80,7 +80,7 @@ def provenance(text: str, data_files: list[Path]) -> Provenance:
     json_dates, json_machine = _from_json(data_files)
     dates += json_dates
     machine = []
-    for fact in json_machine + [f"{m.group(1)} CPUs" for m in _CPUS.finditer(text)]:
+    for fact in json_machine + [f"{m.group(1) or m.group(2)} CPUs" for m in _CPUS.finditer(text)]:
         if fact not in machine:
             machine.append(fact)
     return Provenance(dates[0] if dates else NOT_RECORDED, ", ".join(machine[:3]) if machine else NOT_RECORDED)
