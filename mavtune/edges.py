@@ -56,12 +56,14 @@ def edge_evidence_text(ev: Mapping[str, Any]) -> str:
 
 def range_edges(gains: Mapping[str, float], space: Mapping[str, tuple[float, float]], epsilon: float,
                 evidence: Mapping[str, Mapping[str, Any] | None] | None = None,
-                flown: Mapping[str, tuple[float, float]] | None = None) -> list[RangeEdge]:
+                flown: Mapping[str, tuple[float, float]] | None = None,
+                brackets: Mapping[str, tuple[float, float]] | None = None) -> list[RangeEdge]:
     """The gains that lie within ε·(hi − lo) of an edge of their range (a line search ends that close to the
     minimiser, so the minimiser may be the edge itself or lie beyond it). `evidence` is each gain's last search's
     `edge_evidence()`: an answer on a flown edge is said with its numbers; `flown` each gain's span flown without
     failure in that search: an edge that was flown and is not the answer cost more — no edge (the optimum lies
-    inside)."""
+    inside); `brackets` each gain's final bracket: an edge it no longer reaches was ruled out by the comparisons
+    (with ε near 0.5 the tolerance spans nearly the whole range, so nearness alone says nothing)."""
     edges = []
     for name, value in gains.items():
         lo, hi = space[name]
@@ -76,6 +78,10 @@ def range_edges(gains: Mapping[str, float], space: Mapping[str, tuple[float, flo
             side = "upper"
         else:
             continue
+        bracket = (brackets or {}).get(name)
+        if not said and bracket is not None and all(map(math.isfinite, bracket)) and abs(
+                (bracket[0] if side == "lower" else bracket[1]) - (lo if side == "lower" else hi)) > 1e-9 * (hi - lo):
+            continue  # the comparisons moved the bracket off this edge: the minimiser lies inside
         span = (flown or {}).get(name)
         if not said and span is not None and abs((span[0] if side == "lower" else span[1]) - (lo if side == "lower"
                                                                                                else hi)) <= 1e-9 * (hi - lo):

@@ -401,7 +401,7 @@ def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path) -
 
     maps = fleet.param_maps() if hasattr(fleet, "param_maps") else {}
     evidence, flown = result.edges()
-    return outcome(maps, result.gains, settings.space, settings.epsilon, out_dir, evidence, flown)
+    return outcome(maps, result.gains, settings.space, settings.epsilon, out_dir, evidence, flown, result.brackets())
 
 
 def print_outcome(console: Console, outcome: dict[str, Any]) -> None:

@@ -147,6 +147,10 @@ class TuningResult:
         spans = {name: flown_span(s.samples) for name, s in last.items()}
         return {name: s.edge for name, s in last.items()}, {n: span for n, span in spans.items() if span is not None}
 
+    def brackets(self) -> dict[str, tuple[float, float]]:
+        """Per gain, the final bracket of the last line search that set it: where its minimiser can lie."""
+        return {s.gain: tuple(s.bracket) for s in self.searches}
+
     @property
     def flights(self) -> int:
         """Vehicle flights made, lost ones included."""
