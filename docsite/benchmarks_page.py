@@ -14,6 +14,7 @@ NOT_RECORDED = "not recorded"
 _DATE = re.compile(r"\b(20\d\d-\d\d-\d\d)(?:[T ](\d\d:\d\d)(?::\d\d(?:\.\d+)?)?)?(?: ?(?:UTC|Z|\+00:00))?")
 _CPUS = re.compile(r"\b(?:(\d+) (?:CPUs|cpus|cores)\b|nproc (\d+))")
 _MODEL_KEYS = ("cpu_model", "cpu", "processor", "model_name")
+_MODEL = re.compile(r"\b((?:AMD|Intel)[ (][^;·,()\n]{2,40})")
 
 
 @dataclass(frozen=True)
@@ -80,8 +81,10 @@ def provenance(text: str, data_files: list[Path]) -> Provenance:
     json_dates, json_machine = _from_json(data_files)
     dates += json_dates
     machine = []
-    for fact in json_machine + [f"{m.group(1) or m.group(2)} CPUs" for m in _CPUS.finditer(text)]:
-        if fact not in machine:
+    said = [m.group(1).strip() for m in _MODEL.finditer(text)] + [
+        f"{m.group(1) or m.group(2)} CPUs" for m in _CPUS.finditer(text)]
+    for fact in json_machine + said:
+        if not any(fact in kept for kept in machine):  # "2 CPUs" adds nothing to "x86_64, 2 CPUs"
             machine.append(fact)
     return Provenance(dates[0] if dates else NOT_RECORDED, ", ".join(machine[:3]) if machine else NOT_RECORDED)
 

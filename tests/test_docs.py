@@ -407,3 +407,11 @@ def test_every_command_has_an_example():
     assert names <= shown, f"no example of: {', '.join(sorted(names - shown))}"
     banked = {c.argv[2] for c in COMMANDS if c.argv[:2] == ("mavtune", "bank") and len(c.argv) > 2}
     assert {c.name for c in bank_app.registered_commands} <= banked
+
+
+def test_every_benchmark_script_is_listed():
+    """development.md's table names every script in benchmarks/ (common.py is their shared helper)."""
+    text = (ROOT / "docs" / "development.md").read_text()
+    missing = [p.name for p in sorted((ROOT / "benchmarks").glob("*.py"))
+               if p.name != "common.py" and f"`benchmarks/{p.name}`" not in text]
+    assert not missing, f"docs/development.md does not list {', '.join(missing)}"
