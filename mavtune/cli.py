@@ -39,6 +39,8 @@ LAZY = {
     "swarm-key": ("mavtune.swarm.cli", "swarm_key_command",
                   "Write each vehicle its own key file from the swarm key: an agent holding only its own acts as "
                   "no other."),
+    "restore": ("mavtune.vehicles.mavlink.restore", "restore_command",
+                "Put each vehicle's original gains back (as recorded before any change), read them back, fly nothing."),
     "mavsim": ("mavtune.vehicles.mavlink.mavsim.cli", "mavsim_command",
                "Serve the simulator as a PX4 or ArduPilot vehicle over MAVLink on UDP loopback (like SITL)."),
 }

@@ -23,6 +23,8 @@ from pathlib import Path
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_harness import claim_instance, read_params_on, release_instance
+
 REPO = Path(__file__).resolve().parents[2]
 HOVER_M = 5.0  # MIS_TAKEOFF_ALT for the hover, m above home
 INSTANCES = range(10)
@@ -51,29 +53,6 @@ def _private_copy() -> Path:
             p.unlink()
             p.symlink_to("px4")
     return copy
-
-
-def _claim_instance() -> int:
-    """A free instance number, claimed by a lock file (stale ones of dead processes are taken over)."""
-    lockdir = Path(tempfile.gettempdir()) / "mavtune-px4-instances"
-    lockdir.mkdir(exist_ok=True)
-    for n in INSTANCES:
-        lock = lockdir / f"{n}.lock"
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            try:
-                os.kill(int(lock.read_text() or 0), 0)
-                continue
-            except (ValueError, ProcessLookupError):
-                lock.unlink(missing_ok=True)
-                continue
-            except PermissionError:
-                continue
-        os.write(fd, str(os.getpid()).encode())
-        os.close(fd)
-        return n
-    raise RuntimeError("no free PX4 SITL instance number (0..9)")
 
 
 @dataclass
@@ -164,8 +143,8 @@ def px4_vehicles(count: int = 1, hover: bool = True, env: dict[str, str] | None 
     with ExitStack() as stack:
         vehicles: list[Px4] = []
         for _ in range(count):
-            n = _claim_instance()
-            stack.callback((Path(tempfile.gettempdir()) / "mavtune-px4-instances" / f"{n}.lock").unlink, True)
+            n = claim_instance("px4", INSTANCES)
+            stack.callback(release_instance, "px4", n)
             folder = Path(tempfile.mkdtemp(prefix=f"mavtune-px4-{n}-"))
             stack.callback(shutil.rmtree, folder, True)
             proc = subprocess.Popen([str(copy / "bin" / "px4"), "-d", "-i", str(n), str(copy / "etc")], cwd=folder,
@@ -187,20 +166,6 @@ def read_px4_params(url: str, names: list[str], timeout_s: float = 15.0) -> dict
     """Read parameters afresh over a new connection to the API link `url` (what the autopilot really holds now)."""
     master = mavutil.mavlink_connection(url, source_system=250)
     try:
-        hb = master.wait_heartbeat(timeout=timeout_s)
-        if hb is None:
-            raise RuntimeError(f"{url}: PX4 sent no heartbeat")
-        values: dict[str, float] = {}
-        deadline = time.monotonic() + timeout_s
-        while len(values) < len(names) and time.monotonic() < deadline:
-            for n in names:
-                if n not in values:
-                    master.mav.param_request_read_send(master.target_system, master.target_component, n.encode(), -1)
-            t_end = time.monotonic() + 0.5
-            while time.monotonic() < t_end:
-                msg = master.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.1)
-                if msg is not None and msg.param_id in names:
-                    values[msg.param_id] = round(float(msg.param_value), 6)
-        return values
+        return read_params_on(master, names, timeout_s)
     finally:
         master.close()

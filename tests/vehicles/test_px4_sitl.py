@@ -8,17 +8,16 @@ import json
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 import pytest
 from pymavlink import mavparm
 
-from mavtune.journal import Journal
 from mavtune.vehicles.mavlink.config import MavlinkConfig
 
 from mavlink_harness import tune_mavlink
 from px4_harness import SKIP_REASON, px4_root, px4_vehicles, read_px4_params
+from sitl_harness import after_rounds, recorded_rounds, tune_by_agents
 
 pytestmark = [
     pytest.mark.sitl, pytest.mark.slow, pytest.mark.integration, pytest.mark.timeout(600),
@@ -40,11 +39,6 @@ def assert_restored(urls: list[str]) -> None:
         assert read_px4_params(url, list(ORIGINALS)) == ORIGINALS, url
 
 
-def journal_rounds(out) -> int:
-    with Journal(out / "journal.sqlite") as j:
-        return len(j.rounds())
-
-
 def test_one_vehicle_avg_tunes_and_restores(tmp_path):
     with px4_vehicles(1) as (px4,):
         started = time.monotonic()
@@ -53,7 +47,7 @@ def test_one_vehicle_avg_tunes_and_restores(tmp_path):
         assert_restored([px4.tuner_url])
     assert result["status"] == "finished" and result["restored"] is True
     assert result["original_params"] == {px4.tuner_url: ORIGINALS}
-    assert result["flights_by_status"]["ok"] > 0 and journal_rounds(tmp_path) == result["rounds"]
+    assert result["flights_by_status"]["ok"] > 0 and recorded_rounds(tmp_path) == result["rounds"]
     params = result["tuned_params"][px4.tuner_url]
     assert set(params) == set(ORIGINALS)
     assert 0.1 <= params["MPC_Z_P"] <= 1.5 and 2.0 <= params["MPC_Z_VEL_P_ACC"] <= 15.0
@@ -78,37 +72,11 @@ def test_two_vehicles_split_each_flies_its_own_point(tmp_path):
 
 
 def test_two_agents_under_the_zenoh_coordinator_give_each_vehicles_parameters(tmp_path):
-    from test_sitl import _free_tcp_port
-
-    endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
-    key = tmp_path / "swarm.key"
-    key.write_text("px4 sitl swarm test key\n")
-    (tmp_path / "agent.toml").write_text(
-        f"[swarm]\nsession = \"px4\"\nkey_file = \"{key}\"\nresult_timeout_s = 90.0\n"
-        "[mavlink]\nautopilot = \"px4\"\nheartbeat_wait_s = 30.0\n")
     out = tmp_path / "run"
     with px4_vehicles(2) as vehicles:
         urls = [v.tuner_url for v in vehicles]
-        procs = [subprocess.Popen(
-            [*MAVTUNE, "coordinator", "--listen", endpoint, "--vehicles", "2", "--out", str(out), "--session",
-             "px4", "--key-file", str(key), "--settle-s", "0", "--result-timeout-s", "90", "--bootstraps", "1",
-             "--epsilon", "0.25"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
-        try:
-            for i, url in enumerate(urls):
-                procs.append(subprocess.Popen(
-                    [*MAVTUNE, "agent", "--id", f"p{i}", "--connect", endpoint, "--vehicle", "mavlink",
-                     "--mavlink", url, "--config", str(tmp_path / "agent.toml"), "--state-dir",
-                     str(tmp_path / f"state{i}")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-            log, _ = procs[0].communicate(timeout=540)
-            assert procs[0].returncode == 0, log[-3000:]
-            for agent in procs[1:]:
-                agent.send_signal(signal.SIGINT)
-                agent.wait(timeout=30)
-        finally:
-            for p in procs:
-                if p.poll() is None:
-                    p.kill()
-                p.wait(timeout=10)
+        tune_by_agents(urls, tmp_path, "px4", "autopilot = \"px4\"\nheartbeat_wait_s = 30.0\n", ["p0", "p1"],
+                       result_timeout_s=90.0, timeout_s=540)
         assert_restored(urls)
     result = json.loads((out / "result.json").read_text())
     assert result["status"] == "finished" and result["flights_by_status"]["ok"] > 0
@@ -122,42 +90,24 @@ def test_two_agents_under_the_zenoh_coordinator_give_each_vehicles_parameters(tm
         assert {r[0] for r in rows} == {str(sysid)}
 
 
-class _Pilot(threading.Thread):
-    """A ground station on the vehicle's GCS link that switches it to Hold once the tuner has flown `rounds`."""
-
-    def __init__(self, px4, out, rounds: int):
-        super().__init__(daemon=True)
-        self.px4, self.out, self.rounds, self.done, self.stop = px4, out, rounds, threading.Event(), threading.Event()
-
-    def run(self) -> None:
-        master = self.px4.pilot
-        while not self.stop.wait(0.2):
-            try:
-                if not (self.out / "journal.sqlite").exists() or journal_rounds(self.out) < self.rounds:
-                    continue
-            except Exception:  # noqa: BLE001 - the run is still creating it
-                continue
-            deadline = time.monotonic() + 20
-            while time.monotonic() < deadline:
-                master.set_mode("LOITER")
-                hb = master.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
-                if hb is not None and master.flightmode == "LOITER":
-                    self.done.set()
-                    return
-            return
+def switch_to_hold(px4) -> bool:
+    """What a pilot does from a ground station: Hold (AUTO.LOITER) over the GCS link, until PX4 says it is in it."""
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        px4.pilot.set_mode("LOITER")
+        if px4.pilot.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5) is not None and \
+                px4.pilot.flightmode == "LOITER":
+            return True
+    return False
 
 
 def test_pilot_taking_over_gets_the_originals_and_the_run_goes_on(tmp_path):
     with px4_vehicles(2) as vehicles:
         urls = [v.tuner_url for v in vehicles]
-        pilot = _Pilot(vehicles[0], tmp_path, rounds=2)
-        pilot.start()
-        try:
+        took = []
+        with after_rounds(tmp_path, 2, lambda: took.append(switch_to_hold(vehicles[0]))) as done:
             result = tune_mavlink(urls, tmp_path, px4_config(), vehicles=2, **SHORT)
-        finally:
-            pilot.stop.set()
-            pilot.join(timeout=30)
-        assert pilot.done.is_set()
+        assert done.is_set() and took == [True]
         assert_restored(urls)
     assert result["status"] == "finished" and result["restored"] is True
     lost = [f for r in result["rounds_log"] for f in r["flights"] if f["status"] == "lost"]
@@ -169,28 +119,11 @@ def test_pilot_taking_over_gets_the_originals_and_the_run_goes_on(tmp_path):
 def test_px4_killed_mid_flight_the_run_goes_on_and_the_journal_keeps_every_round(tmp_path):
     with px4_vehicles(2) as vehicles:
         urls = [v.tuner_url for v in vehicles]
-        stop = threading.Event()
-
-        def kill_after_two_rounds() -> None:
-            while not stop.wait(0.2):
-                try:
-                    recorded = journal_rounds(tmp_path) if (tmp_path / "journal.sqlite").exists() else 0
-                except Exception:  # noqa: BLE001 - the run is still creating it
-                    continue
-                if recorded >= 2:
-                    vehicles[0].kill()
-                    return
-
-        killer = threading.Thread(target=kill_after_two_rounds, daemon=True)
-        killer.start()
-        try:
+        with after_rounds(tmp_path, 2, vehicles[0].kill):
             result = tune_mavlink(urls, tmp_path, px4_config(), vehicles=2, **SHORT)
-        finally:
-            stop.set()
-            killer.join(timeout=10)
         assert_restored(urls[1:])
     assert result["status"] == "finished" and result["restored"] is False  # the dead one could not confirm
-    assert journal_rounds(tmp_path) == result["rounds"]
+    assert recorded_rounds(tmp_path) == result["rounds"]
     statuses = [f["status"] for r in result["rounds_log"] for f in r["flights"] if f["vehicle"] == urls[0]]
     assert "lost" in statuses
 
@@ -203,12 +136,9 @@ def test_ctrl_c_mid_run_restores_and_resumes_from_the_journal(tmp_path):
                str(tmp_path / "px4.toml"), "--epsilon", "0.25", "--bootstraps", "1", "--quiet"]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         try:
-            deadline = time.monotonic() + 300
-            while time.monotonic() < deadline and not (
-                    (out / "journal.sqlite").exists() and journal_rounds(out) >= 2):
-                time.sleep(0.5)
-            proc.send_signal(signal.SIGINT)
-            log, _ = proc.communicate(timeout=60)
+            with after_rounds(out, 2, lambda: proc.send_signal(signal.SIGINT)) as sent:
+                log, _ = proc.communicate(timeout=300)
+            assert sent.is_set(), log[-2000:]
         finally:
             if proc.poll() is None:
                 proc.kill()
@@ -217,7 +147,7 @@ def test_ctrl_c_mid_run_restores_and_resumes_from_the_journal(tmp_path):
         assert_restored([px4.tuner_url])
         summary = json.loads((out / "result.json").read_text())
         assert summary["status"] == "interrupted" and summary["restored"] is True
-        assert journal_rounds(out) == summary["rounds"] >= 2
+        assert recorded_rounds(out) == summary["rounds"] >= 2
         done = subprocess.run(cmd[:-1], capture_output=True, text=True, timeout=500)
         assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
         assert_restored([px4.tuner_url])
