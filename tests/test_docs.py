@@ -34,7 +34,7 @@ SHELL = {"bash", "sh", "console", "shell"}
 EXTERNAL = {"arducopter", "sim_vehicle.py", "dask"}
 # mavtune commands that need something outside this machine's test run (a swarm, a vehicle, a cluster) or serve
 # forever: parsed, never run.
-OUTSIDE_COMMANDS = {"agent", "coordinator", "mavsim", "swarm-key"}
+OUTSIDE_COMMANDS = {"agent", "coordinator", "mavsim", "swarm-key", "restore"}
 OUTSIDE_FLEETS = {"mavlink", "zenoh"}
 # mavtune commands too long for the default suite (> ~20 s): run under -m slow.
 LONG_COMMANDS = {"reproduce", "bench"}
