@@ -374,6 +374,8 @@ def run_summary(config: Config, plan: Plan, result: TuningResult | None, fleet: 
                 "plan": {"rounds": plan.rounds, "rounds_max": plan.rounds_max, "flight_time_s": plan.flight_time_s}}
     if fleet is not None and hasattr(fleet, "report"):
         summary |= fleet.report()  # e.g. drop-out events, original parameters and whether they were restored
+    if maps := param_maps(fleet):
+        summary["param_maps"] = maps  # the report gives the gains in the autopilot's units
     summary |= outcome
     return summary
 
@@ -390,6 +392,16 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     except OSError as exc:  # a full disk, a folder in the way: the old file stays whole, the partial goes
         partial.unlink(missing_ok=True)
         raise MavtuneError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def param_maps(fleet: Fleet | None) -> dict[str, Any]:
+    """{vehicle: its parameter map as JSON} for vehicles that map the gains to autopilot parameters ({} for others
+    or when a vehicle cannot say: the report then stays in normalised gains)."""
+    try:
+        maps = fleet.param_maps() if fleet is not None and hasattr(fleet, "param_maps") else {}
+        return {str(v): m.model_dump() for v, m in maps.items()}
+    except (MavtuneError, ValueError, AttributeError):  # a vehicle that never connected has no map to give
+        return {}
 
 
 def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path) -> dict[str, Any]:
@@ -409,7 +421,7 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
     tolerance = outcome.get("tuned_params_tolerance", {})
     for vehicle, params in outcome.get("tuned_params", {}).items():
         values = ", ".join(f"{n} = {v:.4g} ± {tolerance.get(vehicle, {}).get(n, 0):.2g}" for n, v in params.items())
-        console.print(f"{vehicle}: {values}", highlight=False)
+        console.print(f"{vehicle}: {values} (± the search tolerance)", highlight=False)
     if outcome.get("param_files"):
         console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
                       f"{', '.join(outcome['param_files'])}", highlight=False)
@@ -446,7 +458,7 @@ def _result_table(result: TuningResult) -> Table:
                 "flights cannot rule out and its last move between bootstraps; p ≥ 0.9: comparisons whose kept "
                 "point was the best with that probability (not the answer's accuracy)")
     table = Table(caption=caption)
-    for column in ("gain", "value", "interval", "comparisons p ≥ 0.9"):
+    for column in ("gain", "value ± se", "interval", "comparisons p ≥ 0.9"):
         table.add_column(column, justify="left" if column == "gain" else "right")
     last = {s.gain: s for s in result.searches}
     for name, value in result.gains.items():

@@ -225,6 +225,7 @@ def _surface_figures(out: Path, surfaces: dict[float, Any], runs: list[dict[str,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from mavtune.report.figure_rules import fit_titles
     from mavtune.sim import surface as surf
 
     figures = []
@@ -233,14 +234,17 @@ def _surface_figures(out: Path, surfaces: dict[float, Any], runs: list[dict[str,
         avg = [(r["kp"], r["kd"]) for r in C.group(runs, "avg", p)]
         split = [(r["kp"], r["kd"]) for r in C.group(runs, "split", p)]
         im = surf.plot_surface(ax, s, points=avg, point_style={"color": "limegreen", "markeredgecolor": "black",
-                                                               "markersize": 6, "label": "avg", "alpha": 0.85},
+                                                               "markersize": 10, "label": f"avg ({len(avg)} runs)",
+                                                               "alpha": 0.85},
                                title=f"payload {p:g} kg: log10 mean cost ({camp.grid}×{camp.grid}×{camp.repeats}), "
                                      "final gains")
-        if split:  # plot_surface draws x = kd, y = kp
-            ax.plot([kd for _, kd in split], [kp for kp, _ in split], "o", color="red", markeredgecolor="black",
-                    markersize=6, alpha=0.85, label="split", ls="none")
-        fig.colorbar(im, ax=ax, label="log10 mean cost")
-        ax.legend(loc="lower right", fontsize=7, framealpha=0.8)
+        if split:
+            # smaller and on top: a split run ending where an avg run did leaves both visible
+            surf.mark_points(ax, split, {"color": "red", "marker": "D", "markeredgecolor": "black", "markersize": 5,
+                                         "alpha": 0.9, "label": f"split ({len(split)} runs)"}, count_at=(5.0, -10.0))
+        fig.colorbar(im, ax=ax, label="log10 mean cost", extend="max")
+        ax.legend(loc="best", fontsize=7, framealpha=0.8, title="×n: runs ending on one spot", title_fontsize=6)
+        fit_titles(fig)
         fig.tight_layout()
         name = f"surface_{_payload_tag(p)}.png"
         fig.savefig(out / name, dpi=100)

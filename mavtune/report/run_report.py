@@ -31,7 +31,10 @@ from mavtune.fleet import Status
 from mavtune.plan import clock
 from mavtune.report import markdown as md
 from mavtune.report.searches import SearchView, as_float, flown_point, noise, search_views, uncertainty
+from mavtune.report import units as U
+from mavtune.report.figure_rules import many
 from mavtune.report.traces import has_traces, vehicle_order
+from mavtune.report.units import GainUnit, gain_units
 
 REPORT = "report.md"
 TIMELINE_PNG = "timeline.png"
@@ -85,6 +88,11 @@ class Report:
     def uncertainty(self) -> dict[str, dict[str, float]]:
         return uncertainty(self.result)
 
+    @cached_property
+    def units(self) -> dict[str, GainUnit]:
+        """The gains every vehicle binds to one autopilot parameter (a vehicle run), for figures and tables."""
+        return gain_units(self.summary)
+
 
 def write_run_report(out_dir: str | Path, result, config=None, surface: Any = None, title: str | None = None,
                      status: str = "finished", figures: bool = True, summary: dict[str, Any] | None = None) -> Path:
@@ -129,8 +137,12 @@ def tuned_params_section(summary: dict) -> list[str]:
     rows = [[f"`{vehicle}`", f"`{name}`", md.num(value, 4), md.num(tolerance.get(vehicle, {}).get(name, math.nan), 2)]
             for vehicle, params in (summary.get("tuned_params") or {}).items() for name, value in params.items()]
     if rows:
-        parts += ["## Tuned parameters", "", md.table(["vehicle", "parameter", "value", "±"], rows, ["l", "l", "r", "r"]),
-                  ""]
+        parts += ["## Tuned parameters", "",
+                  md.table(["vehicle", "parameter", "value", "± search tolerance (ε × range)"], rows,
+                           ["l", "l", "r", "r"]), "",
+                  "± here is the search's tolerance, how close to the optimum a line search narrows (ε of the "
+                  "parameter's range), not a statistical error: the final gains' standard errors and intervals are "
+                  "under Final gains.", ""]
         if summary.get("param_files"):
             whose = summary.get("param_file_vehicles") or {}
             several = len({tuple(v) for v in whose.values()}) > 1  # a file per vehicle: say whose
@@ -161,19 +173,19 @@ def _guarded(section: Callable[[Report], list[str]], rep: Report) -> list[str]:
 
 
 def _settings(rep: Report) -> list[str]:
-    return _settings_section(rep.result, rep.config, rep.summary)
+    return _settings_section(rep.result, rep.config, rep.summary, rep.units)
 
 
 def _final_gains(rep: Report) -> list[str]:
     from mavtune.report.tuning_section import final_gains_section
 
     if rep.final:
-        return final_gains_section(rep.gains, rep.uncertainty, rep.searches, noise(rep.result))
+        return final_gains_section(rep.gains, rep.uncertainty, rep.searches, noise(rep.result), units=rep.units)
     lead = (f"The run was {ENDINGS.get(rep.status, rep.status)} after {len(rep.rounds)} rounds: these are the gains "
             "it held then — each finished line search's result, the start value of a gain not searched yet — not "
             f"its answer. `mavtune tune --out {rep.out}` continues it to the result an uninterrupted run gives.")
     return final_gains_section(rep.gains, rep.uncertainty, rep.searches, noise(rep.result),
-                               heading="Gains so far (not final)", lead=lead)
+                               heading="Gains so far (not final)", lead=lead, units=rep.units)
 
 
 def _line_searches(rep: Report) -> list[str]:
@@ -181,18 +193,22 @@ def _line_searches(rep: Report) -> list[str]:
     if rep.final:
         return []
     rows = []
+    units = rep.units
     for v in rep.searches:
         first, last = v.rounds[0], v.rounds[-1]
+        g = v.gain
         if v.finished:
-            state = f"finished: {md.num(v.result, 4)}" + (f" (stopped narrowing: {v.stop_reason})"
-                                                          if v.stop_reason else "")
+            state = f"finished: {U.num(g, v.result, units)}" + (f" (stopped narrowing: {v.stop_reason})"
+                                                               if v.stop_reason else "")
         elif all(map(math.isfinite, v.last_bracket)):
             lo, hi = v.last_bracket
-            state = f"in progress: bracket [{md.num(lo, 4)}, {md.num(hi, 4)}] after round {last}"
+            state = f"in progress: bracket [{U.num(g, lo, units)}, {U.num(g, hi, units)}] after round {last}"
         else:
             lo, hi = v.brackets[-1] if v.brackets else (math.nan, math.nan)
-            state = f"in progress: bracket [{md.num(lo, 4)}, {md.num(hi, 4)}] as its last round was planned"
-        rows.append([v.bootstrap, v.gain, f"{first}–{last}" if last != first else first, len(v.comparisons), state])
+            state = (f"in progress: bracket [{U.num(g, lo, units)}, {U.num(g, hi, units)}] as its last round was "
+                     "planned")
+        rows.append([v.bootstrap, U.label(g, units), f"{first}–{last}" if last != first else first,
+                     len(v.comparisons), state])
     planned = rep.summary.get("plan") or {}
     done = (f"{len(rep.rounds)} rounds flown of the {planned['rounds']} planned (at most {planned.get('rounds_max')})."
             if planned.get("rounds") else f"{len(rep.rounds)} rounds flown.")
@@ -210,16 +226,17 @@ def _tuning(rep: Report) -> list[str]:
     from mavtune.report.tuning_section import tuning_section
 
     if not rep.searches or not rep.figures:
-        return tuning_section(rep.searches, None)
+        return tuning_section(rep.searches, None, units=rep.units)
     from mavtune.report.tuning_figure import MAX_ROWS, drawn_bootstraps, plot_tuning
 
     space = (getattr(rep.result, "settings", None) or {}).get("space") or {}
-    plot_tuning(rep.searches, rep.gains, rep.uncertainty, space, vehicle_order(rep.rounds), rep.out / TUNING_PNG)
+    plot_tuning(rep.searches, rep.gains, rep.uncertainty, space, vehicle_order(rep.rounds), rep.out / TUNING_PNG,
+                rep.units)
     shown = drawn_bootstraps(rep.searches)
     bootstraps = sorted({v.bootstrap for v in rep.searches})
     note = (f" The figure shows the last {MAX_ROWS} of {len(bootstraps)} bootstraps (from {shown[0]}); the tables "
             "below have them all." if len(shown) < len(bootstraps) else "")
-    return tuning_section(rep.searches, TUNING_PNG, note)
+    return tuning_section(rep.searches, TUNING_PNG, note, rep.units)
 
 
 def _timeline(rep: Report) -> list[str]:
@@ -230,13 +247,18 @@ def _timeline(rep: Report) -> list[str]:
         return []
     from mavtune.report.timeline import plot_timeline
 
-    plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG)
-    what = ("altitude reference (dashed) and measurement of each vehicle, its tracking error |z − z_ref| (thin) "
-            "with the mean over each flight (bar), " if has_traces(rep.rounds)
+    plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG, units=rep.units)
+    whose = ("over the vehicles (median and 10–90 % band), the" if many(len(vehicle_order(rep.rounds)))
+             else "each vehicle's")
+    what = (f"{whose} altitude reference (dashed) and measurement and tracking error |z − z_ref| (thin) with its "
+            "mean over each flight (bar), both scaled to the normal flights (a diverged or failed flight is "
+            "clipped, marked ^ and counted); " if has_traces(rep.rounds)
             else "no altitude traces were recorded (e.g. a callable fleet); ")
+    gains = " in the autopilot's units (normalised on the right axis)" if rep.units else ""
     return parts + [md.image(TIMELINE_PNG, "tuning timeline"), "",
-                    f"Like the paper's Figs. 6–7: {what}the gain each vehicle flew in each round, and the cost of "
-                    f"each flight (log scale; red × = failed flight). Shaded bands separate the line searches.", ""]
+                    f"Like the paper's Figs. 6–7: {what}the gain each vehicle flew in each round{gains}; the cost of "
+                    "each flight (log scale over every flight; red × = failed flight). Shaded bands separate the line "
+                    "searches.", ""]
 
 
 def _cost_surface(rep: Report) -> list[str]:
@@ -253,7 +275,7 @@ def _cost_surface(rep: Report) -> list[str]:
 
 
 def _rounds(rep: Report) -> list[str]:
-    return ["## Rounds", "", _rounds_table(rep.rounds), ""]
+    return ["## Rounds", "", _rounds_table(rep.rounds, rep.units), ""]
 
 
 def _fleet_events(rep: Report) -> list[str]:
@@ -310,28 +332,37 @@ def _plot_gains_on_surface(grid, gains: tuple[float, float], path: Path, source:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from mavtune.report.figure_rules import fit_titles
     from mavtune.sim.surface import plot_surface
 
     fig, ax = plt.subplots(figsize=(6.0, 5.0))
     im = plot_surface(ax, grid, points=[gains], point_style={"markersize": 8, "markeredgecolor": "black",
                                                              "label": "final gains"},
                       title=f"final gains on the cost surface ({source})")
-    fig.colorbar(im, ax=ax, label="log10 mean cost")
-    ax.legend(loc="lower right", fontsize=7)
+    fig.colorbar(im, ax=ax, label="log10 mean cost", extend="max")
+    ax.legend(loc="best", fontsize=7)
+    fit_titles(fig)  # a long surface path wraps instead of leaving the image
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
-def _settings_section(result, config, summary: dict[str, Any]) -> list[str]:
-    """How the run was set up: method, strategy, space, start gains, vehicles, fleet, payload, wall time."""
+def _settings_section(result, config, summary: dict[str, Any], units: dict[str, GainUnit] | None = None
+                      ) -> list[str]:
+    """How the run was set up: method, strategy, space (with the autopilot parameter each gain drives), start
+    gains, vehicles, fleet, payload, wall time."""
     s = result.settings or {}
+    units = units or {}
     rows = []
     if s:
         rows += [["method", f"{s.get('method')} (ε = {s.get('epsilon')})"],
                  ["strategy", s.get("strategy")], ["reuse", s.get("reuse")],
-                 ["space", ", ".join(f"{n} ∈ [{lo:g}, {hi:g}]" for n, (lo, hi) in s.get("space", {}).items())],
-                 ["start gains", ", ".join(f"{n} = {v:.4g}" for n, v in (s.get("initial") or {}).items())]]
+                 ["space", ", ".join(f"{n} ∈ [{lo:g}, {hi:g}]" + (
+                     f" ({units[n].param} {units[n].value(lo):g} to {units[n].value(hi):g})" if n in units else "")
+                     for n, (lo, hi) in s.get("space", {}).items())],
+                 ["start gains", ", ".join(f"{n} = {v:.4g}" + (f" ({units[n].param} = {units[n].value(v):.4g})"
+                                                               if n in units else "")
+                                           for n, v in (s.get("initial") or {}).items())]]
     rows.append(["bootstraps", f"{result.bootstraps} ({result.stop_reason})"])
     names = vehicle_order(result.rounds)
     rows.append(["vehicles", ", ".join(names) or "—" if len(names) <= WIDE_FLEET else
@@ -396,9 +427,11 @@ def _plan(result, config, vehicles: int, round_s: float) -> dict[str, Any] | Non
 WIDE_FLEET = 8  # more vehicles than this: the rounds table gives each point flown, not each vehicle's columns
 
 
-def _rounds_table(rounds: list) -> str:
+def _rounds_table(rounds: list, units: dict[str, GainUnit] | None = None) -> str:
     """One row per round: bracket, each vehicle's point and cost (for a larger fleet than WIDE_FLEET: each point
-    flown, its flights and their mean cost), and what went wrong."""
+    flown, its flights and their mean cost), and what went wrong; gains in the autopilot's units (the gain column
+    names the parameter) where `units` has them."""
+    units = units or {}
     vehicles = vehicle_order(rounds)
     wide = len(vehicles) > WIDE_FLEET
     header = ["round", "bootstrap", "gain", "bracket"] + (["points flown: flights, mean cost"] if wide else
@@ -407,17 +440,19 @@ def _rounds_table(rounds: list) -> str:
     rows = []
     for r in rounds:
         if wide:
-            flown = [_points_flown(r)]
+            flown = [_points_flown(r, units)]
         else:
             by = {f.vehicle: f for f in r.flights}
-            flown = [md.num(by[v].gains.get(r.gain, math.nan), 5) if v in by else "—" for v in vehicles] + \
+            flown = [U.num(r.gain, by[v].gains.get(r.gain, math.nan), units, 5) if v in by else "—"
+                     for v in vehicles] + \
                     [md.num(by[v].cost, 5) if v in by and by[v].status is not Status.LOST else "—" for v in vehicles]
-        rows.append([r.index, r.bootstrap, r.gain, f"[{r.bracket[0]:.5g}, {r.bracket[1]:.5g}]", *flown,
+        bracket = f"[{U.num(r.gain, r.bracket[0], units, 5)}, {U.num(r.gain, r.bracket[1], units, 5)}]"
+        rows.append([r.index, r.bootstrap, U.label(r.gain, units), bracket, *flown,
                      _round_status(r) + (" (journal)" if getattr(r, "replayed", False) else "")])
     return md.table(header, rows, ["r", "r", "l", "l"] + ["r"] * (len(header) - 5) + ["l"])
 
 
-def _points_flown(rnd) -> str:
+def _points_flown(rnd, units: dict[str, GainUnit]) -> str:
     """Each point of a round, in order: `point ×flights: mean cost` over its flights that returned one."""
     by_point: dict[float, list] = {}
     for i, f in enumerate(rnd.flights):
@@ -425,7 +460,7 @@ def _points_flown(rnd) -> str:
     parts = []
     for point, flights in by_point.items():
         costs = [c for f in flights if f.status is not Status.LOST and math.isfinite(c := as_float(f.cost))]
-        parts.append(f"{md.num(point, 5)} ×{len(flights)}: " + (md.num(math.fsum(costs) / len(costs), 5)
+        parts.append(f"{U.num(rnd.gain, point, units, 5)} ×{len(flights)}: " + (md.num(math.fsum(costs) / len(costs), 5)
                                                                   if costs else "—"))
     return "; ".join(parts)
 

@@ -1,18 +1,22 @@
 """The tuning itself in one figure: cost against gain for each line search and the final gains with their interval.
 
 One column per gain, one row per bootstrap. Each line search gets two panels sharing the gain axis:
-- cost against gain: every flight as a dot (its vehicle's colour; red × at the top = a cost that is not finite or
-  off the scale), the per-point mean ± standard error as a black bar, the search's result as a red line;
+- cost against gain: every flight as a dot (its vehicle's colour; grey for a large fleet), on a linear axis from 0
+  scaled to the search's normal flights (`figure_rules.normal`): a cost above it is a ^ at the top with its count,
+  a failed flight (no finite cost) a red x; the per-point mean ± standard error as a black bar, the search's result
+  as a red line;
 - the comparisons, top to bottom: the bracket each started from (grey), its points (ticks), the point kept (green),
   and last the bracket the search ended with.
 A last row shows per gain every bootstrap's result and the final value with its interval (when the tuner gives one).
+A gain with an autopilot parameter (a vehicle run) is drawn in the parameter's units, the normalised gain on the
+last row's top axis.
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import matplotlib
 
@@ -21,14 +25,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.gridspec import GridSpec, GridSpecFromSubplotSpec  # noqa: E402
 from matplotlib.transforms import blended_transform_factory  # noqa: E402
 
+from mavtune.report.figure_rules import count_text, fit_titles, many, mark_above, normal, scale_top  # noqa: E402
 from mavtune.report.searches import SearchView  # noqa: E402
-from mavtune.report.timeline import log_axis, text  # noqa: E402
+from mavtune.report.timeline import text  # noqa: E402
 from mavtune.report.traces import drawable, to_draw  # noqa: E402
+from mavtune.report.units import GainUnit  # noqa: E402
 
 MAX_ROWS = 12  # bootstraps drawn; a longer run shows its last ones (the report's tables have them all)
-LOG_RATIO = 20.0  # costs spanning more than this factor get a log axis
 INTERVAL_COLOUR = "#d62728"
 JITTER = 0.025  # the vehicles' dots at one point spread over this share of the axis, beside the mean bar
+UNIT_AXIS_IN = 0.4  # height of the gap holding the final row's normalised axis (vehicle runs), in
+SUMMARY_DOTS = "#555555"  # a large fleet's dots: one colour, one artist per panel
 
 
 def gain_columns(views: Sequence[SearchView], gains: Sequence[str]) -> list[str]:
@@ -47,9 +54,10 @@ def drawn_bootstraps(views: Sequence[SearchView]) -> list[int]:
 
 
 def plot_tuning(views: Sequence[SearchView], final: dict[str, float], uncertainty: dict[str, dict[str, float]],
-                space: dict[str, Sequence[float]], vehicles: Sequence[str], path: Path) -> Path:
+                space: dict[str, Sequence[float]], vehicles: Sequence[str], path: Path,
+                units: Mapping[str, GainUnit] | None = None) -> Path:
     """Draw the tuning figure (`tuning_figure`) into `path` (PNG). Returns `path`."""
-    fig = tuning_figure(views, final, uncertainty, space, vehicles)
+    fig = tuning_figure(views, final, uncertainty, space, vehicles, units)
     try:
         fig.savefig(path, dpi=90)
     finally:
@@ -57,20 +65,44 @@ def plot_tuning(views: Sequence[SearchView], final: dict[str, float], uncertaint
     return path
 
 
+class _Axis:
+    """A gain's axis: normalised values drawn in the autopilot's units when the gain has one (`unit`)."""
+
+    def __init__(self, gain: str, unit: GainUnit | None):
+        self.gain, self.unit = gain, unit
+
+    def x(self, g: float) -> float:
+        g = to_draw(g)
+        return self.unit.value(g) if self.unit and math.isfinite(g) else g
+
+    def width(self, dg: float) -> float:
+        return self.unit.width(dg) if self.unit else dg
+
+    @property
+    def name(self) -> str:
+        return self.unit.param if self.unit else self.gain
+
+
 def tuning_figure(views: Sequence[SearchView], final: dict[str, float], uncertainty: dict[str, dict[str, float]],
-                  space: dict[str, Sequence[float]], vehicles: Sequence[str]):
+                  space: dict[str, Sequence[float]], vehicles: Sequence[str],
+                  units: Mapping[str, GainUnit] | None = None):
     """The line searches `views` and the `final` gains (with `uncertainty` per gain where known) as a Figure.
-    `space` gives each gain's range for the axes; `vehicles` fixes the dot colours."""
+    `space` gives each gain's range for the axes; `vehicles` fixes the dot colours; a gain in `units` is drawn in
+    the autopilot's units (the normalised gain on the final row's top axis)."""
     columns = gain_columns(views, list(final))
+    axis = {g: _Axis(g, (units or {}).get(g)) for g in columns}
     rows = drawn_bootstraps(views)
     ladders = [max((len(v.comparisons) or len(v.brackets) for v in views if v.bootstrap == b), default=1)
                for b in rows]
-    heights = [1.7 + 0.35 + 0.11 * n for n in ladders] + [0.45 + 0.13 * len(rows)]
-    fig = plt.figure(figsize=(4.4 * len(columns) + 0.6, sum(heights) + 0.45 * len(heights) + 0.8))
+    in_units = any(a.unit for a in axis.values())
+    spacer = [UNIT_AXIS_IN] if in_units else []  # room for the normalised axis on top of the final row
+    heights = [1.7 + 0.35 + 0.11 * n for n in ladders] + spacer + [0.45 + 0.13 * len(rows)]
+    fig = plt.figure(figsize=(4.4 * len(columns) + 0.6, sum(heights) + 0.45 * len(heights) + 1.0))
     outer = GridSpec(len(heights), len(columns), figure=fig, height_ratios=heights, hspace=0.45 / 2.4,
                      wspace=0.25, left=0.08 if len(columns) > 1 else 0.14, right=0.98,
-                     top=1 - 0.6 / fig.get_figheight(), bottom=0.45 / fig.get_figheight())
-    colour = {v: plt.get_cmap("tab10")(j % 10) for j, v in enumerate(vehicles)}
+                     top=1 - 0.75 / fig.get_figheight(), bottom=0.45 / fig.get_figheight())
+    summarise = many(len(vehicles))
+    colour = {v: (SUMMARY_DOTS if summarise else plt.get_cmap("tab10")(j % 10)) for j, v in enumerate(vehicles)}
     limits = {g: _limits(g, views, final, uncertainty, space) for g in columns}
 
     for r, (b, n) in enumerate(zip(rows, ladders)):
@@ -80,22 +112,25 @@ def tuning_figure(views: Sequence[SearchView], final: dict[str, float], uncertai
             cost_ax = fig.add_subplot(pair[0])
             ladder_ax = fig.add_subplot(pair[1], sharex=cost_ax)
             view = next((v for v in views if v.bootstrap == b and v.gain == g), None)
-            cost_ax.set_xlim(*limits[g])
-            _cost_panel(cost_ax, view, colour, b, g)
-            _ladder_panel(ladder_ax, view)
+            cost_ax.set_xlim(*(axis[g].x(x) for x in limits[g]))
+            _cost_panel(cost_ax, view, colour, b, axis[g], summarise)
+            _ladder_panel(ladder_ax, view, axis[g])
             if view is not None and view is _last_search(views, g) and g in uncertainty:
-                _interval(cost_ax, uncertainty[g])
-                _interval(ladder_ax, uncertainty[g])
+                _interval(cost_ax, uncertainty[g], axis[g])
+                _interval(ladder_ax, uncertainty[g], axis[g])
             plt.setp(cost_ax.get_xticklabels(), visible=False)
             if c == 0:
                 cost_ax.set_ylabel("cost")
                 ladder_ax.set_ylabel("comparisons", fontsize=7)
     for c, g in enumerate(columns):
         ax = fig.add_subplot(outer[-1, c])
-        ax.set_xlim(*limits[g])
-        _final_panel(ax, g, views, rows, final.get(g, math.nan), uncertainty.get(g))
-    fig.suptitle("the tuning: cost against gain in each line search (black: mean ± se per point), the comparisons "
-                 "and the final gains", x=0.01, y=1 - 0.1 / fig.get_figheight(), ha="left", va="top", fontsize=10)
+        ax.set_xlim(*(axis[g].x(x) for x in limits[g]))
+        _final_panel(ax, axis[g], views, rows, final.get(g, math.nan), uncertainty.get(g))
+    fig.suptitle("the tuning: cost against gain in each line search (black: mean ± standard error per point; linear "
+                 "cost scaled to the normal flights, ^ above it, red x: failed), the comparisons and the final gains"
+                 + (f"; dots: all {len(vehicles)} vehicles" if summarise else ""),
+                 x=0.01, y=1 - 0.1 / fig.get_figheight(), ha="left", va="top", fontsize=10)
+    fit_titles(fig)
     return fig
 
 
@@ -123,53 +158,65 @@ def _limits(gain: str, views, final, uncertainty, space) -> tuple[float, float]:
     return lo - pad, hi + pad
 
 
-def _cost_panel(ax, view: SearchView | None, colour: dict, bootstrap: int, gain: str) -> None:
-    """Every flight's cost at its point, the per-point mean ± se, failed flights at the top, the result."""
-    ax.set_title(text(f"bootstrap {bootstrap} · {gain}"), fontsize=8, loc="left", pad=2)
+def _cost_panel(ax, view: SearchView | None, colour: dict, bootstrap: int, axis: _Axis, summarise: bool) -> None:
+    """Every flight's cost at its point on a linear scale from 0 set by the search's normal flights (those above
+    it marked ^ at the top with their count; failed flights red x), the per-point mean ± se, the result."""
+    ax.set_title(text(f"bootstrap {bootstrap} · {axis.name}"), fontsize=8, loc="left", pad=2)
     ax.tick_params(labelsize=7)
     if view is None:
         ax.text(0.5, 0.5, "not searched", transform=ax.transAxes, ha="center", va="center", color="0.5", fontsize=8)
         ax.set_yticks([])
         return
-    top = blended_transform_factory(ax.transData, ax.transAxes)
     x0, x1 = ax.get_xlim()
     spread = len(colour) - 1 or 1
     shift = {v: (j / spread - 0.5) * JITTER * (x1 - x0) for j, v in enumerate(colour)}
-    dots: dict[str, tuple[list[float], list[float]]] = {}
-    failed: list[float] = []
-    finite = []
-    for s in view.points:
-        if not drawable(s.point):
-            continue
-        for cost, vehicle in zip(s.costs, s.vehicles):
-            if drawable(cost):
-                xs, ys = dots.setdefault(vehicle, ([], []))
-                xs.append(s.point + shift.get(vehicle, 0.0))
-                ys.append(cost)
-                finite.append(cost)
-            else:
-                failed.append(s.point)
-    for vehicle, (xs, ys) in dots.items():
-        ax.plot(xs, ys, "o", ms=3, color=colour.get(vehicle, "0.5"), alpha=0.9, zorder=5)
+    flights = [(axis.x(s.point), cost, vehicle) for s in view.points if drawable(s.point)
+               for cost, vehicle in zip(s.costs, s.vehicles)]
+    finite = [c for _, c, _ in flights if drawable(c)]
+    top = scale_top([c for c, ok in zip(finite, normal(finite)) if ok])
+    dots: dict[object, tuple[list[float], list[float]]] = {}
+    failed: dict[float, int] = {}
+    above: dict[float, int] = {}
+    for x, cost, vehicle in flights:
+        if not drawable(cost):
+            failed[x] = failed.get(x, 0) + 1
+        elif cost > top:
+            above[x] = above.get(x, 0) + 1
+        else:
+            xs, ys = dots.setdefault(SUMMARY_DOTS if summarise else vehicle, ([], []))
+            xs.append(x + shift.get(vehicle, 0.0))
+            ys.append(cost)
+    for key, (xs, ys) in dots.items():
+        ax.plot(xs, ys, "o", ms=2 if summarise else 3, color=colour.get(key, key if summarise else "0.5"),
+                alpha=0.5 if summarise else 0.9, zorder=5)
+    mark_above(ax, list(above), list(above.values()))
     if failed:
-        ax.plot(failed, [0.97] * len(failed), "x", ms=5, color="red", transform=top, clip_on=False, zorder=3)
-    measured = [(p, m, se) for p, m, se in view.summary() if drawable(p) and drawable(m)]
+        _mark_failed(ax, failed)
+    measured = [(axis.x(p), m, se) for p, m, se in view.summary() if drawable(p) and drawable(m)]
     if measured:
         ax.errorbar([p for p, _, _ in measured], [m for _, m, _ in measured],
                     yerr=[se if drawable(se) else 0.0 for _, _, se in measured], fmt="_", ms=9, mew=1.6,
                     color="black", capsize=3, lw=1.2, zorder=4)
     if drawable(view.result):
-        ax.axvline(view.result, color=INTERVAL_COLOUR, lw=1.0, zorder=1)
-    positive = [c for c in finite if c > 0]
-    if positive and max(positive) / min(positive) > LOG_RATIO and len(positive) == len(finite):
-        log_axis(ax, min(positive), max(positive))
-    elif not finite:
+        ax.axvline(axis.x(view.result), color=INTERVAL_COLOUR, lw=1.0, zorder=1)
+    if finite:
+        ax.set_ylim(min(0.0, min(finite)), top)
+    else:
         ax.text(0.5, 0.5, "no finite cost", transform=ax.transAxes, ha="center", va="center", color="0.5",
                 fontsize=8)
         ax.set_yticks([])
 
 
-def _ladder_panel(ax, view: SearchView | None) -> None:
+def _mark_failed(ax, failed: dict[float, int]) -> None:
+    """Failed flights (no finite cost) as a red x at the panel's top at their point, with their count."""
+    top = blended_transform_factory(ax.transData, ax.transAxes)
+    ax.plot(list(failed), [0.9] * len(failed), "x", ms=5, color="red", transform=top, clip_on=False, zorder=3)
+    for x, n in failed.items():
+        if n > 1:
+            ax.text(x, 0.9, " " + count_text(n), transform=top, fontsize=6, color="red", va="center", zorder=3)
+
+
+def _ladder_panel(ax, view: SearchView | None, axis: _Axis) -> None:
     """The comparisons top to bottom: bracket (grey), points (ticks) and the point kept (green); then its last
     bracket (where it ended, or where an unfinished search stands)."""
     ax.tick_params(labelsize=7)
@@ -187,56 +234,70 @@ def _ladder_panel(ax, view: SearchView | None) -> None:
         rows = [(br, [], -1) for br in seen]
     bars_x, bars_y, ticks_x, ticks_y, kept_x, kept_y = [], [], [], [], [], []
     for i, (bracket, points, best) in enumerate(rows):
-        bars_x += [to_draw(bracket[0]), to_draw(bracket[1]), math.nan]
+        bars_x += [axis.x(bracket[0]), axis.x(bracket[1]), math.nan]
         bars_y += [-i, -i, math.nan]
-        ticks_x += [to_draw(p) for p in points]
+        ticks_x += [axis.x(p) for p in points]
         ticks_y += [-i] * len(points)
         if 0 <= best < len(points):
-            kept_x.append(to_draw(points[best]))
+            kept_x.append(axis.x(points[best]))
             kept_y.append(-i)
     ax.plot(bars_x, bars_y, color="0.55", lw=3, solid_capstyle="butt", zorder=1)
     ax.plot(ticks_x, ticks_y, "|", ms=7, color="black", zorder=2)
     ax.plot(kept_x, kept_y, "o", ms=4.5, color="#2ca02c", zorder=3)
     if drawable(view.result):
-        ax.axvline(view.result, color=INTERVAL_COLOUR, lw=1.0, zorder=0)
+        ax.axvline(axis.x(view.result), color=INTERVAL_COLOUR, lw=1.0, zorder=0)
     ax.set_ylim(-len(rows) + 0.4, 0.6)
 
 
-def _interval(ax, u: dict[str, float]) -> None:
+def _interval(ax, u: dict[str, float], axis: _Axis) -> None:
     """The final gain's interval as a light band (nothing when the tuner could not give one)."""
     lo, hi = u.get("lo", math.nan), u.get("hi", math.nan)
     if drawable(lo) and drawable(hi) and hi >= lo:
-        ax.axvspan(lo, hi, color=INTERVAL_COLOUR, alpha=0.12, lw=0, zorder=0)
+        ax.axvspan(axis.x(lo), axis.x(hi), color=INTERVAL_COLOUR, alpha=0.12, lw=0, zorder=0)
 
 
-def _final_panel(ax, gain: str, views: Sequence[SearchView], rows: list[int], value: float,
+def _final_panel(ax, axis: _Axis, views: Sequence[SearchView], rows: list[int], value: float,
                  u: dict[str, float] | None) -> None:
-    """Each bootstrap's result of `gain` (grey) and the final value with its interval (red)."""
+    """Each bootstrap's result of the gain (grey) and the final value with its interval (red); in the autopilot's
+    units with the normalised gain on the top axis when the gain has a unit."""
+    gain = axis.gain
     ax.tick_params(labelsize=7)
     results = [(v.bootstrap, v.result) for v in views if v.gain == gain and v.finished and v.bootstrap in rows]
     for b, x in results:
-        ax.plot(to_draw(x), -rows.index(b), "o", ms=4, color="0.45")
+        ax.plot(axis.x(x), -rows.index(b), "o", ms=4, color="0.45")
     y_final = -len(rows)
     u = u or {}
     lo, hi, se, level = (u.get(k, math.nan) for k in ("lo", "hi", "se", "level"))
     if drawable(value):
+        v = axis.x(value)
         if drawable(lo) and drawable(hi):
-            ax.errorbar(value, y_final, xerr=[[max(value - lo, 0.0)], [max(hi - value, 0.0)]], fmt="D", ms=5,
+            ax.errorbar(v, y_final, xerr=[[max(v - axis.x(lo), 0.0)], [max(axis.x(hi) - v, 0.0)]], fmt="D", ms=5,
                         color=INTERVAL_COLOUR, capsize=4, lw=1.5)
         else:
-            ax.plot(value, y_final, "D", ms=5, color=INTERVAL_COLOUR)
+            ax.plot(v, y_final, "D", ms=5, color=INTERVAL_COLOUR)
     ax.set_yticks([-i for i in range(len(rows))] + [y_final])
     ax.set_yticklabels([f"b{b}" for b in rows] + ["final"], fontsize=7)
     ax.set_ylim(y_final - 0.7, 0.7)
-    ax.set_xlabel(text(gain), fontsize=8)
-    ax.set_title(text(f"{gain} = {_final_text(value, se, lo, hi, level)}"), fontsize=8, loc="left", pad=2)
+    if axis.unit:
+        unit = axis.unit
+        span = unit.hi - unit.lo
+        ax.set_xlabel(text(f"{unit.param} (autopilot units)"), fontsize=8)
+        top = ax.secondary_xaxis("top", functions=(lambda p: (p - unit.lo) / span, lambda g: unit.lo + g * span))
+        top.tick_params(labelsize=6, pad=1)
+        top.set_xlabel(text(f"{gain} (normalised)"), fontsize=6, labelpad=2)
+        pad = 20
+    else:
+        ax.set_xlabel(text(gain), fontsize=8)
+        pad = 2
+    ax.set_title(text(f"{axis.name} = {_final_text(axis.x(value), axis.width(se), axis.x(lo), axis.x(hi), level)}"),
+                 fontsize=8, loc="left", pad=pad)
 
 
 def _final_text(value: float, se: float, lo: float, hi: float, level: float) -> str:
-    """'0.344 ± 0.061, 90 % interval [0.25, 0.5]' with what is known."""
+    """'0.344 ± 0.061 (se), 90 % interval [0.25, 0.5]' with what is known."""
     if not math.isfinite(value):
         return "not tuned"
-    out = f"{value:.3g}" + (f" ± {se:.2g}" if math.isfinite(se) else "")
+    out = f"{value:.3g}" + (f" ± {se:.2g} (se)" if math.isfinite(se) else "")
     if math.isfinite(lo) and math.isfinite(hi):
         share = f"{100 * level:.0f} % " if math.isfinite(level) else ""
         out += f", {share}interval [{lo:.3g}, {hi:.3g}]"

@@ -171,7 +171,8 @@ def plot_surface(ax, surface: Surface, points: Sequence[tuple[float, float]] = (
                  title: str | None = None, mark_min: bool = True):
     """Draw log10(mean cost) over the (kp, kd) square on `ax` (like the paper's Fig. 2); `points` (kp, kd) on top.
 
-    Colours span the minimum to the 90th percentile (higher values saturate). Returns the image for a colour bar.
+    Colours span the minimum to the 90th percentile (higher values saturate: give the colour bar `extend="max"`);
+    points on one spot are drawn once with their count (`mark_points`). Returns the image for a colour bar.
     """
     z = np.log10(np.maximum(surface.mean, 1e-12))
     lo, hi = float(np.nanmin(z)), float(np.nanquantile(z, 0.9))  # the diverging edge would flatten the rest
@@ -184,15 +185,38 @@ def plot_surface(ax, surface: Surface, points: Sequence[tuple[float, float]] = (
         ax.plot([kd0], [kp0], marker="*", color="white", markersize=12, markeredgecolor="black", linestyle="none",
                 label=f"grid minimum ({kp0:.3f}, {kd0:.3f})")
     if points:
-        style = {"marker": "o", "color": "red", "linestyle": "none", "markersize": 5} | (point_style or {})
-        pts = np.asarray(points, dtype=float)
-        ax.plot(pts[:, 1], pts[:, 0], **style)
+        mark_points(ax, points, point_style)
     ax.set_xlabel("k_D (normalised)")
     ax.set_ylabel("k_P (normalised)")
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1)
     ax.set_title(title or "log10 of the mean cost")
     return im
+
+
+SAME_SPOT = 0.015  # points closer than this (normalised, per gain) are one marker on a surface figure
+
+
+def mark_points(ax, points: Sequence[tuple[float, float]], style: dict | None = None,
+                count_at: tuple[float, float] = (5.0, 3.0)) -> None:
+    """(kp, kd) points on a surface figure (x = kd, y = kp), those on one spot (within SAME_SPOT) drawn once with
+    their count beside ('×3', offset by `count_at` points), so several runs ending at the same gains are not read
+    as one."""
+    from matplotlib.patheffects import withStroke
+
+    groups: list[list[float]] = []
+    for kp, kd in points:
+        same = next((g for g in groups if abs(g[0] - kp) <= SAME_SPOT and abs(g[1] - kd) <= SAME_SPOT), None)
+        if same is None:
+            groups.append([float(kp), float(kd), 1])
+        else:
+            same[2] += 1
+    style = {"marker": "o", "color": "red", "linestyle": "none", "markersize": 5} | (style or {})
+    ax.plot([g[1] for g in groups], [g[0] for g in groups], **style)
+    for kp, kd, n in groups:
+        if n > 1:
+            ax.annotate(f"×{n:.0f}", (kd, kp), xytext=count_at, textcoords="offset points", fontsize=7,
+                        color="black", path_effects=[withStroke(linewidth=2, foreground="white")])
 
 
 def save_png(surface: Surface, path: str | Path, title: str | None = None) -> None:
@@ -204,7 +228,7 @@ def save_png(surface: Surface, path: str | Path, title: str | None = None) -> No
 
     fig, ax = plt.subplots(figsize=(6.0, 5.0))
     im = plot_surface(ax, surface, title=title)
-    fig.colorbar(im, ax=ax, label=f"log10 mean {surface.scenario.cost}")
+    fig.colorbar(im, ax=ax, label=f"log10 mean {surface.scenario.cost}", extend="max")
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

@@ -32,6 +32,7 @@ def test_tune_one_px4_vehicle_end_to_end(tmp_path):
     assert tuned == pytest.approx({"MPC_Z_P": 0.1 + 1.4 * summary["gains"]["kp"],
                                    "MPC_Z_VEL_P_ACC": 2.0 + 13.0 * summary["gains"]["kd"]})
     assert summary["param_files"] == ["tuned.parm", "tuned.params"]
+    assert summary["param_maps"][url]["gains"]["kp"]["param"] == "MPC_Z_P"  # the report's autopilot units
     assert (tmp_path / "tuned.parm").read_text().count("\n") == 3  # a comment and two NAME VALUE lines
     for edge in summary["range_edges"]:  # every edge names its parameter and what to do
         assert edge["param"] in PX4_ORIGINALS and edge["hint"] and edge["param"] in edge["message"]
