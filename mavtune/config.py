@@ -55,16 +55,20 @@ class Tuning(_Section):
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
+    """The gains to tune, each with its [low, high] range, tuned in this order (the simulator's are normalised)."""
     method: str = "eql"
     epsilon: float = Field(0.2, ge=MIN_EPSILON, lt=0.5)
     bootstraps: StrictInt | Literal["auto"] = 2
     max_bootstraps: StrictInt = Field(10, ge=1, le=MAX_BOOTSTRAPS)
+    """With `bootstraps = "auto"`: the most passes over the gains before it stops anyway."""
     vehicles: StrictInt = Field(2, ge=1, le=MAX_VEHICLES)
     strategy: str = "avg"
     replicates: StrictInt | None = Field(None, ge=1, le=MAX_VEHICLES)
     points: StrictInt | None = Field(None, ge=2, le=MAX_POINTS)
+    """nsection: points per iteration (unset: one per vehicle slot)."""
     reuse: StrictBool = True
     initial: dict[str, float] = Field(default_factory=lambda: {"kd": 0.2})
+    """Starting values of gains not yet tuned (others start mid-range); the paper's kd 0.2 when kd is tuned."""
     seed: StrictInt = Field(0, ge=0, le=MAX_SEED, description="simulated vehicle j has seed + j")
     adaptive: StrictBool = True
     confidence: float = Field(0.85, gt=0.5, lt=1.0, description="adaptive: p_correct a comparison needs to move on")
@@ -136,8 +140,11 @@ class FlightPlan(_Section):
     """The primitive each vehicle flies per round and how long a round and a battery last."""
 
     primitive: Literal["circle", "step", "figure8"] = "circle"
+    """The reference each vehicle flies per round (the paper's: a circle with a climb)."""
     primitive_s: float = Field(8.0, ge=MIN_PRIMITIVE_S, le=120)
+    """Duration of the primitive, the part of a flight the cost measures, s."""
     settle_s: float = Field(1.0, ge=0, le=60)
+    """Hover after a gain change before the primitive, s (flown, not in the cost)."""
     battery_s: float = Field(600.0, gt=0, description="usable flight time of one battery pack, s")
     max_rounds: StrictInt = Field(MAX_ROUNDS, ge=1, description="a plan of more rounds is refused (raise it to insist)")
 
@@ -151,6 +158,8 @@ class FlightPlan(_Section):
 
 
 class FleetChoice(_Section):
+    """Which vehicles fly: the built-in simulator, swarm agents over Zenoh, or PX4 / ArduPilot over MAVLink."""
+
     kind: Literal["sim", "zenoh", "mavlink"] = "sim"
 
 

@@ -48,6 +48,8 @@ class Scenario(_Model):
 
     primitive: PrimitiveName = "circle"
     cost: CostName = "iae"
+    """What a flight costs: iae (the paper's: integral of |altitude error|), ise, itae, or effort (iae plus
+    effort_weight × the relative thrust change)."""
     primitive_s: float = Field(8.0, ge=1.0, le=120, description="duration of the reference primitive, s (at least "
                                "1 s: 100 altitude errors at 100 Hz)")
     settle_s: float = Field(1.0, ge=0, le=60, description="hover after a gain change: flown, not in the cost, s")

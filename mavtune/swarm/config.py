@@ -46,6 +46,7 @@ class SwarmConfig(BaseModel):
     connect: str | None = None
     """Agent side: the coordinator's endpoint (e.g. tcp/10.0.0.1:7447)."""
     session: Annotated[str, Field(pattern=SESSION_PATTERN)] = "mavtune"
+    """The session id every message carries; the coordinator and its agents must give the same."""
     key: Annotated[str, Field(min_length=MIN_KEY_CHARS, max_length=1024)] | None = None
     """The coordinator's swarm key, or an agent's own key line (never sent); prefer key_file or MAVTUNE_SWARM_KEY."""
     key_file: Path | None = None

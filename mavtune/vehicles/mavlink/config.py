@@ -19,8 +19,8 @@ class GainParam(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     param: str = Field(pattern=PARAM_PATTERN)  # a MAVLink parameter id: at most 16 letters, digits, '_'
-    min: float
-    max: float
+    min: float  # the parameter's value at normalised gain 0 (its own units)
+    max: float  # … and at 1
 
     @model_validator(mode="after")
     def _check(self) -> "GainParam":
@@ -55,7 +55,7 @@ class SafetyConfig(BaseModel):
     max_altitude_error_m: float = Field(1.5, gt=0)  # abort when |z − z_ref| exceeds this
     heartbeat_timeout_s: float = Field(3.0, gt=0)  # wall time without a HEARTBEAT that counts as link loss
     min_altitude_m: float = Field(2.0, ge=0)  # airborne means at least this high (LOCAL_POSITION_NED, up)
-    require_armed: bool = True
+    require_armed: bool = True  # refuse to start unless every vehicle is armed
     allowed_modes: list[str] | None = None  # None: the autopilot's defaults (PX4 POSCTL/LOITER/OFFBOARD, …)
     rejoin_after_link_loss: bool = True  # a vehicle whose link came back may fly later rounds
     position_timeout_s: float = Field(1.0, gt=0)  # wall time without a position sample that aborts a primitive
@@ -68,7 +68,7 @@ class MavlinkConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     urls: list[str] = Field(default_factory=list)  # one per vehicle (udpin:HOST:PORT, tcp:HOST:PORT, serial:DEV:BAUD)
-    autopilot: Literal["auto", "px4", "ardupilot"] = "auto"
+    autopilot: Literal["auto", "px4", "ardupilot"] = "auto"  # auto: as the vehicle's HEARTBEAT says
     gains: dict[str, GainParam] | None = None  # None: DEFAULT_GAINS of the detected autopilot
     primitive_s: float = Field(8.0, ge=1.0)  # one circle (paper: 8 s); under 1 s it measures too little
     settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
@@ -76,15 +76,15 @@ class MavlinkConfig(BaseModel):
     calm_speed_mps: float = Field(0.3, gt=0)  # … and |vertical speed| below this (after an abort the vehicle recovers)
     calm_timeout_s: float = Field(10.0, gt=0)  # vehicle seconds to wait for calm before the flight is lost
     recover_s: float = Field(5.0, ge=0)  # after an abort: hover this long, then stay calm this long (vehicle s)
-    circle_diameter_m: float = Field(2.0, ge=0)
+    circle_diameter_m: float = Field(2.0, ge=0)  # of the circle flown about the hover point
     elevation_m: float = Field(1.0, ge=0)  # altitude difference over the circle
     setpoint_hz: float = Field(20.0, ge=10.0, le=100.0)  # SET_POSITION_TARGET_LOCAL_NED rate (PX4 needs > 2 Hz)
     filter_hz: float = Field(5.0, gt=0)  # low-pass cutoff of the cost, as the simulator's Scenario.filter_hz
-    altitude_source: Literal["local_position", "distance_sensor"] = "local_position"
+    altitude_source: Literal["local_position", "distance_sensor"] = "local_position"  # or the downward rangefinder
     keep_tuned: bool = False  # at the end leave the tuned gains on the vehicle instead of the originals
     heartbeat_wait_s: float = Field(10.0, gt=0)  # how long to wait for the first HEARTBEAT
     param_timeout_s: float = Field(1.0, gt=0)  # wait for PARAM_VALUE per attempt (raise for slow links)
-    param_retries: int = Field(5, ge=1)
+    param_retries: int = Field(5, ge=1)  # attempts of a PARAM_SET before it counts as not confirmed
     mode_timeout_s: float = Field(3.0, gt=0)  # wait for the HEARTBEAT to show a commanded mode
     target_system: int | None = Field(None, ge=1, le=255)  # None: the only autopilot system heard on the link
     # (several heard: refused; a URL's ?target_system=N suffix chooses per vehicle)

@@ -1,0 +1,1 @@
+"""What the docs site generates at build time (mkdocs hooks): the configuration reference and the benchmarks page."""
