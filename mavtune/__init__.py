@@ -7,7 +7,7 @@ __version__ = "0.1.0"
 __all__ = ["Flight", "Fleet", "MavtuneError", "Round", "Status", "Trace", "TuningResult", "tune", "__version__"]
 
 _LAZY = {"Flight": "mavtune.fleet", "Fleet": "mavtune.fleet", "Status": "mavtune.fleet", "Trace": "mavtune.fleet",
-         "Round": "mavtune.tuner", "TuningResult": "mavtune.tuner", "tune": "mavtune.tuner"}
+         "Round": "mavtune.tuner", "TuningResult": "mavtune.tuner", "tune": "mavtune.api"}
 
 
 def __getattr__(name: str):

@@ -410,12 +410,10 @@ def tune(
     sees every round as it ends, `draws` resampled searches give each gain's interval (0: none).
     """
     space = dict(space if space is not None else {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
-    if evaluate is None:
-        from mavtune.sim import SimFleet
-
-        fleet: Fleet = SimFleet(vehicles or 2, seed=seed or 0)
-    elif isinstance(evaluate, Fleet):
-        fleet = evaluate
+    if evaluate is None:  # the engine knows no simulator: `mavtune.tune` (mavtune/api.py) passes its SimFleet
+        raise MavtuneError("evaluate is None: call mavtune.tune for the built-in simulator")
+    if isinstance(evaluate, Fleet):
+        fleet: Fleet = evaluate
     elif callable(evaluate):
         fleet = CallableFleet(evaluate, vehicles or 2)
     else:

@@ -35,7 +35,7 @@ def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPE
 def mavsim_on(port: int, *args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1,
               duration: float = 120.0):
     """Run `mavtune mavsim` sending to 127.0.0.1:port until the block ends."""
-    cmd = [sys.executable, "-c", "from mavtune.cli import main; main()", "mavsim", "--port", str(port),
+    cmd = [sys.executable, "-c", "from mavtune.__main__ import main; main()", "mavsim", "--port", str(port),
            "--autopilot", autopilot, "--seed", str(seed), "--speed", str(speed), "--sysid", str(sysid),
            "--noise-free", "--duration", str(duration), *args]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)

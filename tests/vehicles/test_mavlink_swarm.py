@@ -22,7 +22,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
 PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
 ARDU_ORIGINALS = {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}
 EPSILON = 0.4  # 6 rounds: a short run, and a tolerance wide enough that kd usually ends at an edge
-MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+MAVTUNE = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
 
 
 def free_tcp_port() -> int:
