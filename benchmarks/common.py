@@ -21,3 +21,14 @@ def write_results(name: str, lines: list[str], data: dict) -> None:
     (RESULTS / f"{name}.md").write_text("\n".join(lines))
     (RESULTS / f"{name}.json").write_text(json.dumps(data, indent=2))
     print("\n".join(lines))
+
+
+def padding_args(entry) -> tuple[int, ...]:
+    """The trailing padding argument (the vector width, `mavtune.sim.simd.float64_lanes()`) of a kernel entry point,
+    or () for an entry point of a kernel from before it took one (loaded from git to compare)."""
+    code = getattr(entry, "py_func", entry).__code__
+    if "simd" not in code.co_varnames[:code.co_argcount]:
+        return ()
+    from mavtune.sim.simd import float64_lanes
+
+    return (float64_lanes(),)

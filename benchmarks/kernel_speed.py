@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from common import cpu_s, write_results
+from common import cpu_s, padding_args, write_results
 
 BEFORE = "589e62c"  # main before the struct-of-arrays kernel (scalar kernel, Box-Muller with libm)
 ROOT = Path(__file__).resolve().parent.parent
@@ -49,15 +49,16 @@ def flier(kernel, n: int, parallel: bool):
     from mavtune.sim.scenario import Scenario
 
     sc = Scenario.default()
-    ref, cp, (mix, alloc) = batch.reference_for(sc), batch.constants(sc), batch.mixing()
+    ref, cp, (mix, alloc) = batch.reference_for(sc), batch.kernel_array(batch.constants(sc)), batch.mixing()
     kx, kv = to_physical(np.linspace(0.2, 0.9, n), np.full(n, 0.4))
     seeds, rounds = np.arange(n, dtype=np.uint64), np.full(n, 3, dtype=np.int64)
     costs, status, t_fail, traces = np.empty((n, 4)), np.empty(n, np.int64), np.empty(n), np.empty((n, 1))
     fn = kernel.fly_batch if parallel else kernel.fly_serial
     ns = batch.settle_steps(sc)
+    pad = padding_args(fn)
 
     def fly():
-        fn(seeds, rounds, kx, kv, ref, ns, cp, mix, alloc, 0, traces, costs, status, t_fail)
+        fn(seeds, rounds, kx, kv, ref, ns, cp, mix, alloc, 0, traces, costs, status, t_fail, *pad)
         return costs
 
     return fly, ref.shape[0]

@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from common import write_results
+from common import padding_args, write_results
 from kernel_speed import BEFORE, load_kernel_at
 
 # normalised gains (kp, kd): (0.9, 0.3) the paper's; (0.417, 0.542) and (0.375, 0.625) the noisy grid optima of
@@ -39,7 +39,7 @@ def fly(kernel, scenario, kp: float, kd: float, seeds: np.ndarray) -> np.ndarray
     mix, alloc = batch.mixing()
     kernel.fly_batch(seeds.astype(np.uint64), np.full(n, 1, dtype=np.int64), kx, kv, batch.reference_for(scenario),
                      batch.settle_steps(scenario), batch.constants(scenario), mix, alloc, 0, traces, costs, status,
-                     t_fail)
+                     t_fail, *padding_args(kernel.fly_batch))
     return costs[:, 0]
 
 

@@ -114,6 +114,8 @@ class GainBank:
                 bank.add(e["mass_kg"], e["gains"], e.get("source", ""), e.get("se"))
         except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise MavtuneError(f"gain bank {path} is not a mavtune bank file ({exc})") from None
+        except OSError as exc:  # a folder where the file should be, no permission
+            raise MavtuneError(f"gain bank {path} cannot be read: {exc.strerror or exc}") from None
         return bank
 
 

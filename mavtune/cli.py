@@ -17,6 +17,7 @@ from typer.core import TyperGroup
 
 from mavtune import interrupts
 from mavtune.errors import Interrupted, MavtuneError
+from mavtune.runfolder import usable_path
 from mavtune.options import (
     AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MaxRoundsOpt, MethodOpt, ReplicatesOpt, ReuseOpt,
     SchedulerOpt, StrategyOpt,
@@ -151,7 +152,7 @@ def tune_command(
         raise MavtuneError("--out is empty: name the run folder (or leave --out out for runs/tune-<time>)")
     if stage_rounds is not None and stage_rounds < 1:
         raise MavtuneError(f"--stage-rounds must be at least 1, got {stage_rounds}")
-    folder = Path(out) if out is not None else None
+    folder = usable_path(Path(out), "--out") if out is not None else None
     base = saved_config(folder) if folder is not None and config is None else None  # resume a folder as it was run
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base,
                             flight__max_rounds=max_rounds, tuning__seed=seed, sim__payload_kg=payload,
@@ -168,7 +169,7 @@ def tune_command(
         folder = Path("runs") / time.strftime("tune-%Y%m%d-%H%M%S")
     if resume and not (folder / JOURNAL).is_file():
         raise MavtuneError(f"--resume: {folder / JOURNAL} does not exist")
-    _check_surface(surface)
+    _check_surface(surface, cfg)
     if stage and stage_rounds is None:
         from mavtune.run import plan_of
 
@@ -183,18 +184,31 @@ def report_command(
                                            "the final gains on."),
 ) -> None:
     """Draw a run folder's report (report.md and figures) again from its journal, flying nothing."""
+    from mavtune.config import load_config
     from mavtune.redraw import redraw
+    from mavtune.run import saved_config
 
-    _check_surface(surface)
+    usable_path(run_dir, "run folder")
+    if surface is not None and (saved := saved_config(run_dir)) is not None:
+        _check_surface(surface, load_config(base=saved))
     redraw(run_dir, surface)
 
 
-def _check_surface(surface: Path | None) -> None:
-    """A --surface that is missing or malformed is named before anything flies or is written."""
-    if surface is not None:
-        from mavtune.sim.surface import read_csv
+def _check_surface(surface: Path | None, config) -> None:
+    """A --surface that is missing or malformed, or mapped in another scenario than this simulated run flies, is
+    named before anything flies or is written."""
+    if surface is None:
+        return
+    from mavtune.journal import first_difference
+    from mavtune.sim.surface import read_csv
 
-        read_csv(surface)
+    mapped = read_csv(surface)
+    if config.fleet.kind == "sim" and mapped.scenario_known:
+        differs = first_difference(mapped.scenario.model_dump(mode="json"), config.scenario().model_dump(mode="json"))
+        if differs is not None:
+            where, was, now = differs
+            raise MavtuneError(f"--surface {surface} was mapped at sim.{where} = {was!r} but this run flies "
+                               f"{now!r}; map one in this run's scenario (`mavtune surface`) or leave --surface out")
 
 
 bank_app = typer.Typer(help="A bank of tuned gains by vehicle mass, looked up by the mass estimator's reading.",
@@ -242,7 +256,7 @@ def bank_add(
     path = run_dir / "result.json"
     try:
         summary = json.loads(path.read_text())
-    except (FileNotFoundError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         raise MavtuneError(f"{path} is missing or unreadable: is {run_dir} a mavtune run folder?") from None
     if summary.get("status", "finished") != "finished":
         raise MavtuneError(f"the run in {run_dir} did not finish ({summary.get('status')}): resume it first")
@@ -297,6 +311,9 @@ def run_app(args: list[str] | None = None) -> int:
         return _say(str(exc), "yellow", 130)
     except MavtuneError as exc:
         return _say(f"error: {exc}", "red", 2)
+    except OSError as exc:  # a file or socket the command could not use, named; the files are left as they were
+        where = f"{exc.filename}: " if exc.filename else ""
+        return _say(f"error: {where}{exc.strerror or exc}", "red", 2)
     except click.exceptions.ClickException as exc:
         if type(exc).__name__ == "NoArgsIsHelpError":  # bare `mavtune` or `mavtune bank`: the help, status 2
             typer.echo(exc.ctx.get_help())

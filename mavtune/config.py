@@ -23,14 +23,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 from mavtune.errors import MavtuneError
 from mavtune.search import METHODS
 from mavtune.strategy import STRATEGIES
-from mavtune.tuner import Settings
+from mavtune.tuner import MAX_BOOTSTRAPS, MAX_POINTS, MAX_ROUNDS, MAX_VEHICLES, MIN_EPSILON, Settings
 
-
-MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
-MAX_POINTS = 1_000  # nsection points per iteration
-MAX_BOOTSTRAPS = 1_000
-MIN_EPSILON = 1e-4  # below 1e-4 of a gain's range no flight tells two gains apart; EQL would plan 10^4+ rounds
-MAX_ROUNDS = 2_000  # a plan of more rounds (5 h of 9 s rounds) is refused unless flight.max_rounds is raised
+MIN_PRIMITIVE_S = 1.0  # a shorter primitive samples under 100 altitude errors at 100 Hz: it measures too little
+MAX_SEED = 2**63 - 1 - MAX_VEHICLES  # vehicle j flies seed + j, kept distinct in the simulator's 64-bit seeds
 
 
 class _Section(BaseModel):
@@ -61,7 +57,7 @@ class Tuning(_Section):
     points: StrictInt | None = Field(None, ge=2, le=MAX_POINTS)
     reuse: StrictBool = True
     initial: dict[str, float] = Field(default_factory=lambda: {"kd": 0.2})
-    seed: StrictInt = Field(0, ge=0)
+    seed: StrictInt = Field(0, ge=0, le=MAX_SEED, description="simulated vehicle j has seed + j")
     adaptive: StrictBool = True
     confidence: float = Field(0.85, gt=0.5, lt=1.0, description="adaptive: p_correct a comparison needs to move on")
     cap: StrictInt | None = Field(6, ge=1, description="adaptive: most flights of one point in one comparison "
@@ -76,6 +72,16 @@ class Tuning(_Section):
         """The paper's initial k_D = 0.2 applies only when kd is tuned and no initial values were given."""
         if "initial" not in self.model_fields_set:
             self.initial = {k: v for k, v in self.initial.items() if k in self.space}
+        return self
+
+    @model_validator(mode="after")
+    def _ranges_resolvable(self) -> "Tuning":
+        """A range so narrow that the search's tolerance (ε of it) is below MIN_EPSILON of the normalised gain
+        cannot be told apart by any flight: refused, not flown for nothing."""
+        for name, (lo, hi) in self.space.items():
+            if 0 < hi - lo and (hi - lo) * self.epsilon < MIN_EPSILON:
+                raise ValueError(f"space.{name} = [{lo!r}, {hi!r}] is too narrow to tune: at ε = "
+                                 f"{self.epsilon:g} it must be at least {MIN_EPSILON / self.epsilon:.2g} wide")
         return self
 
     @field_validator("method", "strategy")
@@ -109,7 +115,7 @@ class FlightPlan(_Section):
     """The primitive each vehicle flies per round and how long a round and a battery last."""
 
     primitive: Literal["circle", "step", "figure8"] = "circle"
-    primitive_s: float = Field(8.0, gt=0, le=120)
+    primitive_s: float = Field(8.0, ge=MIN_PRIMITIVE_S, le=120)
     settle_s: float = Field(1.0, ge=0, le=60)
     battery_s: float = Field(600.0, gt=0, description="usable flight time of one battery pack, s")
     max_rounds: StrictInt = Field(MAX_ROUNDS, ge=1, description="a plan of more rounds is refused (raise it to insist)")
@@ -204,14 +210,21 @@ def _plain_numbers(given: Any, used: Any, where: str) -> None:
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
-    """The tables of a TOML file; a missing or malformed file is one line naming it."""
+    """The tables of a TOML file (UTF-8; a byte-order mark, as Windows editors save, is skipped); a missing,
+    unreadable or malformed file is one line naming it."""
     path = Path(path)
     try:
-        return tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise MavtuneError(f"config file {path} does not exist") from None
     except IsADirectoryError:
         raise MavtuneError(f"config file {path} is a folder") from None
+    except UnicodeDecodeError as exc:
+        line = exc.object[:exc.start].count(b"\n") + 1
+        raise MavtuneError(f"config file {path} is not UTF-8 text: byte 0x{exc.object[exc.start]:02x} on line "
+                           f"{line}; save it as UTF-8") from None
+    except OSError as exc:
+        raise MavtuneError(f"config file {path} cannot be read: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise MavtuneError(f"config file {path} is not valid TOML: {exc}") from None
 

@@ -152,7 +152,7 @@ class Journal:
             raise MavtuneError(
                 f"journal {self.path} does not record {', '.join(missing)} (an older mavtune wrote it), so resuming "
                 "could mix settings silently; start a new run folder")
-        if (field := _first_difference(stored, config)) is not None:
+        if (field := first_difference(stored, config)) is not None:
             where, was, now = field
             raise MavtuneError(f"journal {self.path} belongs to another run: {where} was {was!r}, now {now!r} "
                                "(resume with the settings it was started with, or use a new run folder)")
@@ -255,15 +255,15 @@ def _finite(value: Any) -> float:
     return x
 
 
-def _first_difference(was: Any, now: Any, where: str = "") -> tuple[str, Any, Any] | None:
+def first_difference(was: Any, now: Any, where: str = "") -> tuple[str, Any, Any] | None:
     """The first leaf (dotted path) where two JSON-like values differ, or None when they agree."""
     if isinstance(was, dict) and isinstance(now, dict):
         for key in sorted(set(was) | set(now), key=str):
-            found = _first_difference(was.get(key), now.get(key), f"{where}.{key}" if where else str(key))
+            found = first_difference(was.get(key), now.get(key), f"{where}.{key}" if where else str(key))
             if found is not None:
                 return found
         return None
     if isinstance(was, list) and isinstance(now, list) and len(was) == len(now):
         return next((d for i, (a, b) in enumerate(zip(was, now))
-                     if (d := _first_difference(a, b, f"{where}[{i}]")) is not None), None)
+                     if (d := first_difference(a, b, f"{where}[{i}]")) is not None), None)
     return None if was == now else (where, was, now)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from mavtune.errors import MavtuneError
+from mavtune.search.base import P_BEST_STEPS
 from mavtune.tuner import Settings
 
 MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal costs)
@@ -129,26 +130,31 @@ class Work:
         adaptive plan's flat rehearsal flies each point of each comparison `cap` times."""
         s = self.settings
         slots = s.strategy_rule.slots(s.vehicles)
-        self._within(rehearsals * math.ceil(search.budget() / slots) * s.vehicles)
+        self.within(rehearsals * math.ceil(search.budget() / slots) * s.vehicles)
         if search.reuse and slots > 1:
-            self._within(64 * slots * (1 + len(search.ask())))
-        if s.adaptive_rule is not None:  # the flat rehearsal flies every point of every comparison to the cap
-            flights = len(search.needs()) * len(search.ask()) * s.adaptive_rule.cap
-            self._within(flights + ROUND_STEPS * math.ceil(flights / s.vehicles))
+            self.within(64 * slots * (1 + len(search.ask())))
+        if s.adaptive_rule is not None:  # the two flat rehearsals fly every point of every comparison to the cap,
+            # deciding after each round once every point has a flight (p_best's grid, for three points or more)
+            points, comparisons, cap = len(search.ask()), len(search.needs()), s.adaptive_rule.cap
+            flights = comparisons * points * cap
+            decides = comparisons * math.ceil(points * (cap - 1) / s.vehicles)
+            self.within(2 * (flights + ROUND_STEPS * math.ceil(flights / s.vehicles)
+                              + (decides * points * P_BEST_STEPS if points > 2 else 0)))
 
     def add(self, steps: int) -> None:
         """Count `steps` done; past the limit the plan is refused."""
-        self._within(self.done + steps)
+        self.within(self.done + steps)
         self.done += steps
 
-    def _within(self, steps: int) -> None:
+    def within(self, steps: int) -> None:
         """Refuse the plan (one line naming what to change) when `steps` exceed the limit."""
         if steps > self.limit:
             s = self.settings
             raise MavtuneError(f"planning {counted(s.vehicles, 'vehicle')} ({s.strategy}, {s.method}, ε = {s.epsilon:g}"
                                f"{f', cap {s.adaptive_rule.cap}' if s.adaptive_rule else ''}) takes more than "
-                               f"{self.limit:,} rehearsed flights and speculation steps; use fewer vehicles, a larger "
-                               "epsilon" + (" or a smaller cap" if s.adaptive_rule else ""))
+                               f"{self.limit:,} rehearsed flights and speculation steps; use fewer vehicles"
+                               + (", fewer points" if s.method == "nsection" else "") + ", a larger epsilon"
+                               + (" or a smaller cap" if s.adaptive_rule else ""))
 
 
 def _rehearse(settings: Settings, lo: float, hi: float, cost: Callable[[float], float], work: Work,
@@ -179,8 +185,13 @@ def _noisy_bowl(minimum: float, seed: int) -> Callable[[float], float]:
 def _adaptive_rounds(settings: Settings, lo: float, hi: float, work: Work) -> tuple[int, int]:
     """Expected and worst rounds of one adaptive line search: the mean over noisy bowls, and the most over a
     flat cost (no comparison ever decided before the cap), a pure-noise cost and no speculation."""
-    expected = [_rehearse(settings, lo, hi, _noisy_bowl((i + 0.5) / EXPECTED_PROBES, i), work)
-                for i in range(EXPECTED_PROBES)]
+    expected, least = [], math.inf  # the least work of one noisy bowl so far
+    for i in range(EXPECTED_PROBES):
+        before = work.done
+        expected.append(_rehearse(settings, lo, hi, _noisy_bowl((i + 0.5) / EXPECTED_PROBES, i), work))
+        least = min(least, work.done - before)
+        if i >= 1:  # two bowls rehearsed: the rest take at least about the least of them (refused now, not later)
+            work.within(work.done + (EXPECTED_PROBES - 1 - i) * least)
     flat = lambda _: 1.0  # noqa: E731
     worst = max(_rehearse(settings, lo, hi, flat, work), _rehearse(settings, lo, hi, flat, work, speculate=False),
                 *(_rehearse(settings, lo, hi, _noise(seed), work) for seed in range(2)))

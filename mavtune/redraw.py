@@ -9,6 +9,7 @@ writing one (killed, crashed) gets one saying so. Whatever is refused is refused
 from __future__ import annotations
 
 import json
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains
 from mavtune.journal import Journal
 from mavtune.plan import counted
+from mavtune.runfolder import claimed
 from mavtune.run import JOURNAL, REPORT, plan_of, run_summary, saved_config, write_json
 from mavtune.search.interval import DRAWS
 from mavtune.tuner import StageDone, Tuner, TuningResult
@@ -86,9 +88,16 @@ def replay(out_dir: Path) -> tuple[TuningResult, Any, str, dict[str, Any] | None
 def redraw(out_dir: str | Path, surface: Path | None = None, console: Console | None = None) -> Path:
     """Write `out_dir/report.md` with its figures from the journal and config.json, flying nothing; result.json
     then says the report is whole. Returns the report's path."""
+    out_dir, console = Path(out_dir), console or Console(emoji=False)
+    journal = out_dir / JOURNAL
+    with claimed(journal) if journal.is_file() else nullcontext():  # replay names a missing journal
+        return _redraw(out_dir, surface, console)
+
+
+def _redraw(out_dir: Path, surface: Path | None, console: Console) -> Path:
+    """redraw, with the run folder held."""
     from mavtune.report import write_run_report
 
-    out_dir, console = Path(out_dir), console or Console(emoji=False)
     result, config, status, summary = replay(out_dir)
     if summary is None:  # the run never wrote result.json: one from the journal, saying so
         summary = run_summary(config, plan_of(config), result, None, status, None if status == "finished" else

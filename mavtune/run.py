@@ -28,6 +28,7 @@ from mavtune.errors import Interrupted, MavtuneError
 from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal, blank
 from mavtune.plan import Plan, clock as _clock_s, counted, make_plan
+from mavtune.runfolder import claimed
 from mavtune.tuner import Round, StageDone, Tuner, TuningResult
 
 JOURNAL = "journal.sqlite"
@@ -56,13 +57,7 @@ def plan_of(config: Config) -> Plan:
     """The plan of a configuration, with its flight timing; a plan longer than `flight.max_rounds` is refused
     (before rehearsing it when even its fewest possible rounds are too many)."""
     f, settings = config.flight, config.settings()
-    from mavtune.search import make_search
-
-    needs = make_search(settings.method, 0.0, 1.0, settings.epsilon, reuse=settings.reuse,
-                        points=settings.points).budget()
-    fewest = math.ceil(needs / settings.strategy_rule.slots(settings.vehicles)) * len(settings.space) * (
-        settings.bootstraps or 1)
-    if fewest > f.max_rounds:
+    if (fewest := settings.fewest_rounds()) > f.max_rounds:
         _too_long(fewest, config, "at least ")
     plan = make_plan(settings, f.primitive_s, f.settle_s, f.battery_s)
     if plan.rounds > f.max_rounds:
@@ -204,7 +199,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     settings = config.settings()
     plan = plan_of(config)
     prepare_folder(out_dir)
-    with Journal(out_dir / JOURNAL) as book:
+    with Journal(out_dir / JOURNAL) as book, claimed(book.path):
         book.bind(config.fingerprint())
         book.check_writable()
         if recorded := len(book):
@@ -257,7 +252,12 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                     if tuner is not None or not (out_dir / "result.json").exists():  # else nothing was flown or
                         # replayed: the folder's result.json and report still describe its journal
                         (out_dir / REPORT).unlink(missing_ok=True)  # report.md matches result.json or is absent
-                        write_json(out_dir / "result.json", summary)
+                        try:
+                            write_json(out_dir / "result.json", summary)
+                        except MavtuneError as unwritten:  # a full disk: say why the run stopped, and this too
+                            if error is None:
+                                raise
+                            raise MavtuneError(f"{error}; {unwritten}") from None
             if report and result is not None:
                 _report(console, out_dir, result, config, surface, status, summary)
         recorded = len(book)
@@ -382,8 +382,12 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     1000-vehicle run's few rounds where the C encoder takes 0.05 s — time an interrupted run does not have."""
     lines = ",\n".join(f"  {json.dumps(str(key))}: {json.dumps(value, default=str)}" for key, value in data.items())
     partial = path.with_suffix(".json.partial")
-    partial.write_text("{\n" + lines + "\n}\n" if lines else "{}\n")
-    os.replace(partial, path)
+    try:
+        partial.write_text("{\n" + lines + "\n}\n" if lines else "{}\n")
+        os.replace(partial, path)
+    except OSError as exc:  # a full disk, a folder in the way: the old file stays whole, the partial goes
+        partial.unlink(missing_ok=True)
+        raise MavtuneError(f"cannot write {path}: {exc.strerror or exc}") from None
 
 
 def tuned_outcome(fleet: Fleet, gains: dict[str, float], settings, out_dir: Path) -> dict[str, Any]:

@@ -25,6 +25,12 @@ from mavtune.search.interval import DRAWS, resample, resolution
 from mavtune.strategy import Strategy
 
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
+# Bounds of every accepted setting, the same for the Python API and the CLI: each run plans and flies in bounded time.
+MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
+MAX_POINTS = 1_000  # nsection points per iteration
+MAX_BOOTSTRAPS = 1_000
+MIN_EPSILON = 1e-4  # below 1e-4 of a gain's range no flight tells two gains apart; EQL would plan 10^4+ rounds
+MAX_ROUNDS = 2_000  # a run of more rounds (5 h of 9 s rounds) is refused unless its max_rounds is raised
 
 
 @dataclass
@@ -159,12 +165,17 @@ class Settings:
                 raise MavtuneError(f"range of gain {name!r} is [{lo}, {hi}]: lo must be below hi")
             space[name] = (lo, hi)
         self.space = space
-        if not 0.0 < float(self.epsilon) < 0.5:
-            raise MavtuneError(f"epsilon {self.epsilon} is outside (0, 0.5)")
-        if self.bootstraps is not None and int(self.bootstraps) < 1:
-            raise MavtuneError(f"bootstraps must be at least 1 (or None for the paper's stop rule), got {self.bootstraps}")
-        if int(self.vehicles) < 1:
-            raise MavtuneError(f"vehicles must be at least 1, got {self.vehicles}")
+        if not MIN_EPSILON <= float(self.epsilon) < 0.5:
+            raise MavtuneError(f"epsilon {self.epsilon} is outside [{MIN_EPSILON:g}, 0.5)")
+        if self.bootstraps is not None and not 1 <= int(self.bootstraps) <= MAX_BOOTSTRAPS:
+            raise MavtuneError(f"bootstraps must be from 1 to {MAX_BOOTSTRAPS} (or None for the paper's stop rule), "
+                               f"got {self.bootstraps}")
+        if not 1 <= int(self.max_bootstraps) <= MAX_BOOTSTRAPS:
+            raise MavtuneError(f"max_bootstraps must be from 1 to {MAX_BOOTSTRAPS}, got {self.max_bootstraps}")
+        if not 1 <= int(self.vehicles) <= MAX_VEHICLES:
+            raise MavtuneError(f"vehicles must be from 1 to {MAX_VEHICLES}, got {self.vehicles}")
+        if self.points is not None and not 2 <= int(self.points) <= MAX_POINTS:
+            raise MavtuneError(f"points must be from 2 to {MAX_POINTS}, got {self.points}")
         for name, value in self.initial.items():
             if name not in self.space:
                 raise MavtuneError(f"initial value given for {name!r}, which is not in the space ({', '.join(self.space)})")
@@ -186,6 +197,12 @@ class Settings:
         return make_search(self.method, lo, hi, self.epsilon, reuse=self.reuse, points=self.points,
                            adaptive=self.adaptive_rule, pool=pool, refly=self.refly and self.reuse,
                            answer=self.answer)
+
+    def fewest_rounds(self) -> int:
+        """The rounds a run of these settings takes at the least: every line search's budget of evaluations,
+        as many a round as the strategy has slots, per gain and bootstrap (one, for the paper's stop rule)."""
+        rounds = math.ceil(self.search(0.0, 1.0).budget() / self.strategy_rule.slots(int(self.vehicles)))
+        return rounds * len(self.space) * (self.bootstraps or 1)
 
     def start_gains(self) -> Gains:
         """The gains before tuning: the given initial values, mid-range for the rest."""
@@ -398,6 +415,7 @@ def tune(
     answer: str = "search",
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
+    max_rounds: int = MAX_ROUNDS,
 ) -> TuningResult:
     """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
 
@@ -407,7 +425,8 @@ def tune(
     `max_bootstraps` caps the paper's stop rule (`bootstraps=None`), `adaptive` flies close comparisons again
     until the kept point is right with probability `confidence` or each point has `cap` flights, `answer` is
     each line search's answer ("search" or "model": a local fit of all its flights), `on_round`
-    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none).
+    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that
+    need more than `max_rounds` rounds are refused before anything flies, as `mavtune tune` refuses them.
     """
     space = dict(space if space is not None else {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
     if evaluate is None:  # the engine knows no simulator: `mavtune.tune` (mavtune/api.py) passes its SimFleet
@@ -423,6 +442,9 @@ def tune(
                         initial=dict(initial or {}), replicates=replicates, points=points,
                         max_bootstraps=max_bootstraps, seed=seed, adaptive=adaptive, confidence=confidence, cap=cap,
                         answer=answer)
+    if (fewest := settings.fewest_rounds()) > max_rounds:
+        raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
+                           "raise max_rounds to fly them anyway")
     return run_tuning(settings, fleet, journal, on_round, draws=draws)
 
 

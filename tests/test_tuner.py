@@ -108,17 +108,38 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
     (dict(space={}), "space is empty"),
     (dict(space={"kp": (1.0, 0.0)}), "lo must be below hi"),
     (dict(epsilon=0.5), "epsilon 0.5 is outside"),
-    (dict(vehicles=0), "vehicles must be at least 1"),
+    (dict(vehicles=0), "vehicles must be from 1 to"),
     (dict(vehicles=3, strategy="groups", replicates=2), "do not divide"),
     (dict(strategy="fastest"), "unknown strategy"),
     (dict(initial={"ki": 0.1}), "'ki', which is not in the space"),
     (dict(initial={"kd": 2.0}), "outside its range"),
-    (dict(bootstraps=0), "bootstraps must be at least 1"),
+    (dict(bootstraps=0), "bootstraps must be from 1 to"),
+    (dict(epsilon=1e-5), r"epsilon 1e-05 is outside \[0.0001, 0.5\)"),
+    (dict(vehicles=10_001), "vehicles must be from 1 to 10000"),
+    (dict(method="nsection", points=1_001), "points must be from 2 to 1000"),
+    (dict(bootstraps=1_001), "bootstraps must be from 1 to 1000"),
 ])
 def test_bad_input_is_one_line_naming_the_problem(kwargs, message):
     with pytest.raises(MavtuneError, match=message) as info:
         mavtune.tune(bowl(), **{"vehicles": 2, **kwargs})
     assert "\n" not in str(info.value)
+
+
+def test_the_api_refuses_what_the_cli_refuses_before_anything_flies():
+    """ε = 1e-4 asks EQL for 40 004 rounds: refused at once, as `mavtune tune` refuses it, not flown for minutes."""
+    flown = []
+
+    def evaluate(assignments):
+        flown.append(assignments)
+        return [1.0] * len(assignments)
+
+    with pytest.raises(MavtuneError, match="at least 40004 rounds, more than max_rounds = 2000") as info:
+        mavtune.tune(evaluate, epsilon=1e-4)
+    assert "\n" not in str(info.value) and not flown
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=5)
+    assert len(result.rounds) == 5  # EQL's 5 evaluations at ε = 0.25, one a round: allowed at max_rounds = 5
+    with pytest.raises(MavtuneError, match="at least 5 rounds, more than max_rounds = 4"):
+        mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=4)
 
 
 def test_wrong_number_of_costs_is_named():

@@ -20,3 +20,4 @@ def out_folder(path: str | Path) -> Path:
     except OSError as exc:
         raise MavtuneError(f"cannot write to the output folder {path}: {exc.strerror or exc}") from None
     return path
+

@@ -12,6 +12,7 @@ from mavtune.sim import airframe as af
 from mavtune.sim import kernel as K
 from mavtune.sim.cost import lowpass_alpha
 from mavtune.sim.scenario import COST_NAMES, Scenario
+from mavtune.sim.simd import float64_lanes
 from mavtune.sim.tracker import DT_S, flight_reference
 
 # Batches smaller than this fly on the calling thread: the kernel flies chunks of K.LANES vehicles, one chunk per
@@ -89,10 +90,21 @@ def settle_steps(scenario: Scenario) -> int:
     return int(round(scenario.settle_s / DT_S))
 
 
+def kernel_array(values, dtype=np.float64, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """`values` (broadcast to `shape`) as the one array type the kernels are compiled for: writable, aligned,
+    C-contiguous `dtype` (a copy only when `values` is not that already). numba compiles a kernel once per type
+    of its arguments, and a read-only array (a cached constant, a broadcast view) is another type than a writable
+    one: mixing them compiled every kernel twice (issue 19)."""
+    arr = np.asarray(values, dtype=dtype)
+    if shape is not None:
+        arr = np.broadcast_to(arr, shape)
+    return np.require(arr, dtype, ("C", "A", "W"))
+
+
 def seed_array(seeds) -> np.ndarray:
     """Vehicle seeds (any Python ints, negative or beyond 64 bits) as the kernel's uint64, taken modulo 2**64."""
     if isinstance(seeds, np.ndarray) and seeds.dtype.kind in "iu":  # int64 wraps modulo 2**64 as well
-        return np.ascontiguousarray(seeds.astype(np.uint64).ravel())
+        return kernel_array(seeds.astype(np.uint64).ravel(), np.uint64)
     return np.array([int(s) % 2**64 for s in seeds], dtype=np.uint64)
 
 
@@ -121,10 +133,10 @@ def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0,
     this thread (False), or choose by size (None: from PARALLEL_FROM flights on); the results are the same."""
     seeds = seed_array(seeds)
     b = seeds.shape[0]
-    round_ids = np.ascontiguousarray(np.broadcast_to(np.asarray(round_ids, dtype=np.int64), (b,)))
-    kx = np.ascontiguousarray(np.broadcast_to(np.asarray(kx_z, dtype=float), (b,)))
-    kv = np.ascontiguousarray(np.broadcast_to(np.asarray(kv_z, dtype=float), (b,)))
-    ref = reference_for(scenario)
+    round_ids = kernel_array(round_ids, np.int64, (b,))
+    kx = kernel_array(kx_z, shape=(b,))
+    kv = kernel_array(kv_z, shape=(b,))
+    ref = kernel_array(reference_for(scenario))
     n = ref.shape[0]
     every = max(1, int(round(1.0 / (trace_hz * DT_S)))) if trace_hz > 0 else 0
     n_trace = (n + every - 1) // every if every else 0
@@ -135,8 +147,8 @@ def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0,
     mix, alloc = mixing()
     kernel = K.fly_batch if (b >= PARALLEL_FROM if parallel is None else parallel) else K.fly_serial
     if b:
-        kernel(seeds, round_ids, kx, kv, ref, settle_steps(scenario), constants(scenario), mix, alloc, every, traces,
-               costs, status, t_fail)
+        kernel(seeds, round_ids, kx, kv, ref, settle_steps(scenario), kernel_array(constants(scenario)), mix, alloc,
+               every, traces, costs, status, t_fail, float64_lanes())
     t_trace = np.arange(n_trace) * every * DT_S
     z_ref = ref[::every, 2].copy() if every else np.empty(0)
     return BatchResult(costs=costs, status=status, t_fail_s=t_fail, traces=traces[:, :n_trace], trace_t_s=t_trace,

@@ -12,10 +12,11 @@ and state.
 Layout, for speed (issue 11): a struct of arrays. A vehicle is a lane, a column of X (NX, lanes) holding its state,
 parameters, normals and cost accumulators, plus its column of the latency buffer L; `fly_*` fly chunks of LANES
 vehicles, the time loop outside and loops over the lanes inside, so LLVM vectorises them (4 float64 lanes per AVX2
-instruction: branch-free bodies, selects instead of min/max, sqrt as LLVM's intrinsic, one written array per loop
-where a row offset is known only at run time). Chunks go over numba's threads. fastmath here only ignores the sign of
+instruction, 8 per AVX-512 one where LLVM uses 512-bit vectors: `simd.float64_lanes`; branch-free bodies, selects
+instead of min/max, sqrt as LLVM's intrinsic, one written array per loop where a row offset is known only at run
+time). Chunks go over numba's threads. fastmath here only ignores the sign of
 zero: no FMA contraction, reciprocal or approximate-function rewrites, whose results depend on how LLVM compiled
-a call site (the parallel path's copy of `_fly_chunk` is compiled apart from the serial one's, and with them the
+a call site (the parallel path's copy of `fly_chunk` is compiled apart from the serial one's, and with them the
 two differed in the 14th digit depending on compile order); about 7 % slower, and a vehicle flies bit for bit the
 same whichever path flies it. Never NaN or inf assumptions either (the divergence checks need them).
 Rotor forces (RotorPy's model, coefficients in `airframe`): rotor i at hub position r_i meets the air at
@@ -30,9 +31,9 @@ reference each go through the low-pass started at the first reference altitude, 
 
 Randomness is a splitmix64 stream per vehicle: the vehicle spread is drawn from the vehicle seed, everything else
 (wind, gusts, sensor noise) from (vehicle seed, round id), so a vehicle's flight does not depend on the batch (nor
-on its lane: chunks are padded to a multiple of SIMD lanes, so every vehicle takes the same vector code). Normals
-come from `_normal_pair`, a Box-Muller of our own in branch-free arithmetic that vectorises (the libm one did not:
-it took 45 % of a step); the stream changed with it in 0e924a6, its cost statistics did not
+on its lane nor on the padding of a chunk to the machine's vector width). Normals come from `_normal_pair`, a
+Box-Muller of our own in branch-free arithmetic that vectorises (the libm one did not: it took 45 % of a step);
+the stream changed with it in 0e924a6, its cost statistics did not
 (benchmarks/results/noise_stream.md).
 Everything lives in this one file so numba's on-disk cache is invalidated whenever any of it changes.
 """
@@ -555,23 +556,24 @@ def _act(X, L, v, cp, mix, alloc, ref, sk):
 
 
 LANES = 32  # vehicles flown side by side in one chunk: their state (about 1 kB each) stays in the L1 cache
-SIMD = 4  # a chunk flies a multiple of this many lanes (AVX2: 4 float64), so no lane takes the scalar remainder
 
 
 @njit(cache=True, fastmath=FAST, error_model="numpy")
-def _fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs,
-               status, t_fail):
+def fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs,
+              status, t_fail, simd):
     """Fly vehicles lo..hi-1 of a batch side by side through the whole reference into their rows of the outputs.
 
     Struct of arrays with the lanes innermost, all state in one (NX, LANES) array so that every access is a
     constant row offset from one base: each step draws the lanes' normals (a scalar loop: log, cos, sin), then
     one branch-free loop over the lanes steps them all, which LLVM vectorises. The lane count is padded up to a
-    multiple of SIMD with copies of the first vehicle (flown, not kept), so each vehicle takes the same vector
-    code whatever the batch size: results do not depend on the batch. A lane that fails keeps being stepped
-    (its numbers no longer count) until every lane of the chunk has failed.
+    multiple of `simd` (a divisor of LANES: the float64 lanes of the machine's vectors, `simd.float64_lanes`) with
+    copies of the first vehicle (flown, not kept), so no vehicle is left to the loop's scalar remainder, 2.5 times
+    slower per lane. Scalar and vector code compute the same IEEE operations (no FMA contraction), so the padding
+    only changes the speed: results depend neither on the batch nor on the padding. A lane that fails keeps being
+    stepped (its numbers no longer count) until every lane of the chunk has failed.
     """
     nv = hi - lo
-    w = min(LANES, (nv + SIMD - 1) // SIMD * SIMD)
+    w = min(LANES, (nv + simd - 1) // simd * simd)
     n = ref.shape[0]
     dt = cp[C_DT]
     alpha = cp[C_LP_ALPHA]
@@ -649,23 +651,24 @@ def _fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc
 
 @njit(cache=True, parallel=True)
 def fly_batch(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
-              t_fail):
+              t_fail, simd):
     """Fly B vehicles (vehicle i: seeds[i], round_ids[i], gains kxz[i], kvz[i]) along `ref` (n, 9: p, v, a), in
     chunks of LANES spread over numba's threads (worth its thread launch from two chunks on: `batch.PARALLEL_FROM`)."""
     b = seeds.shape[0]
     for c in prange((b + LANES - 1) // LANES):
-        _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
-                   trace_every, traces, costs, status, t_fail)
+        fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
+                  trace_every, traces, costs, status, t_fail, simd)
 
 
-@njit(cache=True)
 def fly_serial(seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc, trace_every, traces, costs, status,
-               t_fail):
-    """`fly_batch` on the calling thread alone: no thread launch, for the small batches of a tuning round."""
+               t_fail, simd):
+    """`fly_batch` on the calling thread alone, for the small batches of a tuning round: no thread launch, and a
+    loop in Python over the compiled `fly_chunk` rather than a compiled loop, which would compile fly_chunk's
+    code a second time into its own machine code (a second or two of the first run)."""
     b = seeds.shape[0]
     for c in range((b + LANES - 1) // LANES):
-        _fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
-                   trace_every, traces, costs, status, t_fail)
+        fly_chunk(c * LANES, min(b, (c + 1) * LANES), seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
+                  trace_every, traces, costs, status, t_fail, simd)
 
 
 @njit(cache=True)

@@ -27,7 +27,7 @@ class Plant:
         self.scenario = scenario if scenario is not None else Scenario.default()
         self.seed = int(seed)
         b = self.vehicles
-        self._cp = batch.constants(self.scenario)
+        self._cp = batch.kernel_array(batch.constants(self.scenario))
         self._mix, self._alloc = batch.mixing()
         # struct of arrays, one column (lane) per vehicle, as the kernel keeps them
         self._X = np.zeros((K.NX, b))
@@ -74,10 +74,11 @@ class Plant:
         self.t_s = self._k * DT_S
 
     def _per_vehicle(self, value, width: int, name: str) -> np.ndarray:
-        """`value` broadcast to (B, width) floats; a one-line error naming `name` when it does not fit."""
+        """`value` broadcast to (B, width) floats (the kernel's array type); a one-line error naming `name` when it
+        does not fit."""
         arr = np.asarray(value, dtype=float)
         try:
-            return np.ascontiguousarray(np.broadcast_to(arr, (self.vehicles, width)))
+            return batch.kernel_array(arr, shape=(self.vehicles, width))
         except ValueError:
             raise MavtuneError(f"{name} must have shape ({width},) or ({self.vehicles}, {width}), got {arr.shape}") \
                 from None

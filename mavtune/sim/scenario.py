@@ -48,7 +48,8 @@ class Scenario(_Model):
 
     primitive: PrimitiveName = "circle"
     cost: CostName = "iae"
-    primitive_s: float = Field(8.0, gt=0, le=120, description="duration of the reference primitive, s")
+    primitive_s: float = Field(8.0, ge=1.0, le=120, description="duration of the reference primitive, s (at least "
+                               "1 s: 100 altitude errors at 100 Hz)")
     settle_s: float = Field(1.0, ge=0, le=60, description="hover after a gain change: flown, not in the cost, s")
     altitude_m: float = Field(2.0, gt=0.2, description="height of the primitive's first point, m")
     payload_kg: float = Field(0.0, ge=0, le=4.0, description="mass added to the vehicle (paper: 0.9 kg battery)")

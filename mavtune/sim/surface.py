@@ -27,6 +27,7 @@ class Surface:
     n: np.ndarray
     failed: np.ndarray
     scenario: Scenario
+    scenario_known: bool = True  # False for a surface.csv without its scenario file (the default is attached)
 
     def argmin(self) -> tuple[float, float]:
         """(kp, kd) of the grid point with the lowest mean cost (NaN means are skipped)."""
@@ -98,18 +99,26 @@ def fly_chunk(scenario: Scenario, kx_z: np.ndarray, kv_z: np.ndarray, seed: int,
     return res.cost(scenario.cost), res.status != K.OK
 
 
+def scenario_path(path: str | Path) -> Path:
+    """The file beside a surface.csv that records the scenario it was mapped in (surface.scenario.json)."""
+    return Path(path).with_suffix(".scenario.json")
+
+
 def write_csv(surface: Surface, path: str | Path) -> None:
-    """Write kp, kd, mean_cost, std_cost, n (one row per grid point)."""
+    """Write kp, kd, mean_cost, std_cost, n (one row per grid point), and the scenario beside it, so the surface
+    is never drawn under a run of another scenario."""
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(CSV_COLUMNS)
         for kp, kd, m, s, n in surface.rows():
             w.writerow([f"{kp:.6g}", f"{kd:.6g}", f"{m:.8g}", f"{s:.8g}", n])
+    scenario_path(path).write_text(surface.scenario.model_dump_json(indent=1) + "\n")
 
 
 def read_csv(path: str | Path) -> Surface:
-    """Read a surface written by `write_csv` (scenario unknown: the default is attached); a file that is not a
-    full kp x kd grid of finite numbers is a one-line MavtuneError naming the file and the problem."""
+    """Read a surface written by `write_csv` with its scenario (without the scenario file, the default is attached
+    and `scenario_known` is False); a file that is not a full kp x kd grid of finite numbers, or a scenario file
+    that is not one, is a one-line MavtuneError naming the file and the problem."""
     path = Path(path)
     try:
         with path.open(newline="") as fh:
@@ -139,8 +148,23 @@ def read_csv(path: str | Path) -> Surface:
                            f"({data.shape[0]} rows, {kp.size} kp and {kd.size} kd values)")
     d = data[np.lexsort((data[:, 1], data[:, 0]))]
     shape = (kp.size, kd.size)
+    scenario, known = _read_scenario(scenario_path(path))
     return Surface(kp=kp, kd=kd, mean=d[:, 2].reshape(shape), std=d[:, 3].reshape(shape),
-                   n=d[:, 4].reshape(shape).astype(int), failed=np.zeros(shape, int), scenario=Scenario.default())
+                   n=d[:, 4].reshape(shape).astype(int), failed=np.zeros(shape, int), scenario=scenario,
+                   scenario_known=known)
+
+
+def _read_scenario(path: Path) -> tuple[Scenario, bool]:
+    """The scenario a surface was mapped in, and whether its file says so (else the default)."""
+    from pydantic import ValidationError
+
+    if not path.is_file():
+        return Scenario.default(), False
+    try:
+        return Scenario.model_validate_json(path.read_bytes()), True
+    except (OSError, ValidationError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) else f"{exc.error_count()} invalid fields"
+        raise MavtuneError(f"the surface's scenario file {path} is unreadable ({reason})") from None
 
 
 def plot_surface(ax, surface: Surface, points: Sequence[tuple[float, float]] = (), point_style: dict | None = None,

@@ -70,7 +70,7 @@ class MavlinkConfig(BaseModel):
     urls: list[str] = Field(default_factory=list)  # one per vehicle (udpin:HOST:PORT, tcp:HOST:PORT, serial:DEV:BAUD)
     autopilot: Literal["auto", "px4", "ardupilot"] = "auto"
     gains: dict[str, GainParam] | None = None  # None: DEFAULT_GAINS of the detected autopilot
-    primitive_s: float = Field(8.0, gt=0)  # one circle (paper: 8 s)
+    primitive_s: float = Field(8.0, ge=1.0)  # one circle (paper: 8 s); under 1 s it measures too little
     settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
     calm_tolerance_m: float = Field(0.15, gt=0)  # after settle_s, also wait until |altitude error| is below this
     calm_speed_mps: float = Field(0.3, gt=0)  # … and |vertical speed| below this (after an abort the vehicle recovers)
