@@ -9,8 +9,8 @@ given to importlib as strings (the lazy exports of `mavtune` and `mavtune.sim`, 
     vehicles     MAVLink vehicles (ArduPilot, PX4, mavsim) as a Fleet, their parameters and tuned files
     swarm        Zenoh coordinator and agents (an agent flies a MAVLink vehicle or a SimFleet)
     report       a run folder's report.md and figures, from what it is given (result, config, surface)
-    application  the public `mavtune.tune` (api: the simulator as its default fleet), run, redraw, bank,
-                 experiments/ (the paper's reproduction)
+    application  the public `mavtune.tune` (api: the simulator as its default fleet), run, runfolder, redraw,
+                 bank, experiments/ (the paper's reproduction)
     cli          the commands: cli, __main__, and the commands kept beside what they drive (sim/commands.py,
                  swarm/cli.py)
 
@@ -34,7 +34,7 @@ LAYERS = (  # bottom first; a module's layer is that of its longest listed prefi
     ("vehicles", ("mavtune.vehicles",)),
     ("swarm", ("mavtune.swarm",)),
     ("report", ("mavtune.report",)),
-    ("application", ("mavtune", "mavtune.api", "mavtune.run", "mavtune.redraw", "mavtune.bank",
+    ("application", ("mavtune", "mavtune.api", "mavtune.run", "mavtune.runfolder", "mavtune.redraw", "mavtune.bank",
                      "mavtune.experiments")),
     ("cli", ("mavtune.cli", "mavtune.__main__", "mavtune.sim.commands", "mavtune.swarm.cli")),
 )
@@ -57,7 +57,8 @@ def layer(module: str) -> int | None:
     best, where = -1, None
     for index, (_, prefixes) in enumerate(LAYERS):
         for prefix in prefixes:
-            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best:
+            inside = module.startswith(prefix + ".") and prefix != "mavtune"  # the package itself: its __init__
+            if (module == prefix or inside) and len(prefix) > best:
                 best, where = len(prefix), index
     return where
 
@@ -93,7 +94,8 @@ def test_every_module_has_a_layer():
 
 def test_no_module_imports_from_a_higher_layer():
     upward = [f"{where(m, line)} imports {name} ({LAYERS[layer(name)][0]}, above {LAYERS[layer(m)][0]})"
-              for m in MODULES for line, name in imports(m) if layer(name) > layer(m)]
+              for m in MODULES for line, name in imports(m)
+              if None not in (layer(name), layer(m)) and layer(name) > layer(m)]  # unplaced: the test above
     assert upward == [], "\n".join(upward)
 
 
