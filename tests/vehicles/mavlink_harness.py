@@ -8,6 +8,8 @@ import subprocess
 import sys
 from contextlib import contextmanager
 
+from pymavlink import mavutil
+
 from mavtune.vehicles.mavlink.config import MavlinkConfig, SafetyConfig
 from mavtune.vehicles.mavlink.link import MavlinkLink
 from mavtune.vehicles.mavlink.params import ParamClient
@@ -24,11 +26,25 @@ def free_udp_port() -> int:
 
 @contextmanager
 def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1,
-           duration: float = 120.0):
-    """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT); kills it afterwards."""
+           duration: float = 120.0, streaming: bool = True):
+    """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT) once it streams positions
+    (unless not `streaming`: at once); kills it afterwards."""
     port = free_udp_port()
     with mavsim_on(port, *args, autopilot=autopilot, seed=seed, speed=speed, sysid=sysid, duration=duration):
+        if streaming:
+            wait_streaming(port)
         yield f"udpin:127.0.0.1:{port}"
+
+
+def wait_streaming(port: int, timeout_s: float = 240.0) -> None:
+    """Wait for the first LOCAL_POSITION_NED on `port`: mavsim's plant is up. With an empty numba cache mavsim
+    compiles it first (about a minute on a loaded machine), so a test's own deadlines start from a flying vehicle."""
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
+    try:
+        assert conn.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=timeout_s) is not None, \
+            f"mavsim on port {port} streamed no position within {timeout_s:g} s"
+    finally:
+        conn.close()
 
 
 @contextmanager

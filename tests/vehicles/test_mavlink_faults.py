@@ -12,7 +12,7 @@ from mavtune.journal import Journal
 
 from mavlink_harness import fast_config, fast_safety, mavsim, read_params, tune_mavlink
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]  # mavsim may compile first
 
 PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
 

@@ -17,7 +17,7 @@ from mavtune.edges import range_edges
 
 from mavlink_harness import FAST_SAFETY, mavsim, read_params
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(480)]  # mavsim may compile first
 
 PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
 ARDU_ORIGINALS = {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}
