@@ -4,9 +4,9 @@ from mavtune.errors import MavtuneError
 
 __version__ = "0.1.0"
 
-__all__ = ["Flight", "Fleet", "MavtuneError", "Round", "Status", "Trace", "TuningResult", "tune", "__version__"]
+__all__ = ["Flight", "FlightContext", "Fleet", "MavtuneError", "Round", "Status", "Trace", "TuningResult", "tune", "__version__"]
 
-_LAZY = {"Flight": "mavtune.fleet", "Fleet": "mavtune.fleet", "Status": "mavtune.fleet", "Trace": "mavtune.fleet",
+_LAZY = {"Flight": "mavtune.fleet", "FlightContext": "mavtune.fleet", "Fleet": "mavtune.fleet", "Status": "mavtune.fleet", "Trace": "mavtune.fleet",
          "Round": "mavtune.tuner", "TuningResult": "mavtune.tuner", "tune": "mavtune.api"}
 
 

@@ -1,20 +1,116 @@
-"""The public `mavtune.tune`: the engine's `tune` (mavtune/tuner.py) with the built-in simulator as its default
-fleet, chosen here above the engine so that the engine imports no simulator (tests/test_layers.py)."""
+"""The Python API: `tune()`, whose every option left out takes the value `mavtune tune` takes with no flag.
+
+Both start from one definition of the default, `mavtune.config.Tuning()`; the paper's exact setting is the
+preset `mavtune.config.PAPER_TUNING` (what `mavtune reproduce` flies), as keyword arguments `paper_options()`.
+"""
 
 from __future__ import annotations
 
-import functools
-import inspect
+from pathlib import Path
+from typing import Any, Callable, Mapping
 
-from mavtune import tuner
+from mavtune.config import PAPER_TUNING, Tuning
+from mavtune.errors import MavtuneError
+from mavtune.fleet import CallableFleet, Evaluate, Fleet, Gains
+from mavtune.search.interval import DRAWS
+from mavtune.tuner import MAX_ROUNDS, Round, Settings, TuningResult, run_tuning
 
 
-@functools.wraps(tuner.tune)
-def tune(*args, **kwargs) -> tuner.TuningResult:
-    given = inspect.signature(tuner.tune).bind(*args, **kwargs)
-    given.apply_defaults()
-    if given.arguments["evaluate"] is None:
+class _Default:
+    """An option not given: it takes the default Tuning's value (None means something of its own for some)."""
+
+    def __repr__(self) -> str:
+        return "DEFAULT"
+
+
+DEFAULT: Any = _Default()
+
+
+def paper_options() -> dict[str, Any]:
+    """The paper's setting (`PAPER_TUNING`) as keyword arguments of `tune()`."""
+    out = {key.removeprefix("tuning."): value for key, value in PAPER_TUNING.items()}
+    if out.get("bootstraps") == "auto":
+        out["bootstraps"] = None
+    return out
+
+
+def default_settings(vehicles: int | None = None, **given: Any) -> Settings:
+    """The Settings of `tune()` with these options: the default Tuning's values for every one left out (or
+    DEFAULT), `vehicles` the fleet's size when not given."""
+    options = {k: v for k, v in given.items() if v is not DEFAULT}
+    if "bootstraps" in options and options["bootstraps"] is None:
+        options["bootstraps"] = "auto"  # the API's None is the file's "auto": the paper's stop rule
+    if "initial" in options and options["initial"] is None:
+        options["initial"] = {}
+    if "space" in options and options["space"] is not None:
+        options["space"] = dict(options["space"])
+    elif "space" in options:
+        del options["space"]
+    if vehicles is not None:
+        options["vehicles"] = vehicles
+    return Tuning().settings(**options)
+
+
+def tune(
+    evaluate: Evaluate | Fleet | None = None,
+    space: Mapping[str, tuple[float, float]] | None = None,
+    method: str = DEFAULT,
+    epsilon: float = DEFAULT,
+    bootstraps: int | None = DEFAULT,
+    vehicles: int | None = None,
+    strategy: str = DEFAULT,
+    reuse: bool = DEFAULT,
+    initial: Gains | None = DEFAULT,
+    journal: str | Path | None = None,
+    seed: int | None = None,
+    *,
+    replicates: int | None = DEFAULT,
+    points: int | None = DEFAULT,
+    max_bootstraps: int = DEFAULT,
+    adaptive: bool = DEFAULT,
+    confidence: float = DEFAULT,
+    cap: int | None = DEFAULT,
+    answer: str = DEFAULT,
+    edges: bool = DEFAULT,
+    on_round: Callable[[Round], None] | None = None,
+    draws: int = DRAWS,
+    max_rounds: int = MAX_ROUNDS,
+    resume: bool = False,
+) -> TuningResult:
+    """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
+
+    Every option left out takes the default of `mavtune tune` (`mavtune.config.Tuning`); `**paper_options()`
+    gives the paper's setting. `evaluate` is a function (one round: list of assignments → one cost per
+    vehicle), a `Fleet`, or None for the built-in simulator (`vehicles` simulated vehicles, default scenario,
+    `seed`). `bootstraps=None` is the paper's stop rule (capped at `max_bootstraps`), `replicates` is r of the
+    groups strategy, `points` the points per iteration of nsection (None: one per slot), `adaptive` flies close
+    comparisons again until the kept point is right with probability `confidence` or each point has `cap`
+    flights (None: 4 rounds' worth), `answer` is each line search's answer ("search" or "model": a local fit of
+    all its flights), `edges` whether a line search ending against an edge of its range flies the edge (an optimum
+    there can be the answer), `on_round` sees every round as it ends, `draws` resampled searches give each gain's
+    interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
+    `mavtune tune` refuses them. `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
+    seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs
+    again (another function is refused), unless `resume=True` (a cost noisy by design).
+    """
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise MavtuneError(f"seed must be a whole number ≥ 0, got {seed!r}")
+    if evaluate is None:
         from mavtune.sim import SimFleet
 
-        given.arguments["evaluate"] = SimFleet(given.arguments["vehicles"] or 2, seed=given.arguments["seed"] or 0)
-    return tuner.tune(*given.args, **given.kwargs)
+        fleet: Fleet = SimFleet(vehicles or Tuning().vehicles, seed=seed or 0)
+    elif isinstance(evaluate, Fleet):
+        fleet = evaluate
+    elif callable(evaluate):
+        fleet = CallableFleet(evaluate, vehicles or Tuning().vehicles, seed=seed or 0)
+    else:
+        raise MavtuneError(f"evaluate must be a function, a Fleet or None, got {type(evaluate).__name__}")
+    settings = default_settings(
+        vehicles if vehicles is not None else fleet.size, space=space, method=method, epsilon=epsilon,
+        bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial=initial, replicates=replicates, points=points,
+        max_bootstraps=max_bootstraps, seed=seed if seed is not None else DEFAULT, adaptive=adaptive,
+        confidence=confidence, cap=cap, answer=answer, edges=edges)
+    if (fewest := settings.fewest_rounds()) > max_rounds:
+        raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
+                           "raise max_rounds to fly them anyway")
+    return run_tuning(settings, fleet, journal, on_round, draws=draws, resume=resume)

@@ -41,6 +41,21 @@ def standard_errors(uncertainty: dict[str, dict[str, float]] | None) -> dict[str
     return {k: u["se"] for k, u in (uncertainty or {}).items() if isinstance(u, dict) and _finite(u.get("se"))}
 
 
+def run_facts(summary: dict[str, Any]) -> dict[str, Any]:
+    """What a bank entry keeps of a finished run beyond its gains, from its result.json (or a result's
+    `to_dict()` with the tuned outcome): standard errors, intervals, whether it converged (no caution that
+    its answer still moved or spans most of its range; the reasons otherwise) and, where the vehicle has them,
+    the tuned autopilot parameters (of the first vehicle; all vehicles of one file share them)."""
+    uncertainty = summary.get("uncertainty") or {}
+    interval = {k: [float(u["lo"]), float(u["hi"])] for k, u in uncertainty.items()
+                if isinstance(u, dict) and _finite(u.get("lo")) and _finite(u.get("hi"))}
+    cautions = [str(c) for c in summary.get("cautions") or []]
+    params = next(iter((summary.get("tuned_params") or {}).values()), {})
+    return {"se": standard_errors(uncertainty), "interval": interval, "cautions": cautions,
+            "converged": not any("still moved" in c or "do not pin it down" in c for c in cautions),
+            "params": {k: float(v) for k, v in params.items() if _finite(v)}}
+
+
 @dataclass(frozen=True)
 class BankEntry:
     """Gains tuned at one vehicle mass."""
@@ -49,6 +64,10 @@ class BankEntry:
     gains: Gains
     source: str = ""  # the run folder (or note) the gains come from
     se: dict[str, float] = field(default_factory=dict)  # standard error of each gain, where the run measured one
+    interval: dict[str, list[float]] = field(default_factory=dict)  # each gain's interval [lo, hi], where known
+    converged: bool | None = None  # None: not known (an entry from before this was kept)
+    cautions: list[str] = field(default_factory=list)  # why it did not converge, as the run said
+    params: dict[str, float] = field(default_factory=dict)  # the gains as autopilot parameters, where it has them
 
 
 @dataclass(frozen=True)
@@ -59,6 +78,8 @@ class Lookup:
     inside: bool
     between: tuple[float, float]  # the tuned masses interpolated between (equal at the ends)
     se: dict[str, float] = field(default_factory=dict)  # interpolated like the gains (an upper bound between)
+    params: dict[str, float] = field(default_factory=dict)  # interpolated like the gains (parameters are linear)
+    unconverged: list[str] = field(default_factory=list)  # the entries used whose run did not converge, and why
 
 
 @dataclass
@@ -67,8 +88,10 @@ class GainBank:
 
     entries: list[BankEntry] = field(default_factory=list)
 
-    def add(self, mass_kg: float, gains: Gains, source: str = "", se: dict[str, float] | None = None) -> None:
-        """Add (or replace) the gains tuned at `mass_kg`, with their standard errors `se` where known."""
+    def add(self, mass_kg: float, gains: Gains, source: str = "", se: dict[str, float] | None = None,
+            **facts: Any) -> None:
+        """Add (or replace) the gains tuned at `mass_kg`, with their standard errors `se` where known and the
+        other `run_facts` (interval, converged, cautions, params)."""
         mass_kg = _mass(mass_kg)
         if not isinstance(gains, dict) or not gains or not all(_finite(v) for v in gains.values()):
             raise MavtuneError(f"bank gains at {mass_kg:g} kg must be finite numbers, got {gains}")
@@ -76,7 +99,10 @@ class GainBank:
             raise MavtuneError(f"bank holds gains {sorted(self.entries[0].gains)}, not {sorted(gains)}")
         known = {k: float(v) for k, v in (se or {}).items() if k in gains and _finite(v) and float(v) >= 0}
         kept = [e for e in self.entries if e.mass_kg != mass_kg]
-        entry = BankEntry(mass_kg, {k: float(v) for k, v in gains.items()}, source, known)
+        interval = {k: [float(a), float(b)] for k, (a, b) in (facts.get("interval") or {}).items() if k in gains}
+        params = {k: float(v) for k, v in (facts.get("params") or {}).items() if _finite(v)}
+        entry = BankEntry(mass_kg, {k: float(v) for k, v in gains.items()}, source, known, interval,
+                          facts.get("converged"), list(facts.get("cautions") or []), params)
         self.entries = sorted(kept + [entry], key=lambda e: e.mass_kg)
 
     def lookup(self, mass_kg: float) -> Lookup:
@@ -86,15 +112,19 @@ class GainBank:
         mass_kg = _mass(mass_kg)
         first, last = self.entries[0], self.entries[-1]
         if exact := next((e for e in self.entries if e.mass_kg == mass_kg), None):
-            return Lookup(dict(exact.gains), True, (exact.mass_kg, exact.mass_kg), dict(exact.se))
+            return Lookup(dict(exact.gains), True, (exact.mass_kg, exact.mass_kg), dict(exact.se), dict(exact.params),
+                          _unconverged([exact]))
         if mass_kg < first.mass_kg or mass_kg > last.mass_kg:
             end = first if mass_kg < first.mass_kg else last
-            return Lookup(dict(end.gains), False, (end.mass_kg, end.mass_kg), dict(end.se))
+            return Lookup(dict(end.gains), False, (end.mass_kg, end.mass_kg), dict(end.se), dict(end.params),
+                          _unconverged([end]))
         upper = next(i for i, e in enumerate(self.entries) if e.mass_kg > mass_kg)
         a, b = self.entries[upper - 1], self.entries[upper]
         w = (mass_kg - a.mass_kg) / (b.mass_kg - a.mass_kg)
         se = {k: (1 - w) * a.se[k] + w * b.se[k] for k in a.gains if k in a.se and k in b.se}
-        return Lookup({k: (1 - w) * a.gains[k] + w * b.gains[k] for k in a.gains}, True, (a.mass_kg, b.mass_kg), se)
+        params = {k: (1 - w) * a.params[k] + w * b.params[k] for k in a.params if k in b.params}
+        return Lookup({k: (1 - w) * a.gains[k] + w * b.gains[k] for k in a.gains}, True, (a.mass_kg, b.mass_kg), se,
+                      params, _unconverged([a, b]))
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps({"entries": [asdict(e) for e in self.entries]}, indent=2))
@@ -111,12 +141,19 @@ class GainBank:
             data: dict[str, Any] = json.loads(path.read_text())
             bank = cls()
             for e in data["entries"]:
-                bank.add(e["mass_kg"], e["gains"], e.get("source", ""), e.get("se"))
+                bank.add(e["mass_kg"], e["gains"], e.get("source", ""), e.get("se"),
+                         **{k: e[k] for k in ("interval", "converged", "cautions", "params") if k in e})
         except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise MavtuneError(f"gain bank {path} is not a mavtune bank file ({exc})") from None
         except OSError as exc:  # a folder where the file should be, no permission
             raise MavtuneError(f"gain bank {path} cannot be read: {exc.strerror or exc}") from None
         return bank
+
+
+def _unconverged(entries: Sequence[BankEntry]) -> list[str]:
+    """'0.9 kg: <why>' for each entry whose run did not converge."""
+    return [f"{e.mass_kg:g} kg: {'; '.join(e.cautions) or 'its run did not converge'}" for e in entries
+            if e.converged is False]
 
 
 def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float], Any], scheduler: str | None = None,
@@ -136,7 +173,8 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
     folders = [out / f"payload-{p:g}kg" for p in payloads_kg]
 
     def keep(i: int, result: Any) -> None:
-        bank.add(MASS_KG + payloads_kg[i], result.gains, str(folders[i]), standard_errors(result.uncertainty))
+        facts = run_facts(result.to_dict())
+        bank.add(MASS_KG + payloads_kg[i], result.gains, str(folders[i]), **facts)
         bank.save(out / "bank.json")
 
     if not scheduler:

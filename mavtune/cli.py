@@ -39,6 +39,8 @@ LAZY = {
     "swarm-key": ("mavtune.swarm.cli", "swarm_key_command",
                   "Write each vehicle its own key file from the swarm key: an agent holding only its own acts as "
                   "no other."),
+    "restore": ("mavtune.vehicles.mavlink.restore", "restore_command",
+                "Put each vehicle's original gains back (as recorded before any change), read them back, fly nothing."),
     "mavsim": ("mavtune.vehicles.mavlink.mavsim.cli", "mavsim_command",
                "Serve the simulator as a PX4 or ArduPilot vehicle over MAVLink on UDP loopback (like SITL)."),
 }
@@ -145,7 +147,7 @@ def tune_command(
                                               "vehicles at the end (default: restore the originals)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No per-round lines or progress bar."),
 ) -> None:
-    """Tune the gains: the paper's setting on 2 simulated vehicles unless told otherwise."""
+    """Tune the gains with the default settings (those of mavtune.tune()) unless told otherwise."""
     from mavtune.run import JOURNAL, run, saved_config
 
     if out is not None and not out.strip():
@@ -251,7 +253,7 @@ def bank_add(
 
     from rich.console import Console
 
-    from mavtune.bank import GainBank, standard_errors
+    from mavtune.bank import GainBank, run_facts
 
     path = run_dir / "result.json"
     try:
@@ -261,7 +263,7 @@ def bank_add(
     if summary.get("status", "finished") != "finished":
         raise MavtuneError(f"the run in {run_dir} did not finish ({summary.get('status')}): resume it first")
     bank = GainBank.load(bank_file, missing_ok=True)
-    bank.add(mass_kg, summary["gains"], str(run_dir), standard_errors(summary.get("uncertainty")))
+    bank.add(mass_kg, summary["gains"], str(run_dir), **run_facts(summary))
     bank.save(bank_file)
     _print_bank(Console(emoji=False), bank)
 
@@ -279,26 +281,41 @@ def bank_lookup(
     where = (f"between {lo:g} and {hi:g} kg" if lo != hi else f"at {lo:g} kg") + (
         "" if found.inside else " (outside the tuned masses: held, not extrapolated)")
     errors = ", ".join(f"{k} {se:.2g}" for k, se in found.se.items())
-    typer.echo(" ".join(f"{k}={v:.5g}" for k, v in found.gains.items()) + f"  # {where}"
+    typer.echo(" ".join(f"{k}={v:.5g}" for k, v in {**found.gains, **found.params}.items()) + f"  # {where}"
                + (f"; standard error {errors}" if errors else ""))
+    for line in found.unconverged:
+        typer.echo(f"caution: the entry at {line}")
 
 
 def _print_bank(console, bank) -> None:
-    """The bank as a table: each gain ± its standard error ('± ?' where the run did not measure one)."""
+    """The bank as a table: each gain ± its standard error ('± ?' where the run did not measure one) with its
+    interval, the autopilot parameters where the run had them, and whether the run converged (and why not)."""
     import math
 
+    from rich.markup import escape
     from rich.table import Table
 
     from mavtune.run import plus_minus
 
-    table = Table(title="gain bank")
+    table = Table(title="gain bank", caption="intervals: each run's 90 % interval (see its result.json)")
     table.add_column("mass, kg", justify="right")
-    for name in bank.entries[0].gains if bank.entries else []:
+    names = list(bank.entries[0].gains) if bank.entries else []
+    params = list(dict.fromkeys(p for e in bank.entries for p in e.params))
+    for name in names + params:
         table.add_column(name, justify="right")
+    table.add_column("converged")
     table.add_column("from")
     for e in bank.entries:
-        table.add_row(f"{e.mass_kg:g}", *(plus_minus(v, e.se.get(k, math.nan)) for k, v in e.gains.items()), e.source)
+        cells = [plus_minus(v, e.se.get(k, math.nan)) + (f"\n[{e.interval[k][0]:.3g}, {e.interval[k][1]:.3g}]"
+                                                          if k in e.interval else "") for k, v in e.gains.items()]
+        cells += [f"{e.params[p]:.4g}" if p in e.params else "" for p in params]
+        converged = {True: "yes", False: "no", None: "?"}[e.converged]
+        table.add_row(f"{e.mass_kg:g}", *map(escape, cells), converged, escape(e.source))
     console.print(table)
+    for e in bank.entries:
+        if e.converged is False:
+            console.print(f"[yellow]caution:[/] the {e.mass_kg:g} kg entry's run did not converge: "
+                          f"{escape('; '.join(e.cautions))}", highlight=False)
 
 
 def run_app(args: list[str] | None = None) -> int:

@@ -90,16 +90,54 @@ class Fleet(Protocol):
         ...
 
 
-Evaluate = Callable[[list[Gains]], Sequence[float]]
-"""The plain-function form of a fleet: one round in, one cost per vehicle out."""
+Evaluate = Callable[..., Sequence[float]]
+"""The plain-function form of a fleet: one round in, one cost per vehicle out — `evaluate(assignments)`, or
+`evaluate(assignments, context)` to receive each flight's `FlightContext` (a parameter named `context`, or a
+second positional parameter)."""
+
+
+@dataclass(frozen=True)
+class FlightContext:
+    """What one flight of a user's cost function is: its round, its vehicle's index in the round, and a seed of
+    its own (from the run's seed, the round and the vehicle) so that a user's simulator is reproducible, also when
+    a run is resumed."""
+
+    round: int
+    vehicle: int
+    seed: int
+
+
+def flight_seed(run_seed: int, round_id: int, vehicle: int) -> int:
+    """A 63-bit seed of one flight, the same on every machine and Python version (a hash, not `hash()`)."""
+    import hashlib
+
+    digest = hashlib.blake2b(f"mavtune {run_seed} {round_id} {vehicle}".encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "big") >> 1
+
+
+def wants_context(evaluate: Callable[..., Any]) -> bool:
+    """True when `evaluate` takes a flight's context: a parameter named `context`, or a second positional one."""
+    import inspect
+
+    try:
+        params = list(inspect.signature(evaluate).parameters.values())
+    except (TypeError, ValueError):  # a builtin without a signature: the plain form
+        return False
+    if any(p.name == "context" for p in params):
+        return True
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    return len(positional) >= 2
 
 
 class CallableFleet:
-    """A fleet of `vehicles` backed by a user function `evaluate(assignments) -> costs`."""
+    """A fleet of `vehicles` backed by a user function `evaluate(assignments) -> costs` (or `evaluate(assignments,
+    context)`: one `FlightContext` per assignment, seeded from `seed`)."""
 
-    def __init__(self, evaluate: Evaluate, vehicles: int):
+    def __init__(self, evaluate: Evaluate, vehicles: int, seed: int = 0):
         self._evaluate = evaluate
         self._vehicles = vehicles
+        self.seed = seed
+        self._context = wants_context(evaluate)
 
     @property
     def size(self) -> int:
@@ -108,7 +146,13 @@ class CallableFleet:
     def fly(self, assignments: Sequence[Gains], round_id: int) -> list[Flight]:
         from mavtune.errors import MavtuneError
 
-        costs = list(self._evaluate([dict(a) for a in assignments]))
+        gains = [dict(a) for a in assignments]
+        if self._context:
+            contexts = [FlightContext(round_id, i, flight_seed(self.seed, round_id, i)) for i in range(len(gains))]
+            costs = list(self._evaluate(gains, context=contexts) if _named_context(self._evaluate) else
+                         self._evaluate(gains, contexts))
+        else:
+            costs = list(self._evaluate(gains))
         if len(costs) != len(assignments):
             raise MavtuneError(
                 f"evaluate returned {len(costs)} costs for {len(assignments)} assignments in round {round_id}; "
@@ -124,5 +168,28 @@ class CallableFleet:
             flights.append(Flight(vehicle=f"v{i}", gains=dict(gains), cost=cost, status=status))
         return flights
 
+    def same_costs(self, flights: Sequence[Flight], assignments: Sequence[Gains], round_id: int, where: str) -> None:
+        """Refuse a journal recorded with another cost function: its round `round_id` evaluated again must give the
+        costs it recorded (a cost that is noisy by design cannot be checked: resume it explicitly)."""
+        from mavtune.errors import MavtuneError
+
+        again = self.fly(assignments, round_id)
+        for i, (was, now) in enumerate(zip(flights, again)):
+            if was.measured and not (was.cost == now.cost or math.isclose(was.cost, now.cost, rel_tol=1e-9,
+                                                                          abs_tol=1e-12)):
+                raise MavtuneError(f"{where} was recorded with another cost function: round {round_id} vehicle {i} "
+                                   f"cost {was.cost:.6g} then, {now.cost:.6g} now; use a new journal (or pass "
+                                   "resume=True if the cost is noisy by design)")
+
     def close(self) -> None:
         pass
+
+
+def _named_context(evaluate: Callable[..., Any]) -> bool:
+    """True when `evaluate` names its context parameter `context` (passed by keyword)."""
+    import inspect
+
+    try:
+        return "context" in inspect.signature(evaluate).parameters
+    except (TypeError, ValueError):
+        return False

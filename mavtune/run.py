@@ -223,7 +223,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
             status = "finished"
             if hasattr(fleet, "tuned"):
                 fleet.tuned = tuner.gains  # a real fleet keeps these on the vehicles only when told to
-            outcome = tuned_outcome(fleet, tuner.gains, settings, out_dir)
+            outcome = tuned_outcome(fleet, tuner.snapshot(), settings, out_dir)
         except StageDone:
             status = "stage"
         except BaseException as exc:  # an interrupt can surface as another error from inside an import
@@ -275,6 +275,8 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console.print(f"tuned after {counted(len(result.rounds), 'round')}, {counted(result.flights, 'flight')} "
                   f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
     console.print(_result_table(result))
+    for line in result.cautions():
+        console.print(f"[yellow]caution:[/] {escape(line)}", highlight=False)
     print_outcome(console, outcome)
     console.print(f"run folder: {out_dir}")
     return result
@@ -390,14 +392,16 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
         raise MavtuneError(f"cannot write {path}: {exc.strerror or exc}") from None
 
 
-def tuned_outcome(fleet: Fleet, gains: dict[str, float], settings, out_dir: Path) -> dict[str, Any]:
+def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path) -> dict[str, Any]:
     """What a finished run says beyond the gains: the range edges they lie at and, for vehicles that map the gains
     to autopilot parameters (MAVLink, directly or behind swarm agents), the gains as each vehicle's parameters
-    (± the search tolerance) and the ground-station parameter files written."""
+    (± the search tolerance) and the ground-station parameter files written; an edge is said with what the
+    flights there say (`LineSearch.edge_evidence`)."""
     from mavtune.vehicles.tuned import tuned_outcome as outcome
 
     maps = fleet.param_maps() if hasattr(fleet, "param_maps") else {}
-    return outcome(maps, gains, settings.space, settings.epsilon, out_dir)
+    evidence, flown = result.edges()
+    return outcome(maps, result.gains, settings.space, settings.epsilon, out_dir, evidence, flown, result.brackets())
 
 
 def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
@@ -410,7 +414,7 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
         console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
                       f"{', '.join(outcome['param_files'])}", highlight=False)
     for edge in outcome.get("range_edges", []):
-        console.print(f"[yellow]range edge:[/] {edge['message']}", highlight=False)
+        console.print(f"[yellow]range edge:[/] {escape(edge['message'])}", highlight=False)
 
 
 def _fleet_line(config: Config) -> str:
@@ -438,8 +442,11 @@ def _result_table(result: TuningResult) -> Table:
     cv = result.noise.get("cv", math.nan)
     caption = (f"noise: {cv:.0%} of the cost per flight ({result.noise.get('dof', 0):g} repeats)"
                if math.isfinite(cv) else "noise unknown: no point was flown twice")
+    caption += ("; each interval is its gain's last line search's (the other gains held), widened by what its "
+                "flights cannot rule out and its last move between bootstraps; p ≥ 0.9: comparisons whose kept "
+                "point was the best with that probability (not the answer's accuracy)")
     table = Table(caption=caption)
-    for column in ("gain", "value", "interval", "sure comparisons"):
+    for column in ("gain", "value", "interval", "comparisons p ≥ 0.9"):
         table.add_column(column, justify="left" if column == "gain" else "right")
     last = {s.gain: s for s in result.searches}
     for name, value in result.gains.items():

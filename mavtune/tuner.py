@@ -15,15 +15,19 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
 from mavtune.errors import MavtuneError
-from mavtune.fleet import CallableFleet, Evaluate, Fleet, Flight, Gains
+from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
-from mavtune.search.interval import DRAWS, resample, resolution
+from mavtune.search.interval import DRAWS, joint, plausible_span, resample, resolution
+from mavtune.search.model import flown_span
 from mavtune.strategy import Strategy
 
+INTERVAL_NOTE = ("each gain's interval is from its last line search, flown with the other gains held (coordinate "
+                 "search), joined with every gain its flights cannot rule out and widened by its last move between "
+                 "bootstraps, towards an interval with the other gains free")
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 # Bounds of every accepted setting, the same for the Python API and the CLI: each run plans and flies in bounded time.
 MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
@@ -79,12 +83,15 @@ class LineSearchRecord:
     samples: dict[float, list[float]] = field(default_factory=dict)
     bracket: tuple[float, float] = (math.nan, math.nan)
     stop_reason: str | None = None
+    edge: dict[str, Any] | None = None  # the answer at the end of the span flown: the evidence there (edge_evidence)
+    beside_failure: float | None = None  # a failed point next to the answer, if any
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "bootstrap": self.bootstrap, "gain": self.gain, "held": self.held, "result": self.result,
             "evaluations": self.evaluations, "brackets": [list(i.bracket) for i in self.iterations],
-            "bracket": list(self.bracket), "stop_reason": self.stop_reason,
+            "bracket": list(self.bracket), "stop_reason": self.stop_reason, "edge": self.edge,
+            "beside_failure": self.beside_failure,
             "comparisons": [
                 {"bracket": list(i.bracket), "points": list(i.points), "means": list(i.costs), "se": list(i.se),
                  "n": list(i.n), "best": i.best, "p_correct": i.p_correct}
@@ -107,6 +114,43 @@ class TuningResult:
     noise: dict[str, float] = field(default_factory=dict)  # the pooled flight-to-flight noise: cv and its dof
     in_progress: LineSearchRecord | None = None  # the line search under way when the run stopped, if any
 
+    def cautions(self) -> list[str]:
+        """What a user must know before trusting the gains, one line each: an answer still moving between
+        bootstraps by more than the search's tolerance, an interval spanning most of its range, an answer next to
+        a flight that failed."""
+        out = []
+        space, epsilon = self.settings.get("space", {}), self.settings.get("epsilon", math.nan)
+        last = {s.gain: s for s in self.searches}
+        for name, u in self.uncertainty.items():
+            lo, hi = space.get(name, (math.nan, math.nan))
+            width, moved = hi - lo, u.get("moved", math.nan)
+            if math.isfinite(moved) and abs(moved) > epsilon * width:
+                out.append(f"{name} still moved {moved:+.3g} between its last two line searches, more than the "
+                           f"search's tolerance {epsilon * width:.3g}: the coordinate search has not settled (its "
+                           "interval is widened by that move; another bootstrap would tell)")
+            ulo, uhi = u.get("lo", math.nan), u.get("hi", math.nan)
+            if uhi - ulo > 0.5 * width:  # (False where either is unknown)
+                out.append(f"{name}'s {u.get('level', 0.9):.0%} interval {ulo:.3g} – {uhi:.3g} spans "
+                           f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more "
+                           "flights per point, or less noise)")
+        for name, rec in last.items():
+            if rec.beside_failure is not None:
+                out.append(f"{name} = {self.gains.get(name, rec.result):.4g} lies next to {rec.beside_failure:.4g}, "
+                           "where a flight failed (diverged): no gain beyond it was answered, but the margin to it "
+                           "is one step of the search")
+        return out
+
+    def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
+        """Per gain, from the last line search that set it: the evidence at the end of its span flown
+        (`LineSearch.edge_evidence`) and that span (`flown_span`), for `mavtune.edges.range_edges`."""
+        last = {s.gain: s for s in self.searches}
+        spans = {name: flown_span(s.samples) for name, s in last.items()}
+        return {name: s.edge for name, s in last.items()}, {n: span for n, span in spans.items() if span is not None}
+
+    def brackets(self) -> dict[str, tuple[float, float]]:
+        """Per gain, the final bracket of the last line search that set it: where its minimiser can lie."""
+        return {s.gain: tuple(s.bracket) for s in self.searches}
+
     @property
     def flights(self) -> int:
         """Vehicle flights made, lost ones included."""
@@ -121,6 +165,8 @@ class TuningResult:
             "stop_reason": self.stop_reason,
             "settings": self.settings,
             "uncertainty": self.uncertainty,
+            "uncertainty_note": INTERVAL_NOTE,
+            "cautions": self.cautions(),
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
@@ -149,6 +195,7 @@ class Settings:
     refly: bool = False
     stop_undecided: bool = False
     answer: str = "search"
+    edges: bool = False
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -192,16 +239,17 @@ class Settings:
             self.adaptive_rule = None
         self.search(0.0, 1.0)  # validates
 
-    def search(self, lo: float, hi: float, pool: NoisePool | None = None) -> LineSearch:
-        """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool`."""
+    def search(self, lo: float, hi: float, pool: NoisePool | None = None, edges: bool | None = None) -> LineSearch:
+        """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool` (`edges`: whether
+        it flies a range edge it ends against, if not as the settings say)."""
         return make_search(self.method, lo, hi, self.epsilon, reuse=self.reuse, points=self.points,
                            adaptive=self.adaptive_rule, pool=pool, refly=self.refly and self.reuse,
-                           answer=self.answer)
+                           answer=self.answer, edges=self.edges if edges is None else edges)
 
     def fewest_rounds(self) -> int:
         """The rounds a run of these settings takes at the least: every line search's budget of evaluations,
         as many a round as the strategy has slots, per gain and bootstrap (one, for the paper's stop rule)."""
-        rounds = math.ceil(self.search(0.0, 1.0).budget() / self.strategy_rule.slots(int(self.vehicles)))
+        rounds = math.ceil(self.search(0.0, 1.0, edges=False).budget() / self.strategy_rule.slots(int(self.vehicles)))
         return rounds * len(self.space) * (self.bootstraps or 1)
 
     def start_gains(self) -> Gains:
@@ -226,7 +274,7 @@ class Settings:
                                                                   "cap": self.adaptive_rule.cap,
                                                                   "stop": self.adaptive_rule.stop},
             "answer": self.answer if self.answer != "search" else None,
-        }
+        } | ({"edges": True} if self.edges else {})  # absent when off: journals from before edges still resume
 
 
 class StageDone(Exception):
@@ -284,8 +332,10 @@ class Tuner:
     @staticmethod
     def _record(bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason."""
+        done = search.done and (bool(search.history) or search.stop_reason is None)
         return LineSearchRecord(bootstrap, name, held, list(search.history), result, search.evaluations,
-                                search.samples(), search.bracket, search.stop_reason)
+                                search.samples(), search.bracket, search.stop_reason,
+                                search.edge_evidence() if done else None, search.beside_failure() if done else None)
 
     def uncertainty(self) -> dict[str, dict[str, float]]:
         """Per tuned gain its interval, from the flights of the last line search that set it."""
@@ -301,7 +351,10 @@ class Tuner:
                                 lambda search: rule.assign(search, int(s.vehicles), speculate=False),
                                 rec.samples, self.pool, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
-            out[name] = interval.to_dict()
+            before = [r.result for r in self.searches[:i] if r.gain == name]
+            moved = rec.result - before[-1] if before else math.nan
+            plausible = plausible_span(rec.samples, self.pool, (lo, hi), interval.level) if self.draws else None
+            out[name] = joint(interval, plausible, moved, (lo, hi)).to_dict()
         self._uncertainty = (len(self.searches), out)
         return out
 
@@ -393,70 +446,20 @@ class Tuner:
                                f"(recorded {record.assignments}, now {assignments}); use a new journal")
 
 
-def tune(
-    evaluate: Evaluate | Fleet | None = None,
-    space: Mapping[str, tuple[float, float]] | None = None,
-    method: str = "eql",
-    epsilon: float = 0.125,
-    bootstraps: int | None = 2,
-    vehicles: int | None = None,
-    strategy: str = "avg",
-    reuse: bool = True,
-    initial: Gains | None = None,
-    journal: str | Path | None = None,
-    seed: int | None = None,
-    *,
-    replicates: int | None = None,
-    points: int | None = None,
-    max_bootstraps: int = 10,
-    adaptive: bool = False,
-    confidence: float = 0.9,
-    cap: int | None = None,
-    answer: str = "search",
-    on_round: Callable[[Round], None] | None = None,
-    draws: int = DRAWS,
-    max_rounds: int = MAX_ROUNDS,
-) -> TuningResult:
-    """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
-
-    `evaluate` is a function (one round: list of assignments → one cost per vehicle), a `Fleet`, or None
-    for the built-in simulator (`vehicles` simulated vehicles, default scenario, `seed`). `replicates` is r
-    of the groups strategy, `points` the points per iteration of nsection (default: one per slot),
-    `max_bootstraps` caps the paper's stop rule (`bootstraps=None`), `adaptive` flies close comparisons again
-    until the kept point is right with probability `confidence` or each point has `cap` flights, `answer` is
-    each line search's answer ("search" or "model": a local fit of all its flights), `on_round`
-    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that
-    need more than `max_rounds` rounds are refused before anything flies, as `mavtune tune` refuses them.
-    """
-    space = dict(space if space is not None else {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
-    if evaluate is None:  # the engine knows no simulator: `mavtune.tune` (mavtune/api.py) passes its SimFleet
-        raise MavtuneError("evaluate is None: call mavtune.tune for the built-in simulator")
-    if isinstance(evaluate, Fleet):
-        fleet: Fleet = evaluate
-    elif callable(evaluate):
-        fleet = CallableFleet(evaluate, vehicles or 2)
-    else:
-        raise MavtuneError(f"evaluate must be a function, a Fleet or None, got {type(evaluate).__name__}")
-    settings = Settings(space=space, method=method, epsilon=epsilon, bootstraps=bootstraps,
-                        vehicles=vehicles if vehicles is not None else fleet.size, strategy=strategy, reuse=reuse,
-                        initial=dict(initial or {}), replicates=replicates, points=points,
-                        max_bootstraps=max_bootstraps, seed=seed, adaptive=adaptive, confidence=confidence, cap=cap,
-                        answer=answer)
-    if (fewest := settings.fewest_rounds()) > max_rounds:
-        raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
-                           "raise max_rounds to fly them anyway")
-    return run_tuning(settings, fleet, journal, on_round, draws=draws)
-
-
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,
                on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None,
-               draws: int = DRAWS) -> TuningResult:
+               draws: int = DRAWS, resume: bool = False) -> TuningResult:
     """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds); with
-    `stage_rounds`, StageDone ends the call after that many newly flown rounds."""
+    `stage_rounds`, StageDone ends the call after that many newly flown rounds. A fleet that can evaluate a round
+    again (a user's cost function: `same_costs`) must give the journal's first round its recorded costs, unless
+    `resume` says to continue without that check."""
     book = Journal(journal) if journal is not None else None
     try:
         if book is not None:
             book.bind(settings.fingerprint())
+            if not resume and len(book) and hasattr(fleet, "same_costs"):
+                first = book.rounds()[0]
+                fleet.same_costs(first.flights, first.assignments, 0, f"journal {book.path}")
         return Tuner(settings, fleet, book, on_round, stage_rounds, draws).run()
     finally:
         if book is not None:

@@ -134,3 +134,27 @@ def test_lookup_command_says_at_for_a_tuned_mass_and_refuses_a_negative_one(tmp_
     assert out.exit_code == 0 and out.output.strip().endswith("# at 2.75 kg")
     refused = runner.invoke(app, ["bank", "lookup", str(path), "--mass-kg", "-1"])
     assert isinstance(refused.exception, MavtuneError) and "positive number of kg" in str(refused.exception)
+
+
+def test_entries_keep_intervals_parameters_and_whether_their_run_converged(tmp_path):
+    """A bank entry says what its run said: its interval, the autopilot's parameters where it has them, and — the
+    console too — when its run did not converge."""
+    from mavtune.bank import run_facts
+
+    settled = {"uncertainty": {"kp": {"se": 0.02, "lo": 0.3, "hi": 0.4}}, "cautions": [],
+               "tuned_params": {"s0": {"PSC_POSZ_P": 1.7}}}
+    moving = {"uncertainty": {"kp": {"se": 0.05, "lo": 0.2, "hi": 0.9}},
+              "cautions": ["kp still moved +0.2 between its last two line searches"],
+              "tuned_params": {"s0": {"PSC_POSZ_P": 2.1}}}
+    b = GainBank()
+    b.add(2.3, {"kp": 0.35}, "a", **run_facts(settled))
+    b.add(3.2, {"kp": 0.55}, "b", **run_facts(moving))
+    assert b.entries[0].converged and not b.entries[1].converged and b.entries[1].interval == {"kp": [0.2, 0.9]}
+    found = b.lookup(2.75)
+    assert found.params == {"PSC_POSZ_P": pytest.approx(1.9)}
+    assert found.unconverged == ["3.2 kg: kp still moved +0.2 between its last two line searches"]
+    assert not b.lookup(2.3).unconverged
+    b.save(tmp_path / "bank.json")
+    assert GainBank.load(tmp_path / "bank.json").entries == b.entries
+    out = CliRunner().invoke(app, ["bank", "lookup", str(tmp_path / "bank.json"), "--mass-kg", "3.0"])
+    assert "PSC_POSZ_P=" in out.output and "caution: the entry at 3.2 kg: kp still moved" in out.output

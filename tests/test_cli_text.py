@@ -90,7 +90,7 @@ def test_ignored_settings_are_warned_and_recorded(tmp_path):
 
 def test_one_vehicle_is_one_vehicle():
     code, out, _ = cli("plan", "-n", "1", "--epsilon", "0.125", "--no-adaptive")
-    assert code == 0 and "1 sim vehicle ·" in out and "(1 vehicle × 36 rounds" in out
+    assert code == 0 and "1 sim vehicle ·" in out and "(1 vehicle × 40 rounds" in out  # 36 + 4 at the edges
 
 
 def test_the_round_line_labels_each_vehicle_and_gives_the_mean():

@@ -27,3 +27,23 @@ def test_each_gain_is_checked_on_its_own_range():
     edges = range_edges({"kp": 0.5, "kd": 0.95}, {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, 0.125)
     assert [(e.gain, e.side) for e in edges] == [("kd", "upper")]
     assert edges[0].to_dict()["message"] == edges[0].message()
+
+
+@given(st.floats(0.01, 0.4999), st.floats(0, 1), st.floats(0, 1))
+def test_an_edge_the_final_bracket_no_longer_reaches_is_never_reported(epsilon, a, b):
+    """ε near 0.5 made every answer "within its tolerance" of an edge; the final bracket says where the minimiser
+    can lie, and an edge outside it was ruled out by the comparisons."""
+    lo, hi = sorted((a, b))
+    value = 0.5 * (lo + hi)
+    edges = range_edges({"kp": value}, {"kp": (0.0, 1.0)}, epsilon, brackets={"kp": (lo, hi)})
+    assert {e.side for e in edges} <= {s for s, touches in (("lower", lo <= 1e-9), ("upper", hi >= 1 - 1e-9)) if touches}
+
+
+def test_a_run_at_epsilon_near_half_reports_no_edge_its_searches_moved_off():
+    import mavtune
+
+    result = mavtune.tune(lambda gains: [(g["kp"] - 0.6) ** 2 + (g["kd"] - 0.4) ** 2 + 1.0 for g in gains],
+                          epsilon=0.4999, bootstraps=1, adaptive=False)
+    evidence, flown = result.edges()
+    assert not range_edges(result.gains, {"kp": (0, 1), "kd": (0, 1)}, 0.4999, evidence, flown, result.brackets())
+    assert range_edges(result.gains, {"kp": (0, 1), "kd": (0, 1)}, 0.4999)  # by nearness alone: always

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import random
 import sqlite3
 
 import pytest
@@ -43,7 +44,9 @@ class CountingFleet:
         pass
 
 
-SETTINGS = dict(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, initial={"kd": 0.2}, bootstraps=2)
+# the paper's search (strategy and reuse given by each test)
+SETTINGS = dict(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, initial={"kd": 0.2}, bootstraps=2, method="eql",
+                epsilon=0.125, adaptive=False, answer="search")
 
 
 @given(st.integers(0, 19), st.sampled_from(["avg", "split"]), st.integers(1, 4))
@@ -123,7 +126,7 @@ def test_resume_with_other_settings_is_refused_and_keeps_the_journal(tmp_path):
     mavtune.tune(CountingFleet(2), journal=path, **SETTINGS)
     size = path.stat().st_size
     with pytest.raises(MavtuneError, match="epsilon was 0.125, now 0.1"):
-        mavtune.tune(CountingFleet(2), journal=path, epsilon=0.1, **SETTINGS)
+        mavtune.tune(CountingFleet(2), journal=path, **{**SETTINGS, "epsilon": 0.1})
     assert path.stat().st_size == size
     with Journal(path) as j:
         assert len(j.rounds()) == 36
@@ -312,3 +315,41 @@ def test_the_first_different_field_is_named_with_its_path(tmp_path):
         with pytest.raises(MavtuneError, match="scenario.wind.mean_mps was 2.0, now 3.0"):
             j.bind({"scenario": {"payload_kg": 0.0, "wind": {"mean_mps": 3.0}}, "vehicles": 2})
         j.bind({"scenario": {"payload_kg": 0, "wind": {"mean_mps": 2}}, "vehicles": 2})  # equal numbers agree
+
+
+def test_a_cost_function_receives_each_flights_context_reproducibly(tmp_path):
+    """evaluate(assignments, context): round, vehicle and a seed per flight — the same seeds on a resumed run."""
+    seen = []
+
+    def evaluate(assignments, context):
+        seen.extend(context)
+        return [noisy_cost(g) + random.Random(c.seed).gauss(0, 0.01) for g, c in zip(assignments, context)]
+
+    first = mavtune.tune(evaluate, vehicles=2, seed=7, draws=0, **SETTINGS)
+    assert [(c.round, c.vehicle) for c in seen[:4]] == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    assert len({c.seed for c in seen}) == len(seen)  # a seed of its own per flight
+    again = mavtune.tune(evaluate, vehicles=2, seed=7, draws=0, **SETTINGS)
+    assert again.gains == first.gains  # reproducible
+    plain = mavtune.tune(lambda gs: [noisy_cost(g) for g in gs], vehicles=2, draws=0, **SETTINGS)
+    keyword = mavtune.tune(lambda gs, *, context=None: [noisy_cost(g) for g in gs], vehicles=2, draws=0, **SETTINGS)
+    assert plain.gains == keyword.gains
+
+
+def test_a_journal_reused_with_another_cost_function_is_refused(tmp_path):
+    path = tmp_path / "j.sqlite"
+    cut = dict(journal=path, vehicles=2, draws=0, **SETTINGS)
+
+    def crashing(assignments, context):
+        if context[0].round == 5:
+            raise Crash(5)
+        return [noisy_cost(g) for g in assignments]
+
+    with pytest.raises(Crash):
+        mavtune.tune(crashing, **cut)
+    size = path.stat().st_size
+    with pytest.raises(MavtuneError, match=r"recorded with another cost function: round 0 vehicle 0 cost .* then"):
+        mavtune.tune(lambda gs: [2 * noisy_cost(g) for g in gs], **cut)
+    assert path.stat().st_size == size
+    resumed = mavtune.tune(lambda gs: [noisy_cost(g) for g in gs], **cut)  # the same function: resumed
+    assert resumed.gains == mavtune.tune(lambda gs: [noisy_cost(g) for g in gs], vehicles=2, draws=0,
+                                         **SETTINGS).gains

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from mavtune.search import METHODS, make_search
-from mavtune.search.model import local_vertex
+from mavtune.search.model import flown_span, local_vertex
 
 
 def run(search, cost):
@@ -33,7 +33,13 @@ def test_the_model_answer_lies_in_the_box_and_the_final_bracket_for_any_costs(me
     run(search, lambda _: next(draw))
     lo, hi = search.bracket
     assert 0.0 <= search.result <= 1.0
-    assert lo - 1e-12 <= search.result <= hi + 1e-12
+    span = flown_span(search.samples())
+    if span is None:  # nothing flown without failure: the search's own answer
+        assert lo - 1e-12 <= search.result <= hi + 1e-12
+        return
+    assert span[0] <= search.result <= span[1]  # never a gain nobody flew, nor one beyond a failed flight
+    if lo <= span[1] and span[0] <= hi:
+        assert lo - 1e-12 <= search.result <= hi + 1e-12
 
 
 @given(st.floats(0.0, 1.0), st.floats(0.1, 10.0), st.floats(0.0, 5.0), st.sampled_from(["eql", "golden", "fibonacci"]))
@@ -41,8 +47,8 @@ def test_the_model_answer_lies_in_the_box_and_the_final_bracket_for_any_costs(me
 def test_on_a_noise_free_quadratic_the_model_answer_is_its_minimiser_inside_the_final_bracket(m, a, c, method):
     """A quadratic fit to a quadratic is exact, so the model's answer is the true minimiser clipped to the final
     bracket; the search's own answer (the bracket's midpoint) equals it only when the minimiser is the midpoint."""
-    model = run(make_search(method, 0.0, 1.0, 0.125, answer="model"), lambda x: a * (x - m) ** 2 + c)
-    search = run(make_search(method, 0.0, 1.0, 0.125), lambda x: a * (x - m) ** 2 + c)
+    model = run(make_search(method, 0.0, 1.0, 0.125, answer="model", edges=True), lambda x: a * (x - m) ** 2 + c)
+    search = run(make_search(method, 0.0, 1.0, 0.125, edges=True), lambda x: a * (x - m) ** 2 + c)
     lo, hi = model.bracket
     assert model.bracket == search.bracket  # the comparisons are the same: only the answer differs
     assert model.result == pytest.approx(min(max(m, lo), hi), abs=1e-6)

@@ -38,10 +38,10 @@ def test_batteries_count_whole_rounds_per_pack():
 @given(st.sampled_from(["eql", "fibonacci", "golden", "dichotomy", "nsection"]),
        st.sampled_from(["avg", "split", "groups"]), st.integers(1, 4), st.booleans(),
        st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.05, 0.45), st.integers(0, 3), st.booleans(),
-       st.sampled_from(["search", "model"]), st.floats(0.6, 0.95), st.integers(1, 8))
+       st.sampled_from(["search", "model"]), st.floats(0.6, 0.95), st.integers(1, 8), st.booleans())
 @settings(max_examples=40, deadline=None)
 def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsilon, noise_seed, adaptive, answer,
-                                   confidence, cap):
+                                   confidence, cap, edges):
     vehicles = 2 * half
     import random
 
@@ -51,7 +51,7 @@ def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsi
         return [((g["kp"] - kp0) ** 2 + (g["kd"] - kd0) ** 2 + 0.01) * (1 + 0.2 * draw.random()) for g in assignments]
 
     kwargs = dict(space=SPACE, method=method, epsilon=epsilon, strategy=strategy, vehicles=vehicles, reuse=reuse,
-                  adaptive=adaptive, answer=answer, confidence=confidence, cap=cap if adaptive else None)
+                  adaptive=adaptive, answer=answer, confidence=confidence, cap=cap if adaptive else None, edges=edges)
     plan = make_plan(Settings(**kwargs, bootstraps=2))
     result = mavtune.tune(evaluate, bootstraps=2, draws=0, **kwargs)  # no interval: only the rounds count here
     if adaptive:  # the worst case is stated before take-off and bounds every run
@@ -65,7 +65,7 @@ def test_plan_command_prints_the_numbers():
                                    "--no-adaptive"])
     assert out.exit_code == 0, out.output
     text = " ".join(out.output.split())
-    assert "rounds 8 (guaranteed at most 28" in text
+    assert "rounds 8 (guaranteed at most 32" in text  # 28 of the method's comparisons, 4 at a range's edge
     assert "flights 64" in text and "1 min 12 s" in text and "batteries 2 per vehicle" in text
 
 
@@ -74,4 +74,23 @@ def test_adaptive_plan_says_the_expected_and_the_worst_case():
     adaptive = make_plan(Settings(space=SPACE, initial={"kd": 0.2}, adaptive=True, cap=4))
     assert plain.rounds <= adaptive.rounds < adaptive.rounds_max
     assert adaptive.rounds_max == 4 * 7 * 2 * 2  # 4 searches × 7 comparisons × 2 points × 2 rounds to the cap
-    assert "expected (at most" in adaptive.describe()
+    assert adaptive.rounds_min <= adaptive.rounds
+    assert f"expected at 20% flight-to-flight noise ({adaptive.rounds_min} if every comparison is clear at once, at most " \
+           f"{adaptive.rounds_max}" in " ".join(adaptive.describe().split())
+
+
+@pytest.mark.parametrize("over", [{}, {"tuning.vehicles": 4}, {"tuning.strategy": "split"}], ids=str)
+def test_the_expected_rounds_are_close_to_the_mean_flown_on_the_simulator(over):
+    """The plan's expected rounds (adaptive, the default) within 15 % of the mean over 16 seeded simulator runs."""
+    from mavtune.config import load_config
+    from mavtune.sim import SimFleet
+    from mavtune.tuner import run_tuning
+
+    expected = make_plan(load_config(None, over).settings()).rounds
+    flown = []
+    for seed in range(16):
+        cfg = load_config(None, {**over, "tuning.seed": seed})
+        result = run_tuning(cfg.settings(), SimFleet(cfg.tuning.vehicles, cfg.scenario(), seed=seed), draws=0)
+        flown.append(len(result.rounds))
+    mean = sum(flown) / len(flown)
+    assert abs(expected - mean) <= 0.15 * mean, (expected, mean)

@@ -8,9 +8,11 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import mavtune
+from mavtune.api import paper_options
 from mavtune.errors import MavtuneError
 
-PAPER = dict(method="eql", epsilon=0.125, bootstraps=2, initial={"kd": 0.2}, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
+# the paper's search (reuse is given by each test)
+PAPER = {**{k: v for k, v in paper_options().items() if k != "reuse"}, "space": {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}}
 
 
 def bowl(kp0=0.9, kd0=0.33):
@@ -97,7 +99,7 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
     def evaluate(assignments):
         return [math.nan if g["kp"] == 0.125 else (g["kp"] - 0.1) ** 2 for g in assignments]
 
-    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, vehicles=1, bootstraps=1)
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, vehicles=1, bootstraps=1, epsilon=0.125)
     assert math.isnan(result.rounds[0].costs[0])
     assert result.rounds[0].flights[0].status is mavtune.Status.FAILED
     assert result.rounds[1].assignments[0]["kp"] == 0.875
@@ -136,7 +138,8 @@ def test_the_api_refuses_what_the_cli_refuses_before_anything_flies():
     with pytest.raises(MavtuneError, match="at least 40004 rounds, more than max_rounds = 2000") as info:
         mavtune.tune(evaluate, epsilon=1e-4)
     assert "\n" not in str(info.value) and not flown
-    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=5)
+    plain = dict(adaptive=False, edges=False)  # no re-flights, no comparison at an edge: exactly the budget
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=5, **plain)
     assert len(result.rounds) == 5  # EQL's 5 evaluations at ε = 0.25, one a round: allowed at max_rounds = 5
     with pytest.raises(MavtuneError, match="at least 5 rounds, more than max_rounds = 4"):
         mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=4)
@@ -170,7 +173,7 @@ def test_paper_stop_rule_fires_on_a_noisy_cost(seed):
 def test_adaptive_keeps_the_noise_free_final_gains():
     for strategy, vehicles in (("avg", 2), ("split", 2), ("groups", 4)):
         plain = mavtune.tune(bowl(), vehicles=vehicles, strategy=strategy, **PAPER)
-        adaptive = mavtune.tune(bowl(), vehicles=vehicles, strategy=strategy, adaptive=True, **PAPER)
+        adaptive = mavtune.tune(bowl(), vehicles=vehicles, strategy=strategy, **{**PAPER, "adaptive": True})
         assert adaptive.gains == plain.gains
         # one flight per point (split) says nothing of the noise: adaptive flies a point twice to learn it
         assert len(adaptive.rounds) <= len(plain.rounds) + (2 if strategy == "split" else 0)
@@ -186,14 +189,14 @@ def test_a_run_whose_every_flight_fails_narrows_nothing_and_says_so():
 
 def test_adaptive_run_replays_from_its_journal_to_the_same_rounds(tmp_path):
     journal = tmp_path / "run.sqlite"
-    kwargs = dict(vehicles=2, adaptive=True, journal=journal, draws=20, **PAPER)
+    kwargs = dict(vehicles=2, journal=journal, draws=20, **{**PAPER, "adaptive": True})
     first = mavtune.tune(noisy(3, cv=0.3), **kwargs)
     assert len(first.rounds) > 36  # close comparisons were flown again
 
     def never(assignments):
         raise AssertionError("a replayed round was flown")
 
-    again = mavtune.tune(never, **kwargs)
+    again = mavtune.tune(never, resume=True, **kwargs)  # resumed without evaluating a round again
     assert [r.assignments for r in again.rounds] == [r.assignments for r in first.rounds]
     assert again.gains == first.gains and again.uncertainty == first.uncertainty
 

@@ -121,8 +121,9 @@ def _write(out: Path, result, config, surface: Any, title: str | None, status: s
 
 
 def tuned_params_section(summary: dict) -> list[str]:
-    """The tuned gains as each vehicle's parameters (± the search tolerance), the parameter files, and the range
-    edges the gains reached (from result.json; nothing when it has none)."""
+    """The tuned gains as each vehicle's parameters (± the search tolerance), the parameter files, the range
+    edges the gains reached and the run's cautions with what its intervals hold (from result.json; nothing when
+    it has none)."""
     parts: list[str] = []
     tolerance = summary.get("tuned_params_tolerance") or {}
     rows = [[f"`{vehicle}`", f"`{name}`", md.num(value, 4), md.num(tolerance.get(vehicle, {}).get(name, math.nan), 2)]
@@ -140,6 +141,10 @@ def tuned_params_section(summary: dict) -> list[str]:
     edges = summary.get("range_edges") or []
     if edges:
         parts += ["## Range edges", ""] + [f"- {e['message']}" for e in edges] + [""]
+    cautions = summary.get("cautions") or []
+    if cautions or summary.get("uncertainty_note"):
+        parts += ["## Cautions", ""] + [f"- {c}" for c in cautions] + (
+            [f"- The intervals: {summary['uncertainty_note']}."] if summary.get("uncertainty_note") else []) + [""]
     return parts
 
 

@@ -11,13 +11,13 @@ from __future__ import annotations
 import heapq
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import groupby
 from typing import ClassVar, Hashable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.search.evidence import Moments, NoisePool, PointStats, moments, p_best, point_stats
-from mavtune.search.model import ANSWERS, Vertex, local_vertex
+from mavtune.search.model import ANSWERS, Vertex, beside_failure, flown_span, local_vertex
 
 State = Hashable
 
@@ -82,7 +82,7 @@ class LineSearch(ABC):
 
     def __init__(self, lo: float, hi: float, epsilon: float, *, reuse: bool = True,
                  adaptive: Adaptive | None = None, pool: NoisePool | None = None, refly: bool = False,
-                 answer: str = "search"):
+                 answer: str = "search", edges: bool = False):
         lo, hi, epsilon = float(lo), float(hi), float(epsilon)
         if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
             raise MavtuneError(f"search interval [{lo}, {hi}] is empty: lo must be below hi")
@@ -94,6 +94,7 @@ class LineSearch(ABC):
         self.answer = answer  # "search": the method's own result; "model": a local fit of all flights (`model`)
         self.adaptive = adaptive
         self.refly = refly  # a point carried from a finished comparison gets fresh flights in the next one
+        self.edges = edges  # a final bracket against the range's edge flies the edge itself (`_step_advance`)
         self.pool = pool if pool is not None else NoisePool()
         self._owner = object()  # this search's points are its own groups in a pool shared by a run
         self.width0 = hi - lo
@@ -102,7 +103,7 @@ class LineSearch(ABC):
         self._key_of: dict[float, int] = {}  # every float seen -> its key: one registry look-up per float
         self._known_moments: dict[int, Moments] = {}  # key -> its usable flights' moments
         self._next_key = 0
-        self._state = self._initial()
+        self._state: State = ("m", self._initial())  # see `_step_points`
         self._samples: dict[int, list[float]] = {}  # key -> every flight's cost usable now
         self._flown: dict[int, list[float]] = {}  # key -> every flight's cost told, usable or not
         self.history: list[Iteration] = []
@@ -136,6 +137,48 @@ class LineSearch(ABC):
         """The estimate of the minimiser at the end: the midpoint of the last bracket."""
         lo, hi = self._bracket(state)
         return 0.5 * (lo + hi)
+
+    # ----- the steps of a search: the method's comparisons, then (with `edges`) one at the range's edge ----
+    #
+    # A step state is ("m", method state) while the method compares; with `edges`, a method that ends with its
+    # bracket against an edge of the range then compares the point its last comparison kept with the edge
+    # itself, ("p", method state, kept, edge), and ends in ("e", method state, kept, edge, edge won). No method
+    # flies the range's edges, so without this an optimum on the edge is never flown and never answered.
+
+    def _step_points(self, state: State) -> tuple[float, ...] | None:
+        """The points compared in a step state, ascending; None once finished."""
+        if state[0] == "m":
+            return self._points(state[1])
+        if state[0] == "p":
+            return tuple(sorted(state[2:4]))
+        return None
+
+    def _step_advance(self, state: State, best: int) -> State:
+        """The step state after a comparison whose point `best` was the cheapest."""
+        points = self._step_points(state)
+        if state[0] == "p":
+            return ("e", *state[1:4], points[best] == state[3])
+        inner = self._advance(state[1], best)
+        if self.edges and self._points(inner) is None:
+            edge = self._edge_against(inner)
+            if edge is not None and self.key(edge) != self.key(points[best]):
+                return ("p", inner, points[best], edge)
+        return ("m", inner)
+
+    def _step_bracket(self, state: State) -> tuple[float, float]:
+        """The interval holding the minimiser: the method's, or between the kept point and an edge that won."""
+        if state[0] == "e" and state[4]:
+            return tuple(sorted(state[2:4]))
+        return self._bracket(state[1])
+
+    def _edge_against(self, inner: State) -> float | None:
+        """The range's edge that a final method bracket reaches, if any."""
+        lo, hi = self._bracket(inner)
+        if hi >= self.hi - 1e-9 * self.width0:
+            return self.hi
+        if lo <= self.lo + 1e-9 * self.width0:
+            return self.lo
+        return None
 
     def _finished(self, width: float) -> bool:
         """True once a bracket is narrow enough that its midpoint is within epsilon of the minimiser."""
@@ -172,7 +215,7 @@ class LineSearch(ABC):
 
     @property
     def done(self) -> bool:
-        return self.stop_reason is not None or self._points(self._state) is None
+        return self.stop_reason is not None or self._step_points(self._state) is None
 
     @property
     def result(self) -> float:
@@ -181,17 +224,50 @@ class LineSearch(ABC):
         return self.vertex().value
 
     def vertex(self) -> Vertex:
-        """The answer with its standard error from the fit (NaN for the method's own answer)."""
+        """The answer with its standard error from the fit (NaN for the method's own answer), always inside the
+        span flown without failure on this side of any failed point (`flown_span`): never a gain nobody flew."""
         if not self.done:
             raise MavtuneError(f"{self.name} search is not finished yet")
-        own = self._result(self._state)
-        if self.answer != "model":
-            return Vertex(own, math.nan, False)
-        return local_vertex(self.samples(), self.bracket, own, self.pool.cv)
+        state = self._state
+        own = state[3] if state[0] == "e" and state[4] else self._result(state[1])  # an edge that won is flown
+        samples = self.samples()
+        found = Vertex(own, math.nan, False)
+        if self.answer == "model":
+            found = local_vertex(samples, self.bracket, own, self.pool.cv)
+        span = flown_span(samples)
+        if span is None:
+            return found
+        return replace(found, value=min(max(found.value, span[0]), span[1]))
 
     @property
     def bracket(self) -> tuple[float, float]:
-        return self._bracket(self._state)
+        return self._step_bracket(self._state)
+
+    def edge_evidence(self) -> dict[str, float | str | bool] | None:
+        """What the flights say at the end of the answer's span nearest a range edge, when the answer lies there:
+        the outermost point flown without failure, the one before it, their mean costs and standard errors, the
+        side, whether it is the range's edge itself and whether the cost still falls towards it (the optimum at or
+        beyond it); None when the answer lies inside the span flown."""
+        samples = self.samples()
+        span = flown_span(samples)
+        if span is None:
+            return None
+        value, tol = self.result, 1e-9 * self.width0
+        inside = sorted((x, point_stats(c, self.pool)) for x, c in samples.items()
+                        if c and all(map(math.isfinite, c)) and span[0] - tol <= x <= span[1] + tol)
+        if len(inside) < 2:
+            return None
+        for side, last, before, bound in (("upper", inside[-1], inside[-2], self.hi), ("lower", inside[0], inside[1],
+                                                                                      self.lo)):
+            if abs(value - last[0]) <= tol:
+                return {"side": side, "last": last[0], "cost": last[1].mean, "se": last[1].se, "before": before[0],
+                        "cost_before": before[1].mean, "se_before": before[1].se,
+                        "at_edge": abs(last[0] - bound) <= tol, "falling": last[1].mean < before[1].mean}
+        return None
+
+    def beside_failure(self) -> float | None:
+        """The failed point next to the answer (nothing flown without failure between them), if any."""
+        return beside_failure(self.samples(), self.result)
 
     def stats(self, x: float) -> PointStats:
         """What the flights usable now say about point x."""
@@ -230,7 +306,7 @@ class LineSearch(ABC):
         undecided — its points below the cap of flights in this comparison, fewest and lowest mean first."""
         if self.done:
             return []
-        points = self._points(self._state)
+        points = self._step_points(self._state)
         unknown = [p for p in points if not self._samples.get(k := self.key(p)) or (self.refly and not self._fresh(k))]
         if unknown:
             return unknown
@@ -244,7 +320,7 @@ class LineSearch(ABC):
         recorded at once (each flight's cost kept, in order): the work is per point, not per vehicle."""
         if len(points) != len(costs):
             raise MavtuneError(f"told {len(costs)} costs for {len(points)} points")
-        current = {self.key(p) for p in (self._points(self._state) or ())}
+        current = {self.key(p) for p in (self._step_points(self._state) or ())}
         costs = list(costs)
         runs: dict[int, list[tuple[int, int]]] = {}  # key -> its runs of flights (a round flies runs of one point)
         end = 0
@@ -287,7 +363,7 @@ class LineSearch(ABC):
 
     def _settle(self) -> None:
         """Advance through every iteration whose points are all known and whose comparison is decided."""
-        while self.stop_reason is None and (points := self._points(self._state)) is not None:
+        while self.stop_reason is None and (points := self._step_points(self._state)) is not None:
             keys = [self.key(p) for p in points]
             if any(not self._samples.get(k) or (self.refly and not self._fresh(k)) for k in keys):
                 return
@@ -306,9 +382,9 @@ class LineSearch(ABC):
                 if not self.reuse or self.refly or k not in self._used:
                     self.evaluations += 1
                     self._used.add(k)
-            self.history.append(Iteration(self._bracket(self._state), tuple(points), tuple(s.mean for s in stats),
+            self.history.append(Iteration(self.bracket, tuple(points), tuple(s.mean for s in stats),
                                           best, tuple(s.se for s in stats), tuple(s.n for s in stats), p))
-            self._state = self._advance(self._state, best)
+            self._state = self._step_advance(self._state, best)
             self._failed_tries = 0
             self._before = {k: len(self._samples[k]) for k in keys}
             if not self.reuse:
@@ -331,12 +407,12 @@ class LineSearch(ABC):
     def needs(self, reuse: bool | None = None) -> list[int]:
         """New points each iteration asks for, in order (every method here is path-independent in this)."""
         reuse = (self.reuse and not self.refly) if reuse is None else reuse
-        state, known, counts = self._initial(), set(), []
-        while (points := self._points(state)) is not None:
+        state, known, counts = ("m", self._initial()), set(), []
+        while (points := self._step_points(state)) is not None:
             keys = {self.key(p) for p in points} if reuse else [self.key(p) for p in points]
             counts.append(sum(1 for k in keys if not reuse or k not in known))
             known.update(keys)
-            state = self._advance(state, 0)
+            state = self._step_advance(state, 0)  # ends against the lower edge: counts its comparison (the most)
         return counts
 
     def budget(self, reuse: bool | None = None) -> int:
@@ -374,7 +450,7 @@ class LineSearch(ABC):
     def _shape(self) -> Hashable:
         """Everything besides the flights that decides what this search asks: its method, interval, tolerance and
         rules (a method with more parameters adds them)."""
-        return type(self), self.lo, self.hi, self.epsilon, self.reuse, self.refly, self.adaptive
+        return type(self), self.lo, self.hi, self.epsilon, self.reuse, self.refly, self.adaptive, self.edges
 
     def _walk(self, n: int, exclude: Sequence[float], max_nodes: int) -> list[float]:
         """The speculation walk itself (see `speculate`)."""
@@ -428,7 +504,7 @@ class LineSearch(ABC):
         """One state of the speculation walk: the points it would score (point, key, bit: unknown and not
         taken), the bit mask of them, and the states it leads to (only the decided outcome once decided);
         None once the search is finished."""
-        points = self._points(state)
+        points = self._step_points(state)
         if points is None:
             return None
         keys = [self.key(p) for p in points]
@@ -443,4 +519,4 @@ class LineSearch(ABC):
             best, p_right, _ = self._decide(keys)
             if self._decided(keys, p_right):
                 outcomes = [best]
-        return scoring, mask, [self._advance(state, best) for best in outcomes]
+        return scoring, mask, [self._step_advance(state, best) for best in outcomes]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 from mavtune.search.base import LineSearch
@@ -35,9 +35,11 @@ class Interval:
     lo: float
     hi: float
     level: float = LEVEL
+    moved: float = math.nan  # how far the answer moved since the gain's previous line search (NaN: the first)
 
     def to_dict(self) -> dict[str, float]:
-        return {"value": self.value, "se": self.se, "lo": self.lo, "hi": self.hi, "level": self.level}
+        return {"value": self.value, "se": self.se, "lo": self.lo, "hi": self.hi, "level": self.level,
+                "moved": self.moved}
 
     @classmethod
     def unknown(cls, value: float, level: float = LEVEL) -> "Interval":
@@ -69,6 +71,46 @@ class _Curve:
         import numpy as np  # here, not at the top: `mavtune plan` imports this module but never resamples
 
         return float(np.interp(x, self.fx, self.fy))
+
+
+def plausible_span(samples: dict[float, list[float]], pool: NoisePool, bounds: tuple[float, float],
+                   level: float = LEVEL) -> tuple[float, float] | None:
+    """Where the minimiser may lie by the flights themselves: every flown point whose mean cost is not worse than
+    the best point's by more than the one-sided `level` quantile of their difference's error could be the
+    minimiser; the span of those points, reaching halfway to the next point flown beyond each end (the minimiser
+    may lie between), or to the range's bound (or a failed point) when none was flown beyond it. None when the
+    noise is unknown or fewer than two points were flown without failure."""
+    from statistics import NormalDist
+
+    finite = sorted((x, point_stats(c, pool)) for x, c in samples.items() if c and all(map(math.isfinite, c)))
+    if len(finite) < 2 or any(not math.isfinite(s.se) for _, s in finite):
+        return None
+    z = NormalDist().inv_cdf(level)
+    best = min(finite, key=lambda p: p[1].mean)[1]
+    near = [i for i, (_, s) in enumerate(finite) if s.mean - best.mean <= z * math.hypot(s.se, best.se)]
+    xs = [x for x, _ in finite]
+    failed = [x for x, c in samples.items() if c and not all(map(math.isfinite, c))]
+    first, last = near[0], near[-1]
+    lo = 0.5 * (xs[first] + xs[first - 1]) if first > 0 else max([bounds[0], *(f for f in failed if f < xs[0])])
+    hi = 0.5 * (xs[last] + xs[last + 1]) if last + 1 < len(xs) else min([bounds[1], *(f for f in failed if f > xs[-1])])
+    return lo, hi
+
+
+def joint(interval: Interval, plausible: tuple[float, float] | None, moved: float,
+          bounds: tuple[float, float]) -> Interval:
+    """A coordinate search's interval beyond "with the other gains held": the resampled one, joined with the span
+    the flights cannot rule out (`plausible_span`), and stretched by the answer's last move between bootstraps to
+    both sides: back to the previous answer (flight noise moves an answer too) and as far on in the direction it
+    moved (coordinate search approaches a coupled optimum step by step, each step a fraction of the last: the
+    move bounds what is left when that fraction is at most a half)."""
+    if not math.isfinite(interval.lo):
+        return replace(interval, moved=moved)
+    lo, hi = interval.lo, interval.hi
+    if plausible is not None:
+        lo, hi = min(lo, plausible[0]), max(hi, plausible[1])
+    if math.isfinite(moved):  # back to the previous answer (noise may have moved it) and as far on (coupling)
+        lo, hi = min(lo, interval.value - abs(moved)), max(hi, interval.value + abs(moved))
+    return replace(interval, lo=max(lo, bounds[0]), hi=min(hi, bounds[1]), moved=moved)
 
 
 def resolution(bracket: tuple[float, float], answer: str = "search") -> float:

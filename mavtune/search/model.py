@@ -59,6 +59,28 @@ def local_vertex(samples: Mapping[float, Sequence[float]], bracket: tuple[float,
     return Vertex(value, _vertex_se(design, w, y, beta, n, cv / math.sqrt(k)), True)
 
 
+def flown_span(samples: Mapping[float, Sequence[float]]) -> tuple[float, float] | None:
+    """Where an answer may lie: between the outermost points flown without failure, and no further than the last
+    of them before a failed point on either side of the best (a diverged flight is a wall); None when no point
+    was flown without failure."""
+    finite = sorted((float(x), math.fsum(c) / len(c), len(c)) for x, c in samples.items()
+                    if c and all(math.isfinite(v) for v in c))
+    if not finite:
+        return None
+    failed = [float(x) for x, c in samples.items() if c and not all(math.isfinite(v) for v in c)]
+    return _clear_of_failures((finite[0][0], finite[-1][0]), finite, failed)
+
+
+def beside_failure(samples: Mapping[float, Sequence[float]], value: float) -> float | None:
+    """The nearest failed point next to `value` (no point flown without failure between them), if any: an
+    answer beside a fly-away is said, never silent."""
+    flown = sorted((float(x), all(math.isfinite(v) for v in c)) for x, c in samples.items() if c)
+    below = [(x, ok) for x, ok in flown if x < value]
+    above = [(x, ok) for x, ok in flown if x > value]
+    near = [side for side in (below[-1] if below else None, above[0] if above else None) if side and not side[1]]
+    return min((x for x, _ in near), key=lambda x: abs(x - value), default=None)
+
+
 def _clear_of_failures(bracket: tuple[float, float], finite: list[tuple[float, float, int]],
                        failed: list[float]) -> tuple[float, float]:
     """The part of the bracket between the measured points nearest the failures on each side of the best one: a

@@ -7,20 +7,29 @@ back to its original gains (or the tuned ones, if its config keeps them). Idempo
 assignment or start does not fly again, the stored result is resent (unless the assignment now carries other gains:
 then the old result does not answer it, and the round is flown).
 
-The agent serves one coordinator run at a time: the run whose Probe it answered last, with a nonce of its own for
-that run. Every other message must carry both (and the session key's tag), so nothing from an earlier run, another
-agent or a forger moves the vehicle; a probe of a run it served before is refused (a replay), as is an assignment of
-a round older than the latest one.
+The agent serves one coordinator run at a time, with a nonce of its own for that run. It commits to a run only when
+a message sealed with its key carries back the nonce it gave in its hello to that run's probe (a Welcome): a nonce
+derived from a secret that is fresh for every process and renewed at every commit, so a replayed probe (of any run,
+before or after a restart) earns a hello that nobody can answer, and a message of a run left before never matches
+again. Every other message must carry the run and the nonce (and the key's tag), so nothing from an earlier run,
+another agent or a forger moves the vehicle; an assignment of a round older than the latest one is refused too.
+
+While it serves no live run the agent knocks (an authenticated 'probe me') every KNOCK_EVERY_S, and after
+DIAGNOSE_AFTER_S without a word from a coordinator it says in one line what is wrong: probes sealed with another
+key, a coordinator on another session, or none at all.
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import logging
 import math
 import queue
 import re
 import secrets
 import threading
+import time
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
@@ -28,8 +37,8 @@ from typing import Any
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.swarm.config import SwarmConfig, agent_key
-from mavtune.swarm.messages import (VEHICLE_PATTERN, Ack, AgentState, Assignment, Codec, Finish, Hello, Probe,
-                                    Rejected, Result, Start, State, result_from_flight)
+from mavtune.swarm.messages import (VEHICLE_PATTERN, Ack, AgentState, Assignment, Codec, Finish, Hello, Knock, Probe,
+                                    Rejected, Result, Start, State, Welcome, claimed, result_from_flight)
 from mavtune.swarm.ratelog import RateLimitedLog
 from mavtune.swarm.transport import Keys, Link, open_client
 from mavtune.swarm.vehicles import Vehicle, finite_gains
@@ -39,8 +48,14 @@ log = logging.getLogger(__name__)
 _KEEP_RESULTS = 256
 """How many past rounds' results an agent keeps to answer repeats."""
 
-_KEEP_RUNS = 64
-"""How many coordinator runs an agent remembers having served (a probe of one of them is a replay)."""
+KNOCK_EVERY_S = 1.0
+"""While the agent serves no live run it asks to be probed this often."""
+
+DIAGNOSE_AFTER_S = 5.0
+"""Without a word from a coordinator for this long after its start, the agent says in one line what it heard."""
+
+_KEEP_SESSIONS = 16
+"""How many other sessions' coordinators an agent remembers (to name them when its own session is silent)."""
 
 INBOX_SIZE = 1024
 """Authenticated messages waiting for the agent's thread; beyond it they are dropped (the coordinator resends)."""
@@ -86,8 +101,10 @@ def decimate(trace: Trace | None, max_points: int) -> Trace | None:
 class Agent:
     """One vehicle's agent: subscribes to its assignments and the start signal, flies, reports."""
 
-    def __init__(self, vehicle_id: str, vehicle: Vehicle, config: SwarmConfig, link: Link, key: str | None = None):
-        """`key`: this vehicle's own key (default: from the configured one, `agent_key`)."""
+    def __init__(self, vehicle_id: str, vehicle: Vehicle, config: SwarmConfig, link: Link, key: str | None = None,
+                 endpoint: str | None = None):
+        """`key`: this vehicle's own key (default: from the configured one, `agent_key`); `endpoint`: the
+        coordinator's, for the diagnosis lines (default: config.connect)."""
         self.id = vehicle_id
         self.vehicle = vehicle
         self.config = config
@@ -96,13 +113,23 @@ class Agent:
         self.link = link
         self.state = AgentState.IDLE
         self.flights_flown = 0
-        self.run_id: str | None = None  # the coordinator run this agent serves (the last probe it answered)
+        self.endpoint = endpoint or config.connect or "?"
+        self.run_id: str | None = None  # the coordinator run this agent serves (committed to on its Welcome)
         self._nonce = ""  # this agent's nonce in that run
-        self._runs: OrderedDict[str, None] = OrderedDict()  # runs served so far
+        self._secret = secrets.token_bytes(32)  # the nonces offered to other runs derive from it; renewed at commit
         self._latest = -1  # the latest round assigned in this run
         self._drops = RateLimitedLog(log)
+        self._foreign = RateLimitedLog(log, level=logging.ERROR)  # probes sealed with another swarm's key
         self._inbox: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=INBOX_SIZE)
-        self._gone: set[str] = set()  # runs whose coordinator's liveliness token went away
+        self._gone: set[str] = set()  # the served run, once its coordinator's liveliness token went away
+        self._orphaned = False  # the served run's coordinator went away (until a commit or its Welcome)
+        self._started = time.monotonic()
+        self._last_knock = -math.inf
+        self._heard = False  # an authenticated message has come
+        self._foreign_probe = False  # a probe of this session sealed with another key has come
+        self._diagnosed = False
+        self._own_coordinator = False  # a coordinator token of this session has been seen
+        self._other_sessions: OrderedDict[str, None] = OrderedDict()  # sessions where a coordinator was seen
         self._armed: _Armed | None = None
         self._results: OrderedDict[int, tuple[Gains, Result]] = OrderedDict()
         self._stop = threading.Event()
@@ -121,22 +148,31 @@ class Agent:
                         vehicle_id, vehicle_id, vehicle_id)
         link = open_client(endpoint, lease_ms=config.lease_ms, connect_timeout_s=config.connect_timeout_s,
                            tls=config.tls)
-        return cls(vehicle_id, vehicle, config, link, key)
+        return cls(vehicle_id, vehicle, config, link, key, endpoint)
 
     # --- wiring -----------------------------------------------------------------------------------------------
     def start(self) -> None:
         """Subscribe and announce presence (liveliness token); the coordinator's Probe is answered with a hello."""
         self.link.subscribe(self.keys.to(self.id), self._on_sample)
-        self.link.watch_liveliness(self.keys.coordinator("*"), self._on_coordinator)
+        self.link.watch_liveliness(Keys.any_coordinator(), self._on_coordinator)
         self.link.declare_token(self.keys.alive(self.id))
+        self._started = time.monotonic()
         log.info("agent %s (%s) up in session %s, IDLE", self.id, self.vehicle.backend, self.config.session)
 
     def _on_sample(self, key: str, payload: bytes) -> None:
         """Zenoh's callback: queue an authenticated payload; anything else is dropped here, before any parsing."""
         if not self.codec.authentic(payload):
-            self._drops("unauthenticated", "agent %s dropped a message on %s: not authenticated by its key",
-                        self.id, key)
+            said = claimed(payload)
+            if said.get("kind") == "probe" and said.get("session") == self.config.session:
+                self._foreign_probe = True
+                self._foreign("foreign_key", "agent %s: a probe on %s is not sealed with this vehicle's key: the "
+                            "coordinator has another swarm's key (give this agent the %s.key that `mavtune swarm-key "
+                            "%s` makes from the coordinator's swarm key)", self.id, key, self.id, self.id)
+            else:
+                self._drops("unauthenticated", "agent %s dropped a message on %s: not authenticated by its key",
+                            self.id, key)
             return
+        self._heard = True
         try:
             self._inbox.put_nowait((key, payload))
         except queue.Full:
@@ -144,8 +180,18 @@ class Agent:
                         INBOX_SIZE)
 
     def _on_coordinator(self, key: str, alive: bool) -> None:
-        if not alive:  # handled in run()'s thread, between flights
-            self._gone.add(Keys.last_chunk(key))
+        """A coordinator's token (of any session) came or went: the served run's going is handled in run()'s
+        thread, between flights; the others are only remembered for the diagnosis."""
+        session, run = Keys.session_of(key), Keys.last_chunk(key)
+        if session != self.config.session:
+            if alive:
+                self._other_sessions[session] = None
+                while len(self._other_sessions) > _KEEP_SESSIONS:
+                    self._other_sessions.popitem(last=False)
+        elif alive:
+            self._own_coordinator = True
+        elif run == self.run_id:
+            self._gone.add(run)
 
     def run(self) -> None:
         """Handle messages until stop() (a flight under way is finished first)."""
@@ -153,6 +199,8 @@ class Agent:
             self.start()
             while not self._stop.is_set():
                 self._check_coordinator()
+                self._knock()
+                self._diagnose()
                 try:
                     item = self._inbox.get(timeout=0.1)
                 except queue.Empty:
@@ -164,7 +212,41 @@ class Agent:
         the token of any other run going away means nothing here."""
         if self.run_id is not None and self.run_id in self._gone:
             self._gone.discard(self.run_id)
+            self._orphaned = True
             self._release(None, "the coordinator is gone")
+
+    def _serving(self) -> bool:
+        """True while the agent serves a run whose coordinator is there."""
+        return self.run_id is not None and not self._orphaned and self.run_id not in self._gone
+
+    def _knock(self) -> None:
+        """Ask to be probed (every KNOCK_EVERY_S) while no live run is served: a coordinator that missed the
+        liveliness token, or whose probe was dropped, still lets the vehicle in."""
+        now = time.monotonic()
+        if not self._serving() and now - self._last_knock >= KNOCK_EVERY_S:
+            self._last_knock = now
+            self.link.put(self.keys.frm(self.id),
+                          self.codec.encode(Knock(session=self.config.session, vehicle=self.id)))
+
+    def _diagnose(self) -> None:
+        """Once, DIAGNOSE_AFTER_S after the start without a word from a coordinator: say in one line why."""
+        if self._diagnosed or self._heard or time.monotonic() - self._started < DIAGNOSE_AFTER_S:
+            return
+        self._diagnosed = True
+        if self._foreign_probe:
+            return  # said when the probe came
+        session, waited = self.config.session, f"{DIAGNOSE_AFTER_S:g} s"
+        others = [s for s in self._other_sessions if s != session]
+        if others and not self._own_coordinator:
+            log.error("agent %s: no coordinator on session %r at %s in %s, but one on session %s: check --session",
+                      self.id, session, self.endpoint, waited, ", ".join(repr(s) for s in others))
+        elif self._own_coordinator:
+            log.error("agent %s: the coordinator of session %r at %s has sent nothing this vehicle can read in %s "
+                      "(is %r in its allowed vehicles? does it hold the swarm key this vehicle's key came from?)",
+                      self.id, session, self.endpoint, waited, self.id)
+        else:
+            log.warning("agent %s: no coordinator heard on session %r at %s in %s; still waiting", self.id, session,
+                        self.endpoint, waited)
 
     def stop(self) -> None:
         """Make run() return."""
@@ -193,35 +275,49 @@ class Agent:
             return
         if msg.vehicle != self.id:
             self._drops("not_mine", "agent %s dropped %s for %s", self.id, msg.kind, msg.vehicle)
-        elif isinstance(msg, Probe):
+            return
+        if isinstance(msg, Probe):
             self._on_probe(msg)
-        elif msg.run != self.run_id or getattr(msg, "agent", None) != self._nonce:
+            return
+        if not isinstance(msg, (Welcome, Assignment, Start, Finish)):
+            self._drops("unexpected", "agent %s dropped %s: not a coordinator's message", self.id, msg.kind)
+            return
+        if msg.run != self.run_id and msg.agent == self._offered(msg.run):
+            self._commit(msg.run)
+        if msg.run != self.run_id or msg.agent != self._nonce:
             self._drops("stale", "agent %s dropped %s of round %d: not of the run it serves now (a replay?)",
                         self.id, msg.kind, msg.round)
+        elif isinstance(msg, Welcome):
+            self._orphaned = False  # the served run's coordinator is there (again): no more knocking
         elif isinstance(msg, Assignment):
             self._on_assignment(msg)
         elif isinstance(msg, Start):
             self._on_start(msg)
         elif isinstance(msg, Finish):
             self._on_finish(msg)
-        else:
-            self._drops("unexpected", "agent %s dropped %s: not a coordinator's message", self.id, msg.kind)
+
+    def _offered(self, run: str) -> str:
+        """The nonce this agent offers (in its hello) to a run it does not serve: fresh for this process, and
+        unlike any offered before the last commit."""
+        return hmac.new(self._secret, run.encode(), hashlib.sha256).hexdigest()[:32]
+
+    def _commit(self, run: str) -> None:
+        """Serve `run` from now on: its coordinator sealed back the nonce offered to it (it is live and has the key)."""
+        self.run_id, self._nonce, self._latest, self._armed = run, self._offered(run), -1, None
+        self._secret = secrets.token_bytes(32)  # every message of a run left before carries a nonce never offered again
+        self._gone.discard(run)
+        self._orphaned = False
+        log.info("agent %s: joined run %s", self.id, run[:8])
 
     def _on_probe(self, msg: Probe) -> None:
-        """Answer the coordinator's probe with a hello; a new run gets a fresh nonce, an earlier one nothing."""
-        if msg.run != self.run_id:
-            if msg.run in self._runs:
-                self._drops("stale", "agent %s dropped a probe of run %s, served before (a replay?)", self.id,
-                            msg.run[:8])
-                return
-            self._runs[msg.run] = None
-            while len(self._runs) > _KEEP_RUNS:
-                self._runs.popitem(last=False)
-            self.run_id, self._nonce, self._latest, self._armed = msg.run, secrets.token_hex(16), -1, None
-            log.info("agent %s: joined run %s", self.id, msg.run[:8])
+        """Answer a probe with a hello echoing its challenge: in the run served, with its nonce; in another, with the
+        nonce offered to it — nothing changes until that run's coordinator seals the nonce back (a Welcome)."""
+        nonce = self._nonce if msg.run == self.run_id else self._offered(msg.run)
         param_map = getattr(self.vehicle, "param_map", None)  # a Vehicle of another make may not have one
-        self._send(Hello, backend=self.vehicle.backend, state=self.state, envelope=self.config.envelope,
-                   params=param_map() if param_map is not None else None)
+        hello = Hello(session=self.config.session, run=msg.run, agent=nonce, vehicle=self.id, challenge=msg.challenge,
+                      backend=self.vehicle.backend, state=self.state, envelope=self.config.envelope,
+                      params=param_map() if param_map is not None else None)
+        self.link.put(self.keys.frm(self.id), self.codec.encode(hello))
 
     def _on_finish(self, msg: Finish) -> None:
         """The run is over: release the vehicle (onto the tuned gains only if they pass the envelope)."""

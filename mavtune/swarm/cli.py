@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import os
 from pathlib import Path
 from typing import List, Optional
 
@@ -24,8 +23,9 @@ def _logging(verbose: bool) -> None:
 
 def _state_dir(vehicle_id: str) -> Path:
     """Where an agent keeps its vehicle's original gains until they are restored ($XDG_STATE_HOME/mavtune)."""
-    base = os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state"
-    return Path(base) / "mavtune" / f"agent-{vehicle_id}"
+    from mavtune.vehicles.mavlink.originals import state_root
+
+    return state_root() / f"agent-{vehicle_id}"
 
 
 def _mavlink_table(path: Optional[Path]) -> dict:

@@ -3,24 +3,33 @@
 Each round: publish the assignments → wait for every acknowledgement → settle → one start signal → collect the
 results with a timeout → hand the flights to the engine (OPTIMIZE). A vehicle that leaves (liveliness DELETE) or
 does not answer in time yields a LOST flight; the engine flies that point again later. Every event is kept.
+
+Admission: a liveliness token or an authenticated knock earns a probe with a fresh challenge; an authenticated hello
+echoing a challenge of this run, newer than the vehicle's last, makes the vehicle present (once Zenoh confirms its
+token) and is answered with a Welcome. Nothing is kept for a token or message that is not authenticated, so no
+flood fills a table the genuine vehicles need; a vehicle id two agents answer for is named and left out.
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import logging
 import math
 import queue
 import re
 import secrets
+import threading
 import time
+from collections import OrderedDict, deque
 from enum import Enum
 from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
 from mavtune.swarm.config import SwarmConfig, ensure_key
-from mavtune.swarm.messages import (Ack, AgentState, Assignment, Codec, Finish, Hello, Probe, Rejected, Result, Start,
-                                    State, vehicle_key)
+from mavtune.swarm.messages import (Ack, AgentState, Assignment, Codec, Finish, Hello, Knock, Probe, Rejected, Result,
+                                    Start, State, Welcome, vehicle_key)
 from mavtune.swarm.ratelog import RateLimitedLog
 from mavtune.swarm.transport import Keys, Link, open_router
 from mavtune.vehicles.parammap import ParamMap
@@ -36,11 +45,23 @@ RESEND_FIRST_S = 0.25
 RESEND_MAX_S = 4.0
 """... at most this far apart (puts drop rather than wait on a congested link, so a message may be lost)."""
 
-MAX_UNINTRODUCED = 256
-"""Liveliness tokens without a hello that the coordinator keeps probing; more are ignored (a token flood)."""
-
 PROBE_EVERY_S = 1.0
-"""A present token without a hello is probed again this often."""
+"""While waiting for vehicles the coordinator says how many are present at most this often."""
+
+KNOCK_GAP_S = 0.5
+"""An authenticated vehicle's knocks earn a probe at most this often."""
+
+CHALLENGE_TTL_S = 60.0
+"""A hello must answer a probe of this run sent at most this long ago."""
+
+DUPLICATE_HOLD_S = 10.0
+"""A vehicle id two agents answered for stays out of the run this long after the last sign of two agents."""
+
+MAX_NAMED = 1024
+"""Claimed ids of unauthenticated senders named so far (each once); beyond, only the rate-limited count."""
+
+MAX_LOST_OPEN = 10_000
+"""Lost flights whose late result would still be kept (oldest forgotten first)."""
 
 
 class CoordinatorState(str, Enum):
@@ -78,17 +99,29 @@ class ZenohFleet:
         self.state = CoordinatorState.IDLE
         self.events: list[dict[str, Any]] = []
         self._drops = RateLimitedLog(log)
+        self._strangers = RateLimitedLog(log, level=logging.ERROR)  # senders it cannot authenticate, named once
+        self._named: set[str] = set()
+        self._named_again = RateLimitedLog(log, level=logging.DEBUG)  # their later messages: counted
         self._t0 = time.monotonic()
         self._inbox: queue.Queue[tuple[str, str, Any]] = queue.Queue(maxsize=INBOX_SIZE)
-        self._alive: dict[str, float] = {}  # vehicle → when it was last probed
+        self._secret = secrets.token_bytes(32)  # seals the challenges of this run's probes
+        self._seq_lock = threading.Lock()
+        self._seq = 0  # the latest challenge's sequence number (µs since the start, strictly increasing)
+        self._alive: set[str] = set()  # vehicles that said hello and whose liveliness token is there
         self._hello: dict[str, Hello] = {}
+        self._accepted: dict[str, tuple[int, str]] = {}  # vehicle → (challenge seq, nonce) of its latest hello taken
+        self._nonces: dict[str, deque[str]] = {}  # vehicle → nonces of its earlier hellos in this run
+        self._knocked: dict[str, float] = {}  # vehicle → when a knock of it last earned a probe
+        self._asked: dict[str, float] = {}  # vehicle that said hello → when Zenoh was last asked for its token
+        self._duplicate: dict[str, float] = {}  # vehicle → until when it is left out (two agents answer for it)
         self._param_maps: dict[str, ParamMap] = {}  # vehicle → its parameter map, from its latest hello in this run
-        self._late: set[tuple[int, str]] = set()  # (round, vehicle) of late results already kept
+        self._lost_open: OrderedDict[tuple[int, str], dict] = OrderedDict()  # (round, vehicle) lost → gains owed
         self._answered: set[tuple[int, str]] = set()  # (round, vehicle) whose result a round took
         self._round: _Round | None = None
         self.link = link if link is not None else open_router(listen, lease_ms=config.lease_ms, tls=config.tls)
         self.link.subscribe(self.keys.frm("*"), self._on_sample)
-        self.link.watch_liveliness(self.keys.alive("*"), lambda k, a: self._offer(("live", k, a)))
+        self.link.watch_liveliness(self.keys.alive("*"), self._on_token)
+        self.link.watch_liveliness(Keys.any_alive(), self._on_foreign_token)
         self.link.declare_token(self.keys.coordinator(self.run))  # agents release their vehicles when it goes
         log.info("coordinator listening on %s, session %s, run %s", listen, config.session, self.run[:8])
 
@@ -113,7 +146,7 @@ class ZenohFleet:
     @property
     def dropped(self) -> int:
         """Messages dropped so far (unauthenticated, malformed, foreign, replayed, unexpected, or over the inbox)."""
-        return self._drops.total
+        return self._drops.total + self._strangers.total + self._named_again.total
 
     def report(self) -> dict[str, Any]:
         """What result.json keeps of this fleet: the session, every drop-out event, the dropped messages."""
@@ -137,7 +170,6 @@ class ZenohFleet:
             if len(present) != announced:
                 log.info("waiting for vehicles: %d of %d present %s", len(present), n, present)
                 announced = len(present)
-            self._probe_silent()
             if not self._pump(min(deadline, time.monotonic() + PROBE_EVERY_S)) and time.monotonic() >= deadline:
                 raise MavtuneError(f"only {len(present)} of {n} vehicles joined session {self.config.session!r} "
                                    f"on {self.listen} within {timeout_s:g} s: {present}")
@@ -186,11 +218,46 @@ class ZenohFleet:
 
     # --- event handling ---------------------------------------------------------------------------------------
     def _on_sample(self, key: str, payload: bytes) -> None:
-        """Zenoh's callback: queue an authenticated payload; anything else is dropped here, before any parsing."""
-        if not self._codec(Keys.last_chunk(key)).authentic(payload):
-            self._drops("unauthenticated", "dropped a message on %s: not authenticated by that vehicle's key", key)
+        """Zenoh's callback: queue an authenticated payload; anything else is dropped here, before any parsing
+        (the sender's claimed id named once: an agent with another swarm's key, or a forger)."""
+        sender = Keys.last_chunk(key)
+        if not self._codec(sender).authentic(payload):
+            if sender in self._named:
+                self._named_again("named", "dropped a message on %s: not authenticated (named before)", key)
+            elif len(self._named) < MAX_NAMED:
+                self._named.add(sender)
+                self._strangers("stranger", "cannot authenticate vehicle %r (on %s): its messages are not sealed "
+                                "with that vehicle's key — an agent given another swarm's key, or a forger", sender,
+                                key)
+            else:
+                self._drops("unauthenticated", "dropped a message on %s: not authenticated by that vehicle's key",
+                            key)
             return
         self._offer(("msg", key, payload))
+
+    def _on_token(self, key: str, alive: bool) -> None:
+        """Zenoh's liveliness callback: a token of a vehicle that said hello is queued; any other token that appears
+        is probed at once and nothing of it is kept (a flood of tokens fills no table)."""
+        vid = Keys.last_chunk(key)
+        if vid in self._hello or vid in self._alive:
+            self._offer(("live", key, alive))
+        elif alive:
+            if self._allowed(vid):
+                self._probe(vid)
+            else:
+                self._drops("not_allowed", "ignored vehicle %r: not in the configured vehicle list", vid)
+
+    def _on_foreign_token(self, key: str, alive: bool) -> None:
+        """Zenoh's liveliness callback for every session: an agent on another session is named once (a --session
+        typo); nothing else is kept."""
+        session, vid = Keys.session_of(key), Keys.last_chunk(key)
+        if not alive or session == self.config.session:
+            return
+        name = f"{session}/{vid}"
+        if name not in self._named and len(self._named) < MAX_NAMED:
+            self._named.add(name)
+            self._strangers("other_session", "vehicle %r is on session %r, not this one (%r): check its --session",
+                            vid, session, self.config.session)
 
     def _offer(self, item: tuple[str, str, Any]) -> None:
         """Queue one event without ever blocking Zenoh's thread."""
@@ -201,6 +268,7 @@ class ZenohFleet:
 
     def _drain(self) -> None:
         """Handle every event waiting now, without blocking."""
+        self._tend()
         while True:
             try:
                 item = self._inbox.get_nowait()
@@ -232,13 +300,18 @@ class ZenohFleet:
             gap = min(2 * gap, RESEND_MAX_S)
 
     def _lose(self, rnd: "_Round", vehicles: list[str], why: str) -> None:
-        """Count these vehicles' flights of the round as LOST, and say so in the events."""
+        """Count these vehicles' flights of the round as LOST, and say so in the events (a late result with the gains
+        owed is still kept)."""
         for vid in vehicles:
             rnd.lost[vid] = why
+            self._lost_open[(rnd.id, vid)] = rnd.applied.get(vid, rnd.assignments[rnd.crew.index(vid)])
+            while len(self._lost_open) > MAX_LOST_OPEN:
+                self._lost_open.popitem(last=False)
             self._event("lost", rnd.id, vid, why)
 
     def _pump(self, deadline: float) -> bool:
         """Handle one event (waiting until `deadline` for it); False once the deadline has passed."""
+        self._tend()
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             return False
@@ -261,36 +334,65 @@ class ZenohFleet:
         return self.config.allowed_vehicles is None or vid in self.config.allowed_vehicles
 
     def _probe(self, vid: str) -> None:
-        self._alive[vid] = time.monotonic()
-        self._send(Probe, vid)
+        """Ask `vid` for a hello echoing a fresh challenge (thread-safe: Zenoh's callbacks probe too)."""
+        self._send(Probe, vid, challenge=self._challenge(vid))
 
-    def _probe_silent(self) -> None:
-        """Probe again the present tokens that have not said hello (a probe or its answer may have been dropped)."""
+    def _challenge(self, vid: str) -> str:
+        """A fresh challenge for a probe of `vid`: its sequence number and a tag under this run's secret (hex)."""
+        with self._seq_lock:
+            self._seq = max(self._seq + 1, int((time.monotonic() - self._t0) * 1e6))
+            seq = self._seq
+        return f"{seq:016x}" + self._challenge_tag(vid, seq)
+
+    def _challenge_tag(self, vid: str, seq: int) -> str:
+        return hmac.new(self._secret, f"{vid}/{seq}".encode(), hashlib.sha256).hexdigest()[:16]
+
+    def _challenge_seq(self, vid: str, challenge: str) -> int | None:
+        """The sequence number of a challenge this run sent `vid` within CHALLENGE_TTL_S, else None."""
+        seq = int(challenge[:16], 16)
+        if not hmac.compare_digest(challenge[16:], self._challenge_tag(vid, seq)):
+            return None
+        return seq if (time.monotonic() - self._t0) * 1e6 - seq <= CHALLENGE_TTL_S * 1e6 else None
+
+    def _tend(self) -> None:
+        """The timed duties, done whenever events are handled: duplicates' holds, unconfirmed tokens."""
+        self._expire_duplicates()
+        self._ask_again()
+
+    def _expire_duplicates(self) -> None:
+        """Probe again a vehicle id left out for two agents once DUPLICATE_HOLD_S passed without a sign of two."""
         now = time.monotonic()
-        for vid, last in list(self._alive.items()):
-            if vid not in self._hello and now - last >= PROBE_EVERY_S:
+        for vid, until in list(self._duplicate.items()):
+            if now >= until:
+                del self._duplicate[vid]
                 self._probe(vid)
+
+    def _mark_alive(self, vid: str) -> None:
+        """Zenoh confirms the token of a vehicle that said hello: it is present."""
+        if vid in self._hello and vid not in self._alive:
+            self._alive.add(vid)
+            self._event("joined", None if self._round is None else self._round.id, vid,
+                        f"backend {self._hello[vid].backend or '?'}")
 
     def _on_liveliness(self, vid: str, alive: bool) -> None:
-        """A vehicle's token appeared (probe it for a hello) or went away (its open flight is LOST)."""
-        if not self._allowed(vid):
-            self._drops("not_allowed", "ignored vehicle %r: not in the configured vehicle list", vid)
-            return
+        """A token of a vehicle that said hello is confirmed (it is present) or went away (its open flight is LOST)."""
         if alive:
-            if vid not in self._alive:
-                if sum(v not in self._hello for v in self._alive) >= MAX_UNINTRODUCED:
-                    self._drops("token_flood", "ignored the liveliness token of %r: %d tokens have not said hello",
-                                vid, MAX_UNINTRODUCED)
-                    return
+            if vid in self._hello:
+                self._mark_alive(vid)
+            elif vid not in self._duplicate:  # it left and came back (a restarted agent): a new hello is due
                 self._probe(vid)
             return
+        self._leave(vid, "liveliness token deleted")
+
+    def _leave(self, vid: str, why: str) -> None:
+        """The vehicle is no longer present: its open flight of the round is LOST."""
         was_present = vid in self._alive and vid in self._hello
-        self._alive.pop(vid, None)
+        self._alive.discard(vid)
         self._hello.pop(vid, None)
         if was_present:
-            self._event("left", None if self._round is None else self._round.id, vid, "liveliness token deleted")
+            self._event("left", None if self._round is None else self._round.id, vid, why)
         if self._round is not None and vid in self._round.crew and self._round.open(vid):
-            self._lose(self._round, [vid], "vehicle left during the round")
+            self._lose(self._round, [vid], f"vehicle left during the round: {why}")
 
     def _on_message(self, key: str, payload: bytes) -> None:
         """Validate one agent message and book it into the round; anything unexpected is dropped and counted."""
@@ -302,6 +404,9 @@ class ZenohFleet:
             return
         if msg.vehicle != sender:
             self._drops("impostor", "dropped %s on %s: it claims to be from %r", msg.kind, key, msg.vehicle)
+            return
+        if isinstance(msg, Knock):
+            self._on_knock(sender)
             return
         if msg.run != self.run:
             self._drops("stale", "dropped %s from %s: of run %s, not this run (a replay?)", msg.kind, sender,
@@ -327,22 +432,15 @@ class ZenohFleet:
                 rnd.flying[sender] = time.monotonic()
             return
         if isinstance(msg, Result) and (rnd is None or msg.round != rnd.id):
-            if (msg.round, sender) in self._answered:
-                log.debug("%s: round %d answered again (a resend or a replay)", sender, msg.round)
-            elif (msg.round, sender) not in self._late:  # nothing measured is discarded: kept in the events, once
-                self._late.add((msg.round, sender))
-                self._event("late_result", msg.round, sender, f"cost {msg.cost!r} ({msg.status.value}) arrived "
-                            "after its round closed", cost=msg.cost, gains=msg.gains)
+            self._on_late_result(sender, msg, "arrived after its round closed")
             return
         if rnd is None or msg.round != rnd.id or sender not in rnd.crew:
             self._drops("unexpected", "dropped %s from %s for round %d: not expected now", msg.kind, sender,
                         msg.round)
             return
         if not rnd.open(sender):
-            if isinstance(msg, Result) and sender in rnd.lost and (msg.round, sender) not in self._late:
-                self._late.add((msg.round, sender))
-                self._event("late_result", msg.round, sender, "result from a vehicle already counted lost",
-                            cost=msg.cost, gains=msg.gains)
+            if isinstance(msg, Result) and sender in rnd.lost:
+                self._on_late_result(sender, msg, "from a vehicle already counted lost")
             return  # the first valid outcome of a round stands
         problem = rnd.gains_problem(sender, msg)
         if problem:
@@ -360,28 +458,102 @@ class ZenohFleet:
             rnd.results[sender] = msg
             self._answered.add((msg.round, sender))
 
+    def _on_late_result(self, sender: str, msg: Result, when: str) -> None:
+        """A result outside its round: kept in the events (once, cost and gains only) when it answers a flight of
+        this vehicle counted lost with the gains it owed; else dropped with a rate-limited line."""
+        key = (msg.round, sender)
+        if key in self._answered:
+            log.debug("%s: round %d answered again (a resend or a replay)", sender, msg.round)
+            return
+        owed = self._lost_open.get(key)
+        if owed is None:
+            self._drops("unassigned", "dropped a result from %s for round %d: no open flight of that round was "
+                        "assigned to it", sender, msg.round)
+        elif msg.gains != owed:
+            self._drops("mismatch", "dropped a late result from %s for round %d: gains %s are not the %s it was "
+                        "assigned", sender, msg.round, sorted(msg.gains)[:8], owed)
+        else:  # nothing measured is discarded
+            del self._lost_open[key]
+            self._event("late_result", msg.round, sender, f"cost {msg.cost!r} ({msg.status.value}) {when}",
+                        cost=msg.cost, gains=msg.gains)
+
+    def _on_knock(self, sender: str) -> None:
+        """An authenticated vehicle asks to be probed (it serves no live run): probe it, at most every KNOCK_GAP_S."""
+        now = time.monotonic()
+        if not self._allowed(sender) or sender in self._duplicate or \
+                now - self._knocked.get(sender, -math.inf) < KNOCK_GAP_S:
+            return
+        self._knocked[sender] = now
+        self._probe(sender)
+
     def _on_hello(self, sender: str, msg: Hello) -> None:
-        """An agent answered our probe: it is present, with this nonce for the run."""
+        """An agent answered a probe of this run: taken if it echoes a challenge newer than the vehicle's last (an
+        older one is a replay; the same one with another nonce, or a newer one with an earlier nonce, is a second agent
+        claiming the id), then welcomed; present once its liveliness token is confirmed."""
         if not self._allowed(sender):
             self._drops("not_allowed", "dropped hello from %r: not in the configured vehicle list", sender)
             return
-        if sender not in self._alive:
-            log.info("hello from %s before its liveliness token; waiting for the token", sender)
+        seq = self._challenge_seq(sender, msg.challenge)
+        if seq is None:
+            self._drops("stale", "dropped hello from %s: it answers no recent probe of this run (a replay?)", sender)
+            return
+        last_seq, last_nonce = self._accepted.get(sender, (-1, ""))
+        earlier = self._nonces.setdefault(sender, deque(maxlen=4))
+        if (seq == last_seq and msg.agent != last_nonce) or (seq > last_seq and msg.agent in earlier):
+            self._on_duplicate(sender)
+            return
+        if seq <= last_seq and msg.agent == last_nonce:
+            log.debug("%s: hello answering an older probe (answers crossed)", sender)
+            return
+        if seq <= last_seq or sender in self._duplicate:
+            self._drops("stale", "dropped hello from %s: it answers an older probe (a replay?)", sender)
+            return
+        if last_nonce and msg.agent != last_nonce:
+            earlier.append(last_nonce)
+        self._accepted[sender] = (seq, msg.agent)
         new = sender not in self._hello
         self._hello[sender] = msg
         if msg.params is not None:  # kept when the vehicle leaves: it may have flown, its parameters still count
             self._param_maps[sender] = msg.params
-        if new and sender in self._alive:
-            self._event("joined", None if self._round is None else self._round.id, sender,
-                        f"backend {msg.backend or '?'}")
+        self._send(Welcome, sender)
+        if sender in self._alive:
+            if new:
+                self._event("joined", None if self._round is None else self._round.id, sender,
+                            f"backend {msg.backend or '?'}")
+        else:  # present once Zenoh confirms its token (a hello may outlive its sender)
+            self._ask_liveliness(sender)
+
+    def _ask_liveliness(self, vid: str) -> None:
+        """Ask Zenoh whether the token of `vid` (which said hello) is there; the answer comes as a liveliness event."""
+        self._asked[vid] = time.monotonic()
+        self.link.check_liveliness(self.keys.alive(vid), lambda k: self._offer(("live", k, True)))
+
+    def _ask_again(self) -> None:
+        """Ask again, every PROBE_EVERY_S, for the tokens of vehicles that said hello and are not confirmed yet (an
+        answer may have been lost)."""
+        now = time.monotonic()
+        for vid in [v for v in self._hello if v not in self._alive]:
+            if now - self._asked.get(vid, -math.inf) >= PROBE_EVERY_S:
+                self._ask_liveliness(vid)
+
+    def _on_duplicate(self, vid: str) -> None:
+        """Two agents answer for vehicle id `vid`: name it, leave it out until only one answers."""
+        if vid not in self._duplicate:
+            self._event("duplicate", None if self._round is None else self._round.id, vid,
+                        f"two agents claim vehicle id {vid!r} (two nonces answered its probes): give each vehicle "
+                        f"its own --id; {vid} is left out of the run until only one answers")
+        self._duplicate[vid] = time.monotonic() + DUPLICATE_HOLD_S
+        self._accepted[vid] = (self._accepted.get(vid, (-1, ""))[0], "")  # whoever answers alone later is taken
+        self._nonces.pop(vid, None)
+        self._leave(vid, "two agents claim its id")
 
     def _event(self, event: str, round_id: int | None, vehicle: str | None, detail: str, **extra: Any) -> None:
         """Keep one event (for result.json) and log it."""
         entry = {"t_s": round(time.monotonic() - self._t0, 3), "event": event, "round": round_id,
                  "vehicle": vehicle, "detail": detail, **extra}
         self.events.append(entry)
-        level = logging.WARNING if event in ("lost", "left", "refused", "late_result", "unassigned", "unreleased") \
-            else logging.INFO
+        level = logging.ERROR if event == "duplicate" else logging.WARNING \
+            if event in ("lost", "left", "refused", "late_result", "unassigned", "unreleased") else logging.INFO
         log.log(level, "round %s: %s %s (%s)", round_id, vehicle or "", event, detail)
 
     def _send(self, kind: type, vid: str, **fields: Any) -> None:

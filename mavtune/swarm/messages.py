@@ -2,18 +2,22 @@
 
 On the wire a message is `HMAC-SHA256(key, body) ‖ body`, the body its JSON, and the key is the vehicle's own
 (`vehicle_key`: derived from the swarm key and the vehicle's id), so a vehicle that holds only its own key can act
-as no other. No key travels. Every body names
-the session, the coordinator's run nonce (`run`, fresh for every coordinator start) and — except a Probe — the
-agent's nonce (`agent`, fresh for every run an agent joins), so a message of an earlier run, or one made for another
-agent, is refused where it is replayed. `Codec.decode()` refuses (`Rejected`, with the reason) anything too
-large, unauthenticated, malformed or foreign; a Result also has to be self-consistent: a finite cost ≥ 0 unless the
-flight failed or was lost (then NaN or +inf), and trace arrays of equal length with finite samples.
+as no other. No key travels. Every body names the session, the coordinator's run nonce (`run`, fresh for every
+coordinator start) and — except a Knock or a Probe — the agent's nonce (`agent`, fresh for every agent process and
+run), so a message of an earlier run, or one made for another agent, is refused where it is replayed. Joining is a
+challenge–response both ways: a Probe carries the coordinator's fresh `challenge`, which the Hello echoes (an old
+hello is refused), and the agent commits to a run only once a message sealed with its key carries its fresh nonce
+back (a Welcome; a replayed probe gets a hello nobody answers). `Codec.decode()` refuses (`Rejected`, with the
+reason) anything too large, unauthenticated, malformed or foreign; a Result also has to be self-consistent: a finite
+cost ≥ 0 unless the flight failed or was lost (then NaN or +inf), and trace arrays of equal length with finite
+samples.
 """
 
 from __future__ import annotations
 
 import hashlib
 import hmac
+import json
 import math
 from enum import Enum
 from typing import Annotated, Any, Literal, Union
@@ -23,9 +27,9 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError,
 from mavtune.fleet import Flight, Status, Trace
 from mavtune.vehicles.parammap import ParamMap
 
-PROTOCOL_VERSION = 4
-"""Bumped on any incompatible change of the messages below or their keys (4: each vehicle's own key); other
-versions are dropped."""
+PROTOCOL_VERSION = 5
+"""Bumped on any incompatible change of the messages below or their keys (4: each vehicle's own key; 5: knock,
+challenge and welcome); other versions are dropped."""
 
 MAX_MESSAGE_BYTES = 1_000_000
 """Payloads larger than this are dropped before anything else (a decimated trace is a few kB)."""
@@ -49,6 +53,14 @@ Nonce = Annotated[str, Field(pattern=NONCE_PATTERN)]
 VehicleId = Annotated[str, Field(pattern=VEHICLE_PATTERN)]
 GainName = Annotated[str, Field(min_length=1, max_length=64)]
 
+MAX_GAINS = 64
+"""A gains dict on the wire names at most this many gains (a controller has a handful)."""
+
+WireGains = Annotated[dict[GainName, float], Field(max_length=MAX_GAINS)]
+
+MAX_INFO_BYTES = 16_000
+"""A result's `info` (flight details, kept in result.json) is at most this large as JSON (a flight's is ~100 B)."""
+
 
 class Rejected(ValueError):
     """A payload that is not a valid message of this session; the text says why (one line)."""
@@ -61,16 +73,28 @@ class AgentState(str, Enum):
     FLYING = "flying"
 
 
-class _Message(BaseModel):
-    """Fields every message carries: version, session, the coordinator's run nonce, the round, the vehicle."""
+class _Base(BaseModel):
+    """Fields every message carries: version, session, the vehicle."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")
 
-    v: Literal[4] = PROTOCOL_VERSION
+    v: Literal[5] = PROTOCOL_VERSION
     session: Annotated[str, Field(pattern=SESSION_PATTERN)]
+    vehicle: VehicleId
+
+
+class Knock(_Base):
+    """Agent → coordinator, every second while it serves no live run: 'vehicle X is here, probe me' (a replay only
+    earns a probe, which is harmless)."""
+
+    kind: Literal["knock"] = "knock"
+
+
+class _Message(_Base):
+    """A message of one coordinator run: its run nonce and the round."""
+
     run: Nonce
     round: Annotated[int, Field(ge=-1)] = -1
-    vehicle: VehicleId
 
 
 class _Bound(_Message):
@@ -80,9 +104,11 @@ class _Bound(_Message):
 
 
 class Probe(_Message):
-    """Coordinator → agent: 'introduce yourself' (sent when a liveliness token appears; no secret in it)."""
+    """Coordinator → agent: 'introduce yourself, echoing `challenge`' (sent when a liveliness token appears or the
+    agent knocks; no secret in it). The challenge is fresh for every probe: a hello echoing an old one is refused."""
 
     kind: Literal["probe"] = "probe"
+    challenge: Nonce
 
 
 class Hello(_Bound):
@@ -91,17 +117,25 @@ class Hello(_Bound):
     its tuned gains as that vehicle's parameters and write its parameter files."""
 
     kind: Literal["hello"] = "hello"
+    challenge: Nonce
     backend: Annotated[str, Field(max_length=64)] = ""
     state: AgentState = AgentState.IDLE
     envelope: dict[GainName, tuple[float, float]] = {}
     params: ParamMap | None = None
 
 
+class Welcome(_Bound):
+    """Coordinator → agent, answering a hello it took: 'you are in run `run` with your nonce `agent`' — the agent's
+    fresh nonce sealed back with its key proves a live coordinator, so the agent commits to the run."""
+
+    kind: Literal["welcome"] = "welcome"
+
+
 class Assignment(_Bound):
     """Coordinator → agent: the gains to apply and fly in round `round`."""
 
     kind: Literal["assignment"] = "assignment"
-    gains: dict[GainName, float]
+    gains: WireGains
 
 
 class Ack(_Bound):
@@ -111,7 +145,7 @@ class Ack(_Bound):
     kind: Literal["ack"] = "ack"
     accepted: bool
     reason: Annotated[str, Field(max_length=1000)] = ""
-    applied: dict[GainName, float] | None = None
+    applied: WireGains | None = None
 
 
 class Start(_Bound):
@@ -125,7 +159,7 @@ class Finish(_Bound):
     configured to keep them, on these tuned gains; None when the run did not finish)."""
 
     kind: Literal["finish"] = "finish"
-    gains: dict[GainName, float] | None = None
+    gains: WireGains | None = None
 
 
 class TraceMsg(BaseModel):
@@ -150,7 +184,7 @@ class Result(_Bound):
     """Agent → coordinator: the outcome of round `round` — cost, status and a decimated trace."""
 
     kind: Literal["result"] = "result"
-    gains: dict[GainName, float]
+    gains: WireGains
     cost: float
     status: Status
     trace: TraceMsg | None = None
@@ -165,6 +199,8 @@ class Result(_Bound):
             raise ValueError(f"negative cost {self.cost!r} (a cost sums absolute errors)")
         if not all(math.isfinite(g) for g in self.gains.values()):
             raise ValueError("non-finite gains")
+        if _info_bytes(self.info) > MAX_INFO_BYTES:
+            raise ValueError(f"info of {_info_bytes(self.info)} bytes, over the {MAX_INFO_BYTES}-byte limit")
         return self
 
     def to_flight(self) -> Flight:
@@ -184,7 +220,8 @@ class State(_Bound):
     state: AgentState
 
 
-Message = Annotated[Union[Hello, Probe, Assignment, Ack, Start, Finish, Result, State], Field(discriminator="kind")]
+Message = Annotated[Union[Knock, Hello, Probe, Welcome, Assignment, Ack, Start, Finish, Result, State],
+                    Field(discriminator="kind")]
 _ADAPTER: TypeAdapter[Message] = TypeAdapter(Message)
 
 
@@ -207,7 +244,7 @@ class Codec:
     def _tag(self, body: bytes) -> bytes:
         return hmac.new(self._key, body, hashlib.sha256).digest()
 
-    def encode(self, msg: _Message) -> bytes:
+    def encode(self, msg: _Base) -> bytes:
         """The payload of a message: its tag, then its JSON (NaN/inf costs survive as JSON constants)."""
         body = msg.model_dump_json().encode()
         return self._tag(body) + body
@@ -218,7 +255,7 @@ class Codec:
             return False
         return hmac.compare_digest(payload[:MAC_BYTES], self._tag(payload[MAC_BYTES:]))
 
-    def decode(self, payload: bytes) -> _Message:
+    def decode(self, payload: bytes) -> _Base:
         """The message in a payload; Rejected (saying why) if it is oversized, unauthenticated, malformed or foreign."""
         if len(payload) > MAX_MESSAGE_BYTES:
             raise Rejected(f"{len(payload)} bytes is over the {MAX_MESSAGE_BYTES}-byte limit")
@@ -227,12 +264,28 @@ class Codec:
         try:
             msg = _ADAPTER.validate_json(payload[MAC_BYTES:])
         except ValidationError as exc:
+            version = claimed(payload).get("v")
+            if isinstance(version, int) and version != PROTOCOL_VERSION:
+                raise Rejected(f"protocol version {version!r}, not {PROTOCOL_VERSION}: run the same mavtune version "
+                               "on the coordinator and every vehicle") from None
             first = exc.errors()[0] if exc.errors() else {}
             raise Rejected(f"invalid message ({first.get('msg', '?')} at "
                            f"{'.'.join(str(p) for p in first.get('loc', ()))})") from None
         if msg.session != self.session:
             raise Rejected(f"{msg.kind} from session {msg.session!r}, not ours")
         return msg
+
+
+def claimed(payload: bytes) -> dict[str, Any]:
+    """What an unauthenticated payload says it is (its JSON body's fields; {} if it has none) — for naming a peer
+    with another key in a diagnosis, never for acting on it."""
+    if not MAC_BYTES < len(payload) <= MAX_MESSAGE_BYTES:
+        return {}
+    try:
+        body = json.loads(payload[MAC_BYTES:])
+    except ValueError:
+        return {}
+    return body if isinstance(body, dict) else {}
 
 
 def result_from_flight(flight: Flight, *, session: str, run: str, agent: str, round_id: int, vehicle: str) -> Result:
@@ -245,9 +298,17 @@ def result_from_flight(flight: Flight, *, session: str, run: str, agent: str, ro
         trace = TraceMsg(t_s=[float(r[0]) for r in rows], z_ref_m=[float(r[1]) for r in rows],
                          z_m=[float(r[2]) for r in rows])
     cost = float(flight.cost)
+    info = _jsonable(flight.info)
+    if _info_bytes(info) > MAX_INFO_BYTES:  # never refuse to report a flight over its details
+        info = {"info_dropped": f"{_info_bytes(info)} bytes of flight details, over the {MAX_INFO_BYTES}-byte limit"}
     return Result(session=session, run=run, agent=agent, round=round_id, vehicle=vehicle, gains=dict(flight.gains),
                   cost=cost, status=flight.status if math.isfinite(cost) or flight.status is not Status.OK
-                  else Status.FAILED, trace=trace, info=_jsonable(flight.info))
+                  else Status.FAILED, trace=trace, info=info)
+
+
+def _info_bytes(info: dict[str, Any]) -> int:
+    """The size of a result's info as JSON (NaN and inf as constants)."""
+    return len(json.dumps(info, default=repr))
 
 
 def _jsonable(info: dict[str, Any]) -> dict[str, Any]:

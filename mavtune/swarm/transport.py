@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import logging
 import re
+import socket
 import threading
 import time
 from typing import Any, Callable
@@ -31,6 +32,9 @@ BLOCK_CLOSE_US = 500_000
 
 _CONNECT_ATTEMPT_S = 1.0
 """An agent's connection attempts are this short so that Ctrl-C is seen between them (Zenoh blocks signals)."""
+
+DIAGNOSE_CONNECT_S = 3.0
+"""After this long without a Zenoh session, an agent says in one line what is at the endpoint."""
 
 
 def zenoh_reason(exc: BaseException) -> str:
@@ -61,9 +65,25 @@ class Keys:
         return f"{self.prefix}/coordinator/{run}"
 
     @staticmethod
+    def any_coordinator() -> str:
+        """The liveliness tokens of every coordinator, in any session (an agent names the session it hears)."""
+        return f"{ROOT}/*/coordinator/*"
+
+    @staticmethod
+    def any_alive() -> str:
+        """The liveliness tokens of every vehicle, in any session (a coordinator names agents on another one)."""
+        return f"{ROOT}/*/alive/*"
+
+    @staticmethod
     def last_chunk(key: str) -> str:
         """The vehicle id at the end of a key."""
         return key.rsplit("/", 1)[-1]
+
+    @staticmethod
+    def session_of(key: str) -> str:
+        """The session a key belongs to (`mavtune/<session>/...`)."""
+        parts = key.split("/")
+        return parts[1] if len(parts) > 2 else ""
 
 
 def zenoh_config(mode: str, endpoint: str, *, lease_ms: int = 2000, connect_timeout_s: float = -1.0,
@@ -145,6 +165,20 @@ class Link:
         with self._lock:
             self._keep.append(self._session.liveliness().declare_subscriber(key, _cb, history=True))
 
+    def check_liveliness(self, key: str, on_alive: Callable[[str], None]) -> None:
+        """Ask which tokens matching `key` are alive now: on_alive(key) for each (nothing if none is)."""
+
+        def _cb(reply: zenoh.Reply) -> None:
+            try:
+                if reply.ok is not None:
+                    on_alive(str(reply.ok.key_expr))
+            except Exception:
+                log.exception("error handling a liveliness reply for %s", key)
+
+        if self._closed:
+            return
+        self._session.liveliness().get(key, zenoh.handlers.Callback(_cb, lambda: None))
+
     def close(self) -> None:
         """Undeclare everything and close the session (idempotent)."""
         if self._closed:
@@ -172,7 +206,8 @@ def open_client(endpoint: str, *, lease_ms: int = 2000, connect_timeout_s: float
                 tls: dict[str, Any] | None = None) -> Link:
     """An agent's link: a Zenoh client connecting to the coordinator at `endpoint`, trying for connect_timeout_s
     (-1: until it answers) in short attempts so that Ctrl-C works while waiting."""
-    deadline = None if connect_timeout_s < 0 else time.monotonic() + connect_timeout_s
+    started = time.monotonic()
+    deadline = None if connect_timeout_s < 0 else started + connect_timeout_s
     waiting_logged = False
     while True:
         attempt_s = _CONNECT_ATTEMPT_S if deadline is None else min(_CONNECT_ATTEMPT_S, deadline - time.monotonic())
@@ -182,6 +217,23 @@ def open_client(endpoint: str, *, lease_ms: int = 2000, connect_timeout_s: float
         except MavtuneError as exc:
             if "Timeout" not in str(exc) or (deadline is not None and time.monotonic() >= deadline):
                 raise
-            if not waiting_logged:
-                log.info("waiting for the coordinator at %s", endpoint)
+            if not waiting_logged and time.monotonic() - started >= DIAGNOSE_CONNECT_S:
+                log.warning("%s", endpoint_diagnosis(endpoint, time.monotonic() - started))
                 waiting_logged = True
+
+
+def endpoint_diagnosis(endpoint: str, waited_s: float) -> str:
+    """One line on why no Zenoh session opened at `endpoint`: nothing listens there, or something that is not a
+    Zenoh router does (a TCP connection opens, the Zenoh handshake never completes)."""
+    match = re.fullmatch(r"(tcp|tls)/(.+):(\d+)", endpoint)
+    if match is None:
+        return f"no Zenoh router answered at {endpoint} in {waited_s:.0f} s; still trying"
+    host = match.group(2).strip("[]")
+    try:
+        with socket.create_connection((host, int(match.group(3))), timeout=1.0):
+            pass
+    except OSError as exc:
+        return (f"nothing accepts connections at {endpoint} ({exc.strerror or exc}); waiting for the coordinator "
+                "to listen there")
+    return (f"{endpoint} is not a Zenoh endpoint: it accepts connections but no Zenoh handshake in {waited_s:.0f} s "
+            "(another service's port? the coordinator's is its --listen); still trying")

@@ -102,11 +102,14 @@ class ParamMap(BaseModel):
             return edge
         upper = edge.side == "upper"
         bound, limit = b.value(edge.bound), b.limit(upper)
+        at_limit = False
         if 0.0 < edge.bound < 1.0:
             hint = f"widen tuning.space.{edge.gain} (the parameter's range goes on to {b.hi if upper else b.lo:g})"
         elif limit is not None and _near(limit, bound):
-            hint = f"the range already ends at {b.param}'s documented limit {limit:g} ({self.stack})"
+            hint, at_limit = f"the range already ends at {b.param}'s documented limit {limit:g} ({self.stack})", True
         else:
-            reach = f" (as far as {limit / b.scale:g}, the autopilot's limit)" if limit is not None else ""
-            hint = f"widen [mavlink.gains.{edge.gain}] {'max' if upper else 'min'}{reach}"
-        return replace(edge, param=b.param, param_value=b.value(edge.value), param_bound=bound, hint=hint)
+            reach = f" as far as {limit / b.scale:g} (the autopilot's limit)" if limit is not None else ""
+            hint = (f"{'raise' if upper else 'lower'} {'max' if upper else 'min'} of gain {edge.gain} ({b.param}) "
+                    f"in the config's mavlink.gains.{edge.gain} table{reach}")
+        return replace(edge, param=b.param, param_value=b.value(edge.value), param_bound=bound, hint=hint,
+                       at_limit=at_limit)

@@ -42,11 +42,15 @@ def write_tuned_files(maps: Mapping[str, ParamMap], gains: Mapping[str, float], 
 
 
 def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
-                  space: Mapping[str, tuple[float, float]], epsilon: float, out_dir: str | Path) -> dict[str, Any]:
+                  space: Mapping[str, tuple[float, float]], epsilon: float, out_dir: str | Path,
+                  evidence: Mapping[str, Any] | None = None,
+                  flown: Mapping[str, tuple[float, float]] | None = None,
+                  brackets: Mapping[str, tuple[float, float]] | None = None) -> dict[str, Any]:
     """What result.json says of a finished run beyond the gains: the range edges they lie at and, for vehicles
     with a parameter map, the gains as each vehicle's parameters (± ε of the range) and the files written.
 
     An edge is said once per parameter it names (vehicles of different autopilots or ranges each get theirs).
+    `evidence`, `flown` and `brackets` say what the flights at each gain's edge say (`mavtune.edges.range_edges`).
     A vehicle whose map binds other gains than those tuned
     gets no parameters (`tuned_params_missing` says why) rather than a wrong file."""
     usable = {v: m for v, m in maps.items() if m.covers(gains)}
@@ -54,7 +58,7 @@ def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
     if missing := {v: f"its parameters bind gains {sorted(m.gains)}, not the tuned {sorted(gains)}"
                    for v, m in maps.items() if v not in usable}:
         outcome["tuned_params_missing"] = missing
-    edges = range_edges(gains, space, epsilon)
+    edges = range_edges(gains, space, epsilon, evidence, flown, brackets)
     if usable:
         edges = [x for e in edges for x in _unique(m.explain_edge(e) for m in usable.values())]
         tolerance = {n: epsilon * (hi - lo) for n, (lo, hi) in space.items()}

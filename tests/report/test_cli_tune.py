@@ -64,7 +64,8 @@ def test_tune_writes_the_run_folder_with_the_report(tmp_path):
     for name in ("journal.sqlite", "config.json", "result.json", "report.md", "timeline.png"):
         assert (out / name).exists(), name
     report = (out / "report.md").read_text()
-    assert "| rounds | 28 | 28 |" in report  # plan vs actual: the plan is known before take-off
+    assert "| rounds | 32 | 28 |" in report  # plan vs actual: the plan (known before take-off) counts a comparison
+    # at a range edge per search, which this cost (optimum inside) never needed
     assert report.count("\n| ") >= 28
 
 

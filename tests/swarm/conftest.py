@@ -38,6 +38,32 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+class LinkStub:
+    """Stands in for the Zenoh link without a network: keeps what is published (key, payload); Zenoh says every
+    token asked about is there."""
+
+    def __init__(self):
+        self.sent: list = []
+
+    def put(self, key, payload):
+        self.sent.append((key, payload))
+
+    def check_liveliness(self, key, on_alive):
+        on_alive(key)
+
+    def subscribe(self, *a):
+        pass
+
+    def declare_token(self, *a):
+        pass
+
+    def watch_liveliness(self, *a):
+        pass
+
+    def close(self):
+        pass
+
+
 class ThreadAgents:
     """Agents on toy vehicles running in threads of this process (real Zenoh clients)."""
 

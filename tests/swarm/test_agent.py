@@ -8,41 +8,38 @@ import pytest
 
 from mavtune.swarm.agent import Agent, check_envelope, decimate
 from mavtune.swarm.config import SwarmConfig
-from mavtune.swarm.messages import Ack, Assignment, Codec, Finish, Hello, Probe, Result, Start, vehicle_key
+from mavtune.swarm.messages import Ack, Assignment, Codec, Finish, Hello, Probe, Result, Start, Welcome, vehicle_key
 from mavtune.swarm.transport import Keys
 from mavtune.swarm.vehicles import FleetVehicle, ToyFleet
 from mavtune.fleet import Trace
+
+from .conftest import LinkStub
 
 KEY = "test key of at least 16 chars"
 CODEC = Codec("s", vehicle_key(KEY, "v0"))  # the agent v0 is given the swarm key: it seals with its own
 RUN = "1" * 32
 
 
-class Recorder:
-    """Stands in for the Zenoh link: keeps what the agent publishes."""
-
-    def __init__(self):
-        self.sent = []
+class Recorder(LinkStub):
+    """Stands in for the Zenoh link: keeps the messages the agent publishes."""
 
     def put(self, key, payload):
         self.sent.append(CODEC.decode(payload))
 
-    def subscribe(self, *a):
-        pass
 
-    def declare_token(self, *a):
-        pass
+CHALLENGE = "c" * 32
 
-    def watch_liveliness(self, *a):
-        pass
 
-    def close(self):
-        pass
+def probed(agent, run=RUN) -> Hello:
+    """The hello the agent answers a probe of `run` with."""
+    agent.handle("probe", CODEC.encode(Probe(session="s", run=run, vehicle=agent.id, challenge=CHALLENGE)))
+    return of(agent, Hello)[-1]
 
 
 def joined(agent, run=RUN):
-    """The agent after answering the probe of `run` (its nonce for that run is agent._nonce)."""
-    agent.handle("probe", CODEC.encode(Probe(session="s", run=run, vehicle=agent.id)))
+    """The agent after answering the probe of `run` and being welcomed (its nonce for that run is agent._nonce)."""
+    hello = probed(agent, run)
+    agent.handle("welcome", CODEC.encode(Welcome(session="s", run=run, agent=hello.agent, vehicle=agent.id)))
     return agent
 
 
@@ -232,15 +229,35 @@ def test_messages_of_another_run_or_nonce_and_stale_rounds_move_nothing():
     assert agent.run_id == "2" * 32 and agent._nonce != first_nonce
     send(agent, keys, old_finish)  # replay from the earlier run
     send(agent, keys, msg(agent, Finish, gains={"kp": 0.1, "kd": 0.1}).model_copy(update={"agent": "f" * 32}))
-    joined(agent, RUN)  # a replayed probe of the earlier run does not take the agent back
+    probed(agent, RUN)  # a replayed probe of the earlier run does not take the agent back
     assert agent.run_id == "2" * 32
     send(agent, keys, old_finish)
+    old_welcome = Welcome(session="s", run=RUN, agent=first_nonce, vehicle="v0")
+    send(agent, keys, old_welcome)  # nor does its earlier welcome: the nonce offered now is another
+    assert agent.run_id == "2" * 32
     assert vehicle.released == [] and not of(agent, Ack)[1:]
     send(agent, keys, msg(agent, Assignment, round=8, gains={"kp": 0.4, "kd": 0.2}))
     send(agent, keys, msg(agent, Assignment, round=7, gains={"kp": 0.9, "kd": 0.9}))  # older than round 8
     assert [a.round for a in of(agent, Ack)] == [5, 8]
     hellos = of(agent, Hello)
-    assert [h.run for h in hellos] == [RUN, "2" * 32] and hellos[0].agent != hellos[1].agent
+    assert [h.run for h in hellos] == [RUN, "2" * 32, RUN] and len({h.agent for h in hellos}) == 3
+    assert all(h.challenge == CHALLENGE for h in hellos)
+
+
+def test_a_probe_commits_nothing_until_the_nonce_comes_back_sealed():
+    """Challenge–response: a (replayed) probe earns a hello; only a message sealed with the vehicle's key that
+    carries the offered nonce back makes the agent serve that run, and a restarted agent offers another nonce."""
+    agent, vehicle, keys = make(vehicle=Releases())
+    served = agent.run_id
+    hello = probed(agent, "3" * 32)
+    assert agent.run_id == served  # still the run it served
+    send(agent, keys, Assignment(session="s", run="3" * 32, agent="e" * 32, vehicle="v0", round=0, gains={"kp": 0.1}))
+    assert agent.run_id == served and not of(agent, Ack)  # a guessed nonce commits nothing
+    send(agent, keys, Assignment(session="s", run="3" * 32, agent=hello.agent, vehicle="v0", round=0,
+                                 gains={"kp": 0.1, "kd": 0.2}))
+    assert agent.run_id == "3" * 32 and of(agent, Ack)[-1].accepted  # the offered nonce sealed back: committed
+    restarted = Agent("v0", FleetVehicle(ToyFleet(1, seed=1), "toy"), agent.config, Recorder())
+    assert probed(restarted, "3" * 32).agent != hello.agent and restarted.run_id is None
 
 
 def test_tuned_gains_outside_the_envelope_are_not_kept():

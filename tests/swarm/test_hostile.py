@@ -63,11 +63,23 @@ class Swarm:
 
     def start_agents(self, n: int, flight_s: float = 0.0) -> None:
         for j in range(n):
-            vehicle = Recording(j, flight_s)
-            agent = Agent.connect(f"v{j}", vehicle, SwarmConfig(**CFG), self.endpoint)
-            threading.Thread(target=agent.run, daemon=True).start()
-            self.agents.append(agent)
-            self.vehicles.append(vehicle)
+            self.start_agent(j, flight_s)
+
+    def start_agent(self, j: int, flight_s: float = 0.0) -> Agent:
+        """Agent v{j} (a new one: a restarted agent process has nothing of the old one)."""
+        vehicle = Recording(j, flight_s)
+        agent = Agent.connect(f"v{j}", vehicle, SwarmConfig(**CFG), self.endpoint)
+        threading.Thread(target=agent.run, daemon=True).start()
+        self.agents.append(agent)
+        self.vehicles.append(vehicle)
+        return agent
+
+    def restart(self, j: int) -> Agent:
+        """Stop agent v{j} and start a new one in its place."""
+        self.agents[j].close(timeout_s=5)
+        fresh = self.start_agent(j)
+        self.agents[j], self.vehicles[j] = self.agents.pop(), self.vehicles.pop()
+        return fresh
 
     def captured(self, kind: str) -> list[tuple[str, bytes]]:
         """Payloads of one kind the tap has read (it reads the JSON; the tag it cannot make)."""
@@ -302,3 +314,103 @@ def test_a_stalled_subscriber_and_a_burst_do_not_stall_the_run(swarm):
     assert elapsed < 8 * 0.2 + 6.0, elapsed
     assert not [e for e in fleet.events if e["event"] in ("left", "lost")]
     assert [v.released for v in swarm.vehicles] == [[], []]  # no agent thought the coordinator was gone
+
+
+def test_replays_of_any_recorded_message_change_nothing_across_agent_restarts(swarm):
+    """Probes, hellos, welcomes, orders and results of an earlier run and of this one, replayed once and then over
+    and over after both agents restarted: the restarted agents serve the live run, every flight of it is flown."""
+    first = swarm.fleet()
+    swarm.start_agents(2)
+    first.wait_for(2)
+    first.fly(A, 0)
+    first.close()
+    second = swarm.fleet()
+    second.wait_for(2)
+    assert [f.cost for f in second.fly(A, 0)] == twin_costs(A, 0)
+    recorded = list(swarm.seen)  # both runs so far, every kind of message
+    assert {json.loads(p[MAC_BYTES:]).get("kind") for _, p in recorded if len(p) > MAC_BYTES} >= {
+        "probe", "hello", "welcome", "assignment", "ack", "start", "result", "finish"}
+    restarted = [swarm.restart(j) for j in range(2)]
+    assert wait_until(lambda: second.present == ["v0", "v1"] and all(a.run_id == second.run for a in restarted), 30)
+    for key, payload in recorded:  # once, mid-run: the first run's probes among them
+        swarm.tap.put(key, payload)
+    stop = threading.Event()
+    t = keep_sending(swarm.tap, recorded, stop)
+    try:
+        flights = [second.fly(B, k) for k in (1, 2)]
+    finally:
+        stop.set()
+        t.join()
+    assert [[f.cost for f in fl] for fl in flights] == [twin_costs(B, k) for k in (1, 2)]
+    assert [a.run_id for a in restarted] == [second.run] * 2 and [a.flights_flown for a in restarted] == [2, 2]
+    assert not [e for e in second.events if e["event"] in ("late_result", "lost", "duplicate")]
+    assert second.dropped > 0
+
+
+def test_a_flood_of_junk_tokens_does_not_keep_the_vehicles_out(swarm):
+    """600 liveliness tokens nobody answers for, there before the coordinator and the agents: the two genuine
+    vehicles join anyway, and the coordinator keeps nothing of the junk."""
+    junk = open_client(swarm.endpoint)
+    try:
+        for i in range(600):
+            junk.declare_token(KEYS.alive(f"junk{i}"))
+        fleet = swarm.fleet()
+        # every junk token is probed once, and that is all it gets
+        assert wait_until(lambda: len({k for k, _ in swarm.seen if "/to/junk" in k}) >= 600, 60)
+        swarm.start_agents(2)
+        assert fleet.wait_for(2, timeout_s=30) == ["v0", "v1"]
+        assert [f.cost for f in fleet.fly(A, 0)] == twin_costs(A, 0)
+        for table in (fleet._hello, fleet._alive, fleet._accepted, fleet._knocked, fleet._duplicate):
+            assert set(table) <= {"v0", "v1"}
+    finally:
+        junk.close()
+
+
+def test_insider_results_for_rounds_never_assigned_are_dropped_and_kept_nowhere(swarm, caplog):
+    """A holder of v0's key sends results for rounds 1000011 and 1000012 (one with 20 000 gains): one line, no
+    event, nothing kept; a late result of a flight counted lost with the gains owed is still kept, once."""
+    fleet = swarm.fleet()
+    swarm.start_agents(1, flight_s=0.2)
+    fleet.wait_for(1)
+    assert [f.cost for f in fleet.fly(A[:1], 0)] == twin_costs(A[:1], 0)
+    hello = [h for h in (json.loads(p[MAC_BYTES:]) for _, p in swarm.captured("hello")) if h["run"] == fleet.run][-1]
+    insider = Codec("h1", vehicle_key(KEY, "v0"))
+    base = dict(session="h1", run=fleet.run, agent=hello["agent"], vehicle="v0", cost=0.001, status="ok")
+    small = insider.encode(Result(**base, round=1000011, gains=A[0]))
+    body = json.dumps({**Result(**base, round=1000012, gains=A[0]).model_dump(mode="json"),
+                       "gains": {f"g{i}": 0.1 for i in range(20_000)}}).encode()
+    huge = insider._tag(body) + body
+    caplog.set_level(logging.WARNING)
+    size = len(json.dumps(fleet.report()))
+    swarm.tap.put(KEYS.frm("v0"), small)
+    swarm.tap.put(KEYS.frm("v0"), huge)
+    assert wait_until(lambda: (fleet.present, fleet.dropped >= 2)[1], 30)
+    lines = [r.getMessage() for r in caplog.records if "dropped" in r.getMessage()]
+    assert len(lines) == 2 and "round 1000011: no open flight of that round was assigned" in lines[0], lines
+    assert "at most 64 items" in lines[1]
+    for _ in range(100):  # the same again and again: a bounded number of lines
+        swarm.tap.put(KEYS.frm("v0"), small)
+        swarm.tap.put(KEYS.frm("v0"), huge)
+    assert wait_until(lambda: (fleet.present, fleet.dropped >= 150)[1], 30)
+    assert [f.cost for f in fleet.fly(B[:1], 1)] == twin_costs(B[:1], 1)
+    assert not [e for e in fleet.events if e["event"] == "late_result" or (e["round"] or 0) >= 1000000]
+    assert len(json.dumps(fleet.report())) < size + 2000  # round 1's events at most
+    assert len([r for r in caplog.records if "dropped" in r.getMessage()]) <= 10
+
+
+def test_two_agents_claiming_one_vehicle_id_are_named_in_one_line(swarm, caplog):
+    caplog.set_level(logging.INFO)
+    fleet = swarm.fleet()
+    swarm.start_agents(2)
+    fleet.wait_for(2)
+    second_v1 = Agent.connect("v1", Recording(1, 0.0), SwarmConfig(**CFG), swarm.endpoint)
+    threading.Thread(target=second_v1.run, daemon=True).start()
+    try:
+        assert wait_until(lambda: (fleet.present, any(e["event"] == "duplicate" for e in fleet.events))[1], 30)
+        assert fleet.present == ["v0"]  # left out while two answer for it
+    finally:
+        second_v1.close(timeout_s=5)
+    lines = [r.getMessage() for r in caplog.records if "two agents claim vehicle id 'v1'" in r.getMessage()]
+    assert len(lines) == 1, lines
+    assert wait_until(lambda: fleet.present == ["v0", "v1"], 40)  # one answers again: it is back
+    assert [f.cost for f in fleet.fly(A, 0)] == twin_costs(A, 0)

@@ -17,6 +17,7 @@ from mavtune.swarm.messages import (MAC_BYTES, MAX_MESSAGE_BYTES, Assignment, Co
 KEY = "k" * 32
 RUN, AGENT = "a" * 32, "b" * 32
 KW = dict(session="s1", run=RUN, agent=AGENT, vehicle="v0")
+CHALLENGE = "c" * 32
 CODEC = Codec("s1", KEY)
 
 
@@ -45,9 +46,10 @@ def _sealed(body: bytes) -> bytes:
     (CODEC.encode(Start(**KW, round=1))[:-1] + b" ", "authenticated"),  # tampered body
     (_sealed(b"null"), "invalid"), (_sealed(b"not json"), "invalid"), (_sealed(b'{"kind": "assignment"}'), "invalid"),
     (CODEC.encode(Start(**{**KW, "session": "other"}, round=1)), "not ours"),
-    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":4', b'"v":3')), "invalid"),
-    (_sealed(Hello(**KW).model_dump_json().encode().replace(b'"vehicle":"v0"', b'"vehicle":"a/b"')), "invalid"),
-    (_sealed(Hello(**KW).model_dump_json().encode().replace(b"}", b',"extra":1}', 1)), "invalid"),
+    (_sealed(Start(**KW, round=1).model_dump_json().encode().replace(b'"v":5', b'"v":4')), "protocol version 4, not 5"),
+    (_sealed(Hello(**KW, challenge=CHALLENGE).model_dump_json().encode().replace(b'"vehicle":"v0"', b'"vehicle":"x/"')),
+     "invalid"),
+    (_sealed(Hello(**KW, challenge=CHALLENGE).model_dump_json().encode().replace(b"}", b',"extra":1}', 1)), "invalid"),
     (b"{" + b" " * MAX_MESSAGE_BYTES + b"}", "limit"),
 ])
 def test_bad_payloads_are_rejected_saying_why(payload, why):
@@ -132,7 +134,7 @@ PARAMS = {"stack": "ardupilot", "system_id": 3, "component_id": 1, "gains": {
 
 
 def test_a_hello_carries_the_vehicles_parameter_map():
-    msg = Hello(**KW, backend="mavlink", params=PARAMS)
+    msg = Hello(**KW, challenge=CHALLENGE, backend="mavlink", params=PARAMS)
     back = CODEC.decode(CODEC.encode(msg))
     assert back == msg and back.params.values({"kp": 0.5, "kd": 0.0}) == {"PSC_POSZ_P": 2.0, "PSC_VELZ_P": 1.0}
 
@@ -145,13 +147,13 @@ def test_a_hello_carries_the_vehicles_parameter_map():
     {"gains": {"kp": {"param": "PSC_POSZ_P", "lo": 1.0, "hi": 3.0, "extra": 1}}},
 ])
 def test_a_hello_with_a_parameter_map_that_could_write_a_wrong_file_is_rejected(change):
-    body = json.dumps(Hello(**KW).model_dump(mode="json") | {"params": PARAMS | change})
+    body = json.dumps(Hello(**KW, challenge=CHALLENGE).model_dump(mode="json") | {"params": PARAMS | change})
     with pytest.raises(Rejected, match=r"invalid message .* at hello\.params\."):
         CODEC.decode(_sealed(body.encode()))
 
 
 def test_a_hello_with_a_non_finite_range_is_rejected():
-    body = Hello(**KW, params=PARAMS).model_dump_json().replace('"hi":8.0', '"hi":Infinity')
+    body = Hello(**KW, challenge=CHALLENGE, params=PARAMS).model_dump_json().replace('"hi":8.0', '"hi":Infinity')
     with pytest.raises(Rejected, match=r"finite number at hello\.params\.gains\.kd\.hi"):
         CODEC.decode(_sealed(body.encode()))
 
@@ -175,3 +177,14 @@ def test_each_vehicle_gets_its_own_key_and_an_agent_takes_only_its_own(tmp_path)
     with pytest.raises(MavtuneError, match="a vehicle's key"):
         write_vehicle_keys(line, ["v2"], tmp_path)
     assert paths[1].read_text().strip().endswith(vehicle_key(KEY, "v1"))  # nothing overwritten
+
+
+def test_a_results_flight_details_are_bounded_and_an_agent_still_reports_a_flight_with_too_many():
+    from mavtune.swarm.messages import MAX_INFO_BYTES
+
+    with pytest.raises(Rejected, match="invalid"):
+        CODEC.decode(_result_json(info={"junk": "x" * MAX_INFO_BYTES}))
+    flight = Flight(vehicle="x", gains={"kp": 0.5}, cost=1.0, status=Status.OK, info={"log": "y" * MAX_INFO_BYTES})
+    res = CODEC.decode(CODEC.encode(result_from_flight(flight, session="s1", run=RUN, agent=AGENT, round_id=2,
+                                                       vehicle="v1")))
+    assert res.cost == 1.0 and list(res.info) == ["info_dropped"]

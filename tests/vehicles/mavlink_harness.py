@@ -6,9 +6,13 @@ import json
 import socket
 import subprocess
 import sys
+import threading
+import time
+from collections import Counter, deque
 from contextlib import contextmanager
 
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
 
 from mavtune.vehicles.mavlink.config import MavlinkConfig, SafetyConfig
 from mavtune.vehicles.mavlink.link import MavlinkLink
@@ -83,7 +87,8 @@ def fast_config(**changes) -> MavlinkConfig:
     """A short primitive, for a simulator running up to SPEED times faster than real time, with load-proof timeouts."""
     base = dict(
         primitive_s=4.0, settle_s=0.5, param_timeout_s=0.5, param_retries=5, heartbeat_wait_s=20.0,
-        mode_timeout_s=5.0, safety=fast_safety(),
+        mode_timeout_s=5.0, discover_s=0.5,  # mavsim at SPEED sends SPEED heartbeats a second
+        safety=fast_safety(),
     )
     base.update(changes)
     return MavlinkConfig(**base)
@@ -93,7 +98,7 @@ def read_params(url: str, names: list[str]) -> dict[str, float]:
     """Read parameters back over a fresh MAVLink connection (what the vehicle really holds now)."""
     link = MavlinkLink(url)
     try:
-        assert link.wait_for(lambda st: st.heartbeats > 0, 10.0), "no heartbeat"
+        link.choose_target(10.0, 0.0)
         client = ParamClient(link, 0.5, 5)
         return {n: client.read(n) for n in names}
     finally:
@@ -110,3 +115,125 @@ def tune_mavlink(urls: list[str], out, config: MavlinkConfig, **tuning) -> dict:
              **{f"tuning.{k}": v for k, v in tuning.items()}}
     run(load_config(None, flags), out, quiet=True, report=False)
     return json.loads((out / "result.json").read_text())
+
+
+class Relay:
+    """A MAVLink router on 127.0.0.1 between `mavtune mavsim` and the ground side (like mavlink-router on a
+    companion): forwards both ways, and lets hostile components speak on the same link (`inject`)."""
+
+    def __init__(self, ground_port: int):
+        self.vehicle_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.vehicle_side.bind(("127.0.0.1", 0))
+        self.port = self.vehicle_side.getsockname()[1]  # mavsim sends here
+        self.ground_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.ground = ("127.0.0.1", ground_port)
+        self.vehicle: tuple[str, int] | None = None
+        self.sent: Counter = Counter()  # (message type, its target_system or None) the ground sent, counted
+        self._parser = mavlink.MAVLink(None)
+        self._up_parser = mavlink.MAVLink(None)
+        self.last_seq: dict[tuple[int, int], int] = {}  # (system, component) → its last packet sequence number
+        self.streaming: set[tuple[str, int]] = set()  # vehicle-side addresses that sent a LOCAL_POSITION_NED
+        self._as_vehicle: dict[tuple[int, int], tuple] = {}  # (system, component) → (MAVLink, queued messages)
+        self._lock = threading.Lock()
+        self.stop = threading.Event()
+        self.threads = [threading.Thread(target=f, daemon=True) for f in (self._up, self._down)]
+        for t in self.threads:
+            t.start()
+
+    def _up(self):
+        self.vehicle_side.settimeout(0.05)
+        while not self.stop.is_set():
+            try:
+                data, self.vehicle = self.vehicle_side.recvfrom(65535)
+            except OSError:
+                continue
+            self.ground_side.sendto(data, self.ground)
+            try:
+                msgs = self._up_parser.parse_buffer(data) or []
+            except mavlink.MAVError:
+                continue
+            for msg in msgs:
+                me = (msg.get_srcSystem(), msg.get_srcComponent())
+                self.last_seq[me] = msg.get_seq()
+                if msg.get_type() == "LOCAL_POSITION_NED":
+                    self.streaming.add(self.vehicle)
+                with self._lock:
+                    queued = self._as_vehicle.get(me)
+                    while queued and queued[1]:
+                        mav = queued[0]
+                        mav.seq = msg.get_seq()  # in the vehicle's own stream, as its own message would be
+                        self.ground_side.sendto(queued[1].popleft().pack(mav), self.ground)
+
+    def _down(self):
+        self.ground_side.settimeout(0.05)
+        while not self.stop.is_set():
+            try:
+                data, _ = self.ground_side.recvfrom(65535)
+            except OSError:
+                continue
+            try:
+                for msg in self._parser.parse_buffer(data) or []:
+                    self.sent[(msg.get_type(), getattr(msg, "target_system", None))] += 1
+            except mavlink.MAVError:
+                pass
+            if self.vehicle is not None:
+                self.vehicle_side.sendto(data, self.vehicle)
+
+    def sent_to(self, system: int) -> dict[str, int]:
+        """{message type: how many} the ground addressed to `system`."""
+        return {kind: n for (kind, target), n in self.sent.items() if target == system}
+
+    @contextmanager
+    def inject(self, system: int, component: int, send, hz: float = 50.0):
+        """A hostile component (system, component) on the link: `send(mav)` `hz` times a second in the block.
+        Speaking as a (system, component) the vehicle has, each message goes out right after one of the vehicle's
+        own, with its packet sequence number, as a message of that component's would."""
+        mav = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)
+        if (system, component) in self.last_seq:
+            queued: deque = deque()
+            with self._lock:
+                self._as_vehicle[(system, component)] = (mav, queued)
+            mav.send = lambda msg, force_mavlink1=False: queued.append(msg)
+        else:
+            mav.send = lambda msg, force_mavlink1=False: self.ground_side.sendto(msg.pack(mav), self.ground)
+        stop = threading.Event()
+
+        def loop():
+            while not stop.is_set():
+                send(mav)
+                time.sleep(1.0 / hz)
+
+        t = threading.Thread(target=loop, daemon=True)
+        t.start()
+        try:
+            yield
+        finally:
+            stop.set()
+            t.join(timeout=2)
+
+    def close(self):
+        self.stop.set()
+        for t in self.threads:
+            t.join(timeout=2)
+        self.vehicle_side.close()
+        self.ground_side.close()
+
+
+@contextmanager
+def relayed_mavsim(**kw):
+    """`mavtune mavsim` behind a Relay: yields (the ground URL, the relay)."""
+    ground_port = free_udp_port()
+    relay = Relay(ground_port)
+    try:
+        with mavsim_on(relay.port, **kw):
+            yield f"udpin:127.0.0.1:{ground_port}", relay
+    finally:
+        relay.close()
+
+
+def wait_streaming(relay: "Relay", senders: int) -> None:
+    """Until `senders` simulated vehicles stream positions through the relay (a loaded machine starts them slowly)."""
+    deadline = time.monotonic() + 60
+    while len(relay.streaming) < senders:
+        assert time.monotonic() < deadline, "the simulated vehicles did not start"
+        time.sleep(0.05)

@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import socket
 import subprocess
+import sys
 import tempfile
+import threading
 import time
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
@@ -49,12 +52,13 @@ def _ports_free(instance: int) -> bool:
     return True
 
 
-def _claim_instance() -> int:
-    """An instance number whose ports (5760+10N, 5762+10N and SITL's simulator ports) are free, claimed by a lock
-    file so parallel tests do not race for it."""
-    lockdir = Path(tempfile.gettempdir()) / "mavtune-sitl-instances"
+def claim_instance(kind: str, numbers, usable=lambda n: True) -> int:
+    """An instance number of `kind` (a SITL's -I/-i) among `numbers` that no other test holds and that is
+    `usable` (its ports free), claimed by a lock file so parallel tests do not race for it (a stale lock of a dead
+    process is taken over); `release_instance` gives it back."""
+    lockdir = Path(tempfile.gettempdir()) / f"mavtune-{kind}-instances"
     lockdir.mkdir(exist_ok=True)
-    for n in range(20, 200):
+    for n in numbers:
         lock = lockdir / f"{n}.lock"
         try:
             fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
@@ -70,10 +74,14 @@ def _claim_instance() -> int:
                 continue
         os.write(fd, str(os.getpid()).encode())
         os.close(fd)
-        if _ports_free(n):
+        if usable(n):
             return n
         lock.unlink(missing_ok=True)
-    raise RuntimeError("no free SITL instance number")
+    raise RuntimeError(f"no free {kind} instance number")
+
+
+def release_instance(kind: str, n: int) -> None:
+    (Path(tempfile.gettempdir()) / f"mavtune-{kind}-instances" / f"{n}.lock").unlink(missing_ok=True)
 
 
 @dataclass
@@ -156,9 +164,8 @@ def sitl_vehicles(count: int = 1, speedup: int = SPEEDUP, hover: bool = True):
     with ExitStack() as stack:
         vehicles: list[Sitl] = []
         for _ in range(count):
-            instance = _claim_instance()
-            stack.callback(lambda n=instance: (Path(tempfile.gettempdir()) / "mavtune-sitl-instances" /
-                                               f"{n}.lock").unlink(missing_ok=True))
+            instance = claim_instance("sitl", range(20, 200), _ports_free)
+            stack.callback(release_instance, "sitl", instance)
             folder = Path(tempfile.mkdtemp(prefix=f"mavtune-sitl-{instance}-"))
             stack.callback(shutil.rmtree, folder, True)
             cmd = [str(binary), "--model", "hexa", "--speedup", str(speedup), f"-I{instance}", "-w",
@@ -183,19 +190,95 @@ def read_sitl_params(url: str, names: list[str], timeout_s: float = 10.0) -> dic
     """Read parameters afresh over a new MAVLink connection (what the autopilot really holds now)."""
     master = _connect_tcp(url, timeout_s)
     try:
-        if master.wait_heartbeat(timeout=timeout_s) is None:
-            raise RuntimeError(f"{url}: no heartbeat")
-        values: dict[str, float] = {}
-        deadline = time.monotonic() + timeout_s
-        while len(values) < len(names) and time.monotonic() < deadline:
-            for n in names:
-                if n not in values:
-                    master.mav.param_request_read_send(master.target_system, master.target_component, n.encode(), -1)
-            t_end = time.monotonic() + 0.5
-            while time.monotonic() < t_end:
-                msg = master.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.1)
-                if msg is not None and msg.param_id in names:
-                    values[msg.param_id] = float(msg.param_value)
-        return values
+        return read_params_on(master, names, timeout_s)
     finally:
         master.close()
+
+
+def read_params_on(master: mavutil.mavfile, names: list[str], timeout_s: float) -> dict[str, float]:
+    """Parameters read over an open connection (asked again every 0.5 s until each has answered)."""
+    if master.wait_heartbeat(timeout=timeout_s) is None:
+        raise RuntimeError(f"{master.address}: no heartbeat")
+    values: dict[str, float] = {}
+    deadline = time.monotonic() + timeout_s
+    while len(values) < len(names) and time.monotonic() < deadline:
+        for n in names:
+            if n not in values:
+                master.mav.param_request_read_send(master.target_system, master.target_component, n.encode(), -1)
+        t_end = time.monotonic() + 0.5
+        while time.monotonic() < t_end:
+            msg = master.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.1)
+            if msg is not None and msg.param_id in names:
+                values[msg.param_id] = float(msg.param_value)
+    return values
+
+
+def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: str, ids: list[str],
+                   result_timeout_s: float, timeout_s: float) -> str:
+    """`mavtune coordinator` with one `mavtune agent --vehicle mavlink` per URL (each its own key file and state
+    folder, all on 127.0.0.1), ε 0.25 and one bootstrap, run to the end in `folder / "run"`; the coordinator's
+    output. The agents stay for the next run after Finish: they are stopped with SIGINT; every process is killed
+    on the way out whatever happens."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
+    key = folder / "swarm.key"
+    key.write_text(f"{session} swarm test key\n")
+    (folder / "agent.toml").write_text(f"[swarm]\nsession = \"{session}\"\nkey_file = \"{key}\"\n"
+                                       f"result_timeout_s = {result_timeout_s}\n[mavlink]\n{mavlink_toml}")
+    mavtune = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+    procs = [subprocess.Popen(
+        [*mavtune, "coordinator", "--listen", endpoint, "--vehicles", str(len(urls)), "--out", str(folder / "run"),
+         "--session", session, "--key-file", str(key), "--settle-s", "0", "--result-timeout-s",
+         str(result_timeout_s), "--bootstraps", "1", "--epsilon", "0.25"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
+    try:
+        for i, (name, url) in enumerate(zip(ids, urls)):
+            procs.append(subprocess.Popen(
+                [*mavtune, "agent", "--id", name, "--connect", endpoint, "--vehicle", "mavlink", "--mavlink", url,
+                 "--config", str(folder / "agent.toml"), "--state-dir", str(folder / f"state{i}")],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        log, _ = procs[0].communicate(timeout=timeout_s)
+        assert procs[0].returncode == 0, log[-3000:]
+        for agent in procs[1:]:
+            agent.send_signal(signal.SIGINT)
+            agent.wait(timeout=30)
+        return log
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+            p.wait(timeout=10)
+
+
+def recorded_rounds(folder: Path) -> int:
+    """Rounds the run in `folder` has recorded in its journal so far (0 while there is none, or it is being made)."""
+    from mavtune.journal import Journal
+
+    try:
+        with Journal(folder / "journal.sqlite", read_only=True) as journal:
+            return len(journal)
+    except Exception:  # noqa: BLE001 - absent, or the run is still creating it
+        return 0
+
+
+@contextmanager
+def after_rounds(folder: Path, rounds: int, action):
+    """Do `action()` once the run in `folder` has recorded `rounds` rounds — mid-run whatever the machine's load,
+    which a fixed delay is not; yields an Event set once it was done."""
+    done, stop = threading.Event(), threading.Event()
+
+    def watch() -> None:
+        while not stop.wait(0.2):
+            if recorded_rounds(folder) >= rounds:
+                action()
+                done.set()
+                return
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        yield done
+    finally:
+        stop.set()
+        watcher.join(timeout=30)

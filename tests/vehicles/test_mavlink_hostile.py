@@ -4,7 +4,6 @@ an extra pymavlink client injecting the hostile traffic."""
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from contextlib import contextmanager
@@ -17,86 +16,12 @@ from mavtune.errors import MavtuneError
 from mavtune.vehicles.mavlink import MavlinkVehicle
 from mavtune.vehicles.mavlink.config import GainParam
 
-from mavlink_harness import fast_config, free_udp_port, mavsim, mavsim_on, read_params, tune_mavlink
+from mavlink_harness import (fast_config, free_udp_port, mavsim, read_params, relayed_mavsim, tune_mavlink,
+                             wait_streaming)
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
 
 PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
-
-
-class Relay:
-    """A MAVLink router on 127.0.0.1 between `mavtune mavsim` and the ground side (like mavlink-router on a
-    companion): forwards both ways, and lets hostile components speak on the same link (`inject`)."""
-
-    def __init__(self, ground_port: int):
-        self.vehicle_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.vehicle_side.bind(("127.0.0.1", 0))
-        self.port = self.vehicle_side.getsockname()[1]  # mavsim sends here
-        self.ground_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.ground = ("127.0.0.1", ground_port)
-        self.vehicle: tuple[str, int] | None = None
-        self.stop = threading.Event()
-        self.threads = [threading.Thread(target=f, daemon=True) for f in (self._up, self._down)]
-        for t in self.threads:
-            t.start()
-
-    def _up(self):
-        self.vehicle_side.settimeout(0.05)
-        while not self.stop.is_set():
-            try:
-                data, self.vehicle = self.vehicle_side.recvfrom(65535)
-            except OSError:
-                continue
-            self.ground_side.sendto(data, self.ground)
-
-    def _down(self):
-        self.ground_side.settimeout(0.05)
-        while not self.stop.is_set():
-            try:
-                data, _ = self.ground_side.recvfrom(65535)
-            except OSError:
-                continue
-            if self.vehicle is not None:
-                self.vehicle_side.sendto(data, self.vehicle)
-
-    @contextmanager
-    def inject(self, system: int, component: int, send, hz: float = 50.0):
-        """A hostile component (system, component) on the link: `send(mav)` `hz` times a second in the block."""
-        mav = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)
-        mav.send = lambda msg, force_mavlink1=False: self.ground_side.sendto(msg.pack(mav), self.ground)
-        stop = threading.Event()
-
-        def loop():
-            while not stop.is_set():
-                send(mav)
-                time.sleep(1.0 / hz)
-
-        t = threading.Thread(target=loop, daemon=True)
-        t.start()
-        try:
-            yield
-        finally:
-            stop.set()
-            t.join(timeout=2)
-
-    def close(self):
-        self.stop.set()
-        for t in self.threads:
-            t.join(timeout=2)
-        self.vehicle_side.close()
-        self.ground_side.close()
-
-
-@contextmanager
-def relayed_mavsim(**kw):
-    """`mavtune mavsim` behind a Relay: yields (the ground URL, the relay)."""
-    ground_port = free_udp_port()
-    relay = Relay(ground_port)
-    try:
-        with mavsim_on(relay.port, **kw):
-            yield f"udpin:127.0.0.1:{ground_port}", relay
-    finally:
-        relay.close()
 
 
 def companion(mav):
@@ -123,6 +48,7 @@ def forward_rangefinder(mav):
 
 def test_only_the_autopilot_is_listened_to_and_only_a_downward_rangefinder(tmp_path):
     with relayed_mavsim(autopilot="px4", speed=5.0) as (url, relay):  # 5× real time: keeps up on a loaded machine
+        wait_streaming(relay, 1)  # the forward rangefinder speaks in the autopilot's own stream
         with relay.inject(1, 100, camera), relay.inject(2, 1, tracker), relay.inject(1, 191, companion), \
                 relay.inject(1, 1, forward_rangefinder, hz=20):
             time.sleep(0.5)  # the hostile components speak first
@@ -251,7 +177,7 @@ def test_the_link_delay_is_measured(delay_s):
     with scripted(delay_s=2 * delay_s) as (url, _):  # the round trip carries the delay twice
         link = MavlinkLink(url)
         try:
-            assert link.wait_for(lambda st: st.heartbeats > 0, 5.0)
+            link.choose_target(5.0, 0.0)
             one_way_s, answers = link.measure_delay()
         finally:
             link.close()

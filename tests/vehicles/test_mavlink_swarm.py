@@ -82,11 +82,12 @@ def test_coordinator_tunes_mavlink_vehicles_through_their_agents_and_gives_their
     assert "parameter files" in log and "tuned-2.params" in log
     report = (out / "report.md").read_text()
     assert "## Tuned parameters" in report and "`MPC_Z_VEL_P_ACC`" in report and "`tuned-1.parm`" in report
-    # a gain within ε of an edge (on mavsim kd usually ends near the top) is said once per vehicle parameter
+    # a gain within ε of an edge (on mavsim kd usually ends near the top) is said once per vehicle parameter,
+    # unless its line search flew that edge and it cost more than the answer (then the optimum lies inside)
     at_edge = {e.gain for e in range_edges(result["gains"], {"kp": (0, 1), "kd": (0, 1)}, EPSILON)}
     named = {(e["gain"], e["param"]) for e in result["range_edges"]}
     params = {"kp": ("PSC_POSZ_P", "MPC_Z_P"), "kd": ("PSC_VELZ_P", "MPC_Z_VEL_P_ACC")}
-    assert named == {(g, p) for g in at_edge for p in params[g]}
+    assert {g for g, _ in named} <= at_edge and named == {(g, p) for g in {g for g, _ in named} for p in params[g]}
     for edge in result["range_edges"]:
         assert f"range edge: {edge['message']}" in " ".join(log.split()) and edge["message"] in report
         assert "documented limit" in edge["hint"]  # the default ranges span each autopilot's limits

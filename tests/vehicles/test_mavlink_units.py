@@ -137,6 +137,8 @@ def test_only_the_autopilot_component_answers_parameters_and_sets_the_mode():
                                                      mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode, 4, 3)
 
         link._handle(_from(1, heartbeat(PX4.custom_mode_word("OFFBOARD"))))
+        link.choose_target(1.0, 0.0)
+        link._handle(_from(1, heartbeat(PX4.custom_mode_word("OFFBOARD"))))
         link._handle(_from(154, heartbeat(PX4.custom_mode_word("POSCTL"))))  # a camera claiming PX4
         link._handle(_from(154, mavlink.MAVLink_param_value_message(b"MPC_Z_P", 9.0, 9, 1, 0)))
         assert link.state.mode == "OFFBOARD" and link.state.component == 1 and "MPC_Z_P" not in link.state.params

@@ -89,7 +89,10 @@ def test_a_range_edge_names_the_parameter_and_what_to_widen(tmp_path):
     at_limit = tuned_outcome({"a": ARDU}, {"kp": 0.5, "kd": 0.95}, SPACE, 0.125, tmp_path)["range_edges"]
     assert [e["param"] for e in at_limit] == ["PSC_VELZ_P"]
     assert "already ends at PSC_VELZ_P's documented limit 8" in at_limit[0]["message"]
+    assert "the limit, not the search, stopped it" in at_limit[0]["message"].replace("autopilot's limit", "limit")
+    assert "widen " not in at_limit[0]["message"] and at_limit[0]["at_limit"]  # no advice to widen
     short = PX4.explain_edge(RangeEdge("kd", 0.95, "upper", 1.0, 0.125))  # MPC_Z_VEL_P_ACC goes on to 15
-    assert short.param_value == pytest.approx(9.6) and "widen [mavlink.gains.kd] max (as far as 15" in short.hint
+    assert short.param_value == pytest.approx(9.6) and not short.at_limit
+    assert "raise max of gain kd (MPC_Z_VEL_P_ACC) in the config's mavlink.gains.kd table as far as 15" in short.hint
     inside = PX4.explain_edge(RangeEdge("kp", 0.1, "lower", 0.05, 0.1))  # the tuning space ends before the range
     assert inside.hint.startswith("widen tuning.space.kp") and inside.param_bound == pytest.approx(0.36)

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -15,11 +14,11 @@ import time
 import pytest
 from pymavlink import mavparm, mavutil
 
-from mavtune.journal import Journal
 from mavtune.vehicles.mavlink.config import MavlinkConfig
 
 from mavlink_harness import tune_mavlink
-from sitl_harness import SKIP_REASON, read_sitl_params, sitl_binary, sitl_vehicles
+from sitl_harness import (SKIP_REASON, after_rounds, read_sitl_params, recorded_rounds, sitl_binary,
+                          sitl_vehicles, tune_by_agents)
 
 pytestmark = [
     pytest.mark.sitl, pytest.mark.integration, pytest.mark.timeout(240),
@@ -41,11 +40,6 @@ def assert_restored(urls: list[str]) -> None:
         assert read_sitl_params(url, list(ORIGINALS)) == ORIGINALS, url
 
 
-def journal_rounds(out) -> int:
-    with Journal(out / "journal.sqlite") as j:
-        return len(j.rounds())
-
-
 @pytest.mark.slow
 def test_one_vehicle_avg_tunes_and_restores(tmp_path):
     with sitl_vehicles(1) as (sitl,):
@@ -56,7 +50,7 @@ def test_one_vehicle_avg_tunes_and_restores(tmp_path):
     assert result["status"] == "finished" and result["restored"] is True
     assert result["original_params"] == {sitl.tuner_url: ORIGINALS}
     assert result["flights_by_status"]["ok"] == result["flights"] == result["rounds"] > 0
-    assert journal_rounds(tmp_path) == result["rounds"]
+    assert recorded_rounds(tmp_path) == result["rounds"]
     params = result["tuned_params"][sitl.tuner_url]
     assert set(params) == set(ORIGINALS)
     assert 0.5 <= params["PSC_POSZ_P"] <= 3.0 and 1.0 <= params["PSC_VELZ_P"] <= 8.0 * 1.6
@@ -83,47 +77,17 @@ def test_two_vehicles_split_each_flies_its_own_point(tmp_path):
     assert result["flights_by_status"]["ok"] == result["flights"]
 
 
-def _free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.slow
 def test_two_agents_under_the_zenoh_coordinator_give_each_vehicles_parameters(tmp_path):
-    endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
-    key = tmp_path / "swarm.key"
-    key.write_text("sitl swarm test key\n")
-    (tmp_path / "agent.toml").write_text(
-        f"[swarm]\nsession = \"sitl\"\nkey_file = \"{key}\"\nresult_timeout_s = 60.0\n"
-        "[mavlink]\nparam_timeout_s = 0.5\nheartbeat_wait_s = 20.0\n")
     out = tmp_path / "run"
     with sitl_vehicles(2) as vehicles:
         urls = [v.tuner_url for v in vehicles]
-        procs = [subprocess.Popen(
-            [*MAVTUNE, "coordinator", "--listen", endpoint, "--vehicles", "2", "--out", str(out), "--session",
-             "sitl", "--key-file", str(key), "--settle-s", "0", "--result-timeout-s", "60", "--bootstraps", "1",
-             "--epsilon", "0.25"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
-        try:
-            for i, url in enumerate(urls):
-                procs.append(subprocess.Popen(
-                    [*MAVTUNE, "agent", "--id", f"s{i}", "--connect", endpoint, "--vehicle", "mavlink",
-                     "--mavlink", url, "--config", str(tmp_path / "agent.toml"), "--state-dir",
-                     str(tmp_path / f"state{i}")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-            log, _ = procs[0].communicate(timeout=200)
-            assert procs[0].returncode == 0, log[-3000:]
-            for agent in procs[1:]:  # agents release their vehicles on Finish and stay for the next run
-                agent.send_signal(signal.SIGINT)
-                agent.wait(timeout=20)
-        finally:
-            for p in procs:
-                if p.poll() is None:
-                    p.kill()
-                p.wait(timeout=10)
+        log = tune_by_agents(urls, tmp_path, "sitl", "param_timeout_s = 0.5\nheartbeat_wait_s = 20.0\n", ["s0", "s1"],
+                             result_timeout_s=60.0, timeout_s=200)
         assert_restored(urls)
     result = json.loads((out / "result.json").read_text())
     assert result["status"] == "finished" and result["flights_by_status"]["ok"] == result["flights"] > 0
-    assert journal_rounds(out) == result["rounds"]
+    assert recorded_rounds(out) == result["rounds"]
     kp, kd = result["gains"]["kp"], result["gains"]["kd"]
     expected = pytest.approx({"PSC_POSZ_P": 1.0 + 2.0 * kp, "PSC_VELZ_P": 1.0 + 7.0 * kd})
     assert result["tuned_params"] == {"s0": expected, "s1": expected}  # from the maps the agents sent
@@ -197,29 +161,12 @@ def test_pilot_taking_over_gets_the_originals_and_the_run_goes_on(tmp_path):
 def test_sitl_killed_mid_flight_the_run_goes_on_and_the_journal_keeps_every_round(tmp_path):
     with sitl_vehicles(2) as vehicles:
         urls = [v.tuner_url for v in vehicles]
-        stop = threading.Event()
-
-        def kill_after_two_rounds() -> None:  # mid-run whatever the machine's load (a fixed delay was not)
-            while not stop.wait(0.2):
-                try:
-                    recorded = journal_rounds(tmp_path) if (tmp_path / "journal.sqlite").exists() else 0
-                except Exception:  # noqa: BLE001 - the run is still creating it
-                    continue
-                if recorded >= 2:
-                    vehicles[0].kill()
-                    return
-
-        killer = threading.Thread(target=kill_after_two_rounds, daemon=True)
-        killer.start()
-        try:
+        with after_rounds(tmp_path, 2, vehicles[0].kill):
             result = tune_mavlink(urls, tmp_path, sitl_config(), vehicles=2, **SHORT)
-        finally:
-            stop.set()
-            killer.join(timeout=10)
         assert_restored(urls[1:])  # the survivor; the killed process holds nothing any more
     assert result["status"] == "finished"
     assert result["restored"] is False  # the lost vehicle could not confirm its originals: said, not hidden
-    assert journal_rounds(tmp_path) == result["rounds"]
+    assert recorded_rounds(tmp_path) == result["rounds"]
     statuses = [f["status"] for r in result["rounds_log"] for f in r["flights"] if f["vehicle"] == urls[0]]
     assert "lost" in statuses and statuses[0] == "ok"
     assert all(f["status"] == "ok" for r in result["rounds_log"] for f in r["flights"] if f["vehicle"] == urls[1])
@@ -233,12 +180,9 @@ def test_ctrl_c_mid_run_restores_and_resumes_from_the_journal(tmp_path):
                "--epsilon", "0.25", "--bootstraps", "1", "--vehicles", "1", "--quiet"]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         try:
-            deadline = time.monotonic() + 120
-            while time.monotonic() < deadline and not (
-                    (out / "journal.sqlite").exists() and journal_rounds(out) >= 2):
-                time.sleep(0.5)
-            proc.send_signal(signal.SIGINT)
-            log, _ = proc.communicate(timeout=60)
+            with after_rounds(out, 2, lambda: proc.send_signal(signal.SIGINT)) as sent:
+                log, _ = proc.communicate(timeout=120)
+            assert sent.is_set(), log[-2000:]
         finally:
             if proc.poll() is None:
                 proc.kill()
@@ -247,7 +191,7 @@ def test_ctrl_c_mid_run_restores_and_resumes_from_the_journal(tmp_path):
         assert_restored([sitl.tuner_url])
         summary = json.loads((out / "result.json").read_text())
         assert summary["status"] == "interrupted" and summary["restored"] is True
-        assert journal_rounds(out) == summary["rounds"] >= 2
+        assert recorded_rounds(out) == summary["rounds"] >= 2
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=200)
         assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
         assert_restored([sitl.tuner_url])

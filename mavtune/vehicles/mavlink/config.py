@@ -86,7 +86,10 @@ class MavlinkConfig(BaseModel):
     param_timeout_s: float = Field(1.0, gt=0)  # wait for PARAM_VALUE per attempt (raise for slow links)
     param_retries: int = Field(5, ge=1)
     mode_timeout_s: float = Field(3.0, gt=0)  # wait for the HEARTBEAT to show a commanded mode
-    target_system: int | None = Field(None, ge=1, le=255)  # None: the first vehicle that sends a HEARTBEAT
+    target_system: int | None = Field(None, ge=1, le=255)  # None: the only autopilot system heard on the link
+    # (several heard: refused; a URL's ?target_system=N suffix chooses per vehicle)
+    discover_s: float = Field(2.5, ge=0)  # after the first autopilot HEARTBEAT, listen this long (wall s) for
+    # other autopilots on the link before sending anything (they send HEARTBEATs at 1 Hz)
     source_system: int = Field(255, ge=1, le=255)  # our (ground station) system id
     safety: SafetyConfig = SafetyConfig()
 

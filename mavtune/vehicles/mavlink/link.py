@@ -4,6 +4,11 @@ A link carries more than the autopilot: companions, cameras, gimbals, antenna tr
 autopilot is the first component whose HEARTBEAT names an autopilot and a vehicle type (`is_autopilot`), not the
 first to speak; position, altitude, mode, parameters and acknowledgements are taken from that component only, and
 the altitude from a rangefinder only when it looks down (MAV_SENSOR_ROTATION_PITCH_270).
+
+Several autopilots may speak on one link. Nothing is sent before `choose_target`: it listens for the autopilots on
+the link, takes the configured target system (`target_system`, or a `?target_system=N` suffix on the URL), or the
+only system heard, and refuses when several are heard and none was chosen, or when two autopilots answer as the
+one system (interleaved packet sequence numbers, differing HEARTBEATs or AUTOPILOT_VERSION uids).
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import math
 import statistics
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -41,8 +47,25 @@ def is_autopilot(autopilot: int, mav_type: int) -> bool:
     return autopilot != mavlink.MAV_AUTOPILOT_INVALID and mav_type not in NOT_VEHICLES
 
 
+TARGET_SUFFIX = "?target_system="
+
+
+def split_target(url: str) -> tuple[str, int | None]:
+    """A URL without its `?target_system=N` suffix, and N (None without one): the system to tune on that link."""
+    base, sep, tail = url.partition(TARGET_SUFFIX)
+    if not sep:
+        if "?" in url:
+            raise MavtuneError(f"MAVLink URL {url!r}: the only suffix understood is ?target_system=N (1..255)")
+        return url, None
+    if not tail.isdigit() or not 1 <= int(tail) <= 255:
+        raise MavtuneError(f"MAVLink URL {url!r}: target_system must be a system id in 1..255, got {tail!r}")
+    return base, int(tail)
+
+
 def parse_url(url: str) -> tuple[str, int]:
-    """A pymavlink device string and baud rate from a mavtune URL (udp:/udpin:/udpout:/tcp:/tcpin:/serial:DEV[:BAUD])."""
+    """A pymavlink device string and baud rate from a mavtune URL (udp:/udpin:/udpout:/tcp:/tcpin:/serial:DEV[:BAUD],
+    optionally ending in ?target_system=N)."""
+    url = split_target(url)[0]
     if url.startswith("serial:"):
         dev, baud = url[len("serial:") :], 57600
         head, sep, tail = dev.rpartition(":")
@@ -75,6 +98,54 @@ class PositionSample:
     wall_s: float
 
 
+class SeqWatch:
+    """The MAVLink packet sequence numbers of one (system, component). One sender counts up by one per message
+    (skipping lost ones; a reboot starts again once); two senders answering as one interleave their counters, so
+    about every message of the second steps the count back by a random amount."""
+
+    BACK_MIN = 8  # a step back by fewer is a reordered packet, not another sender
+    WINDOW_S = 10.0
+    LIMIT = 3  # steps back within WINDOW_S that mean two senders (a burst of 129+ lost messages looks like one)
+
+    def __init__(self) -> None:
+        self.last: int | None = None
+        self.backs: deque[float] = deque()
+        self.flagged = False  # interleaved when last looked at (said once per episode)
+
+    def add(self, seq: int, now_s: float) -> None:
+        """Count one message's sequence number, received at wall time now_s."""
+        if self.last is not None:
+            step = (seq - self.last) % 256
+            if 128 < step <= 256 - self.BACK_MIN:
+                self.backs.append(now_s)
+        self.last = seq
+        while self.backs and now_s - self.backs[0] > self.WINDOW_S:
+            self.backs.popleft()
+
+    def interleaved(self, now_s: float) -> bool:
+        """True when two senders seem to share this (system, component): LIMIT steps back within WINDOW_S of
+        now_s (it clears again after WINDOW_S without one, so bursts of lost messages only pause a vehicle)."""
+        return sum(now_s - t <= self.WINDOW_S for t in self.backs) >= self.LIMIT
+
+
+@dataclass(frozen=True)
+class Heard:
+    """An autopilot heard on the link: its HEARTBEAT's component, autopilot and vehicle type."""
+
+    system: int
+    component: int
+    autopilot: int
+    mav_type: int
+
+    def describe(self) -> str:
+        """'1 (PX4, HEXAROTOR)': the system id, autopilot and vehicle type, for the user."""
+        ap = mavlink.enums["MAV_AUTOPILOT"].get(self.autopilot)
+        ty = mavlink.enums["MAV_TYPE"].get(self.mav_type)
+        ap_name = ap.name.removeprefix("MAV_AUTOPILOT_") if ap else str(self.autopilot)
+        ty_name = ty.name.removeprefix("MAV_TYPE_") if ty else str(self.mav_type)
+        return f"{self.system} ({ap_name}, {ty_name})"
+
+
 @dataclass
 class VehicleState:
     """The latest state the reader thread saw from the target vehicle."""
@@ -99,6 +170,9 @@ class VehicleState:
     param_count: int | None = None  # how many parameters the autopilot says it has
     acks: dict[int, tuple[int, int]] = field(default_factory=dict)  # command → (result, arrival no.)
     ack_arrivals: int = 0
+    uid: int = 0  # AUTOPILOT_VERSION uid (0: not sent)
+    uid2: bytes = b""  # AUTOPILOT_VERSION uid2 (ArduPilot sends this one)
+    versions: int = 0  # AUTOPILOT_VERSION messages received
 
 
 class MavlinkLink:
@@ -106,8 +180,16 @@ class MavlinkLink:
 
     def __init__(self, url: str, *, source_system: int = 255, target_system: int | None = None):
         device, baud = parse_url(url)
+        suffix = split_target(url)[1]
+        if suffix is not None and target_system is not None and suffix != target_system:
+            raise MavtuneError(f"MAVLink URL {url!r} says target_system {suffix}, the config says {target_system}")
         self.url = url
-        self.target_system = target_system
+        self.target_system = suffix if suffix is not None else target_system
+        self.chosen = False  # choose_target() settled the system: only then is anything sent or taken as state
+        self.heard: dict[int, Heard] = {}  # autopilots heard on the link, by system id
+        self._conflicts: dict[int, str] = {}  # system id → why two autopilots seem to answer as it
+        self._uids: dict[int, set[tuple[int, bytes]]] = {}  # system id → AUTOPILOT_VERSION ids seen
+        self._seq: dict[tuple[int, int], SeqWatch] = {}
         try:
             self._conn = mavutil.mavlink_connection(
                 device, baud=baud, source_system=source_system, source_component=mavlink.MAV_COMP_ID_MISSIONPLANNER
@@ -157,13 +239,13 @@ class MavlinkLink:
             return
         src, comp = msg.get_srcSystem(), msg.get_srcComponent()
         st = self.state
+        self._watch(src, comp, msg)
         if mtype == "HEARTBEAT":
             if not is_autopilot(msg.autopilot, msg.type):
                 self._ignore(f"HEARTBEAT of a type-{msg.type} component {src}/{comp} (not an autopilot)")
                 return
-            if self.target_system is None:
-                self.target_system = src
-            if src != self.target_system or st.component not in (None, comp):
+            self._hear(Heard(src, comp, msg.autopilot, msg.type))
+            if not self.chosen or src != self.target_system or st.component not in (None, comp):
                 self._ignore(f"HEARTBEAT of {src}/{comp} (not the target autopilot)")
                 return  # another vehicle, or another autopilot-like component of ours
             with self._cond:
@@ -175,7 +257,7 @@ class MavlinkLink:
                 st.heartbeats += 1
                 self._cond.notify_all()
             return
-        if st.component is None or src != self.target_system or comp != st.component:
+        if not self.chosen or st.component is None or src != self.target_system or comp != st.component:
             if mtype in ("LOCAL_POSITION_NED", "DISTANCE_SENSOR", "PARAM_VALUE", "EXTENDED_SYS_STATE", "COMMAND_ACK"):
                 self._ignore(f"{mtype} from {src}/{comp} (not the autopilot)")
             return  # only the autopilot says where the vehicle is, what it holds and what it did
@@ -214,17 +296,129 @@ class MavlinkLink:
                 st.ack_arrivals += 1
                 st.acks[msg.command] = (msg.result, st.ack_arrivals)
                 self._cond.notify_all()
+        elif mtype == "AUTOPILOT_VERSION":
+            with self._cond:
+                st.uid, st.uid2 = int(msg.uid), bytes(getattr(msg, "uid2", b"") or b"")
+                st.versions += 1
+                self._cond.notify_all()
         elif mtype == "TIMESYNC" and msg.tc1 != 0:  # the answer to one of our requests (tc1 = 0 asks us)
             with self._cond:
                 if msg.ts1 in self._timesync and self._timesync[msg.ts1] < 0:
                     self._timesync[msg.ts1] = time.monotonic_ns() - msg.ts1
                     self._cond.notify_all()
 
+    def _watch(self, src: int, comp: int, msg) -> None:
+        """Follow every sender's sequence numbers and AUTOPILOT_VERSION ids: two autopilots answering as one."""
+        key = (src, comp)
+        watch = self._seq.get(key)
+        if watch is None:
+            if len(self._seq) >= 64:  # a flood of invented senders: keep following those already known
+                return
+            watch = self._seq[key] = SeqWatch()
+        now = time.monotonic()
+        watch.add(msg.get_seq(), now)
+        if watch.interleaved(now) and not watch.flagged:
+            log.warning("%s: two senders answer as %d/%d (their packet sequence numbers interleave)", self.url,
+                        src, comp)
+        watch.flagged = watch.interleaved(now)
+        if msg.get_type() == "AUTOPILOT_VERSION":
+            ids = self._uids.setdefault(src, set())
+            ids.add((int(msg.uid), bytes(getattr(msg, "uid2", b"") or b"").rstrip(b"\0")))
+            if len(ids) > 1 and src not in self._conflicts:
+                self._conflict(src, f"system {src} answers AUTOPILOT_VERSION with {len(ids)} different uids")
+
+    def _hear(self, heard: Heard) -> None:
+        before = self.heard.get(heard.system)
+        if before is not None and before.component == heard.component and before != heard:
+            self._conflict(heard.system, f"system {heard.system} sends HEARTBEATs of two autopilots "
+                                         f"({before.describe()} and {heard.describe()})")
+        with self._cond:
+            self.heard.setdefault(heard.system, heard)
+            self._cond.notify_all()
+
+    def _conflict(self, system: int, why: str) -> None:
+        with self._cond:
+            self._conflicts.setdefault(system, why)
+        log.warning("%s: %s", self.url, why)
+
+    def duplicate_problem(self) -> str | None:
+        """Why the target system cannot be trusted to be one autopilot (one line), or None."""
+        with self._cond:
+            why = self._conflicts.get(self.target_system) if self.target_system is not None else None
+            comp = self.state.component if self.chosen else (self.heard[self.target_system].component
+                                                              if self.target_system in self.heard else None)
+        watch = self._seq.get((self.target_system, comp)) if comp is not None else None
+        if why is None and watch is not None and watch.interleaved(time.monotonic()):
+            why = f"two senders answer as {self.target_system}/{comp} (their packet sequence numbers interleave)"
+        if why is None:
+            return None
+        return (f"{why}: two vehicles seem to use system id {self.target_system} on {split_target(self.url)[0]}; "
+                "give each vehicle its own id (MAV_SYS_ID / SYSID_THISMAV) or its own link")
+
+    def choose_target(self, wait_s: float, listen_s: float) -> Heard:
+        """Settle the one autopilot to talk to, before anything is sent: wait up to wait_s for an autopilot's
+        HEARTBEAT (the target's, when one is configured), listen listen_s more for others, then take the
+        configured system or the only one heard. MavtuneError (one line) when none, or several and none chosen,
+        or two autopilots answer as the target."""
+        want = self.target_system
+        where = split_target(self.url)[0]
+        if not self.wait_for_heard(lambda heard: (want in heard) if want is not None else bool(heard), wait_s):
+            if want is not None and self.heard:
+                raise MavtuneError(f"{where}: no HEARTBEAT from target_system {want} within {wait_s:g} s; heard "
+                                   f"{self._heard_list()}")
+            raise MavtuneError(f"{where}: no HEARTBEAT from an autopilot within {wait_s:g} s")
+        self.wait_for_heard(lambda heard: False, listen_s)  # others may speak a little later
+        if want is None:
+            if len(self.heard) > 1:
+                raise MavtuneError(
+                    f"{where}: {len(self.heard)} autopilot systems speak on this link ({self._heard_list()}); "
+                    f"choose the one to tune: target_system = N in [mavlink], or the URL {where}"
+                    f"{TARGET_SUFFIX}N")
+            want = next(iter(self.heard))
+        with self._cond:
+            self.target_system = want
+        problem = self.duplicate_problem()
+        if problem:
+            raise MavtuneError(f"{where}: refusing to tune: {problem}")
+        heard = self.heard[want]
+        with self._cond:
+            st = self.state
+            st.system, st.component, st.mav_autopilot, st.mav_type = want, heard.component, heard.autopilot, \
+                heard.mav_type
+            self.chosen = True
+        if len(self.heard) > 1:
+            log.info("%s: tuning system %d only; also heard %s", self.url, want, self._heard_list())
+        return heard
+
+    def _heard_list(self) -> str:
+        with self._cond:
+            return ", ".join(h.describe() for _, h in sorted(self.heard.items()))
+
+    def wait_for_heard(self, predicate: Callable[[dict[int, Heard]], bool], timeout_s: float) -> bool:
+        """Block until predicate(autopilots heard) holds or timeout_s passes (wall time, Ctrl-C honoured)."""
+        return self._wait_until(lambda: predicate(self.heard), timeout_s)
+
+    def request_version(self, timeout_s: float) -> tuple[int, bytes] | None:
+        """Ask the target for AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE, twice); its (uid, uid2), or None."""
+        for _ in range(2):
+            before = self.snapshot().versions
+            self.send(lambda m: m.command_long_send(
+                self.target_system, self.target_component, mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+                mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0))
+            if self.wait_for(lambda st: st.versions > before, timeout_s / 2):
+                st = self.snapshot()
+                return st.uid, st.uid2
+        return None
+
     def wait_for(self, predicate: Callable[[VehicleState], bool], timeout_s: float) -> bool:
         """Block until predicate(state) holds (checked under the state lock) or the timeout passes."""
+        return self._wait_until(lambda: predicate(self.state), timeout_s)
+
+    def _wait_until(self, check: Callable[[], bool], timeout_s: float) -> bool:
+        """Block until check() holds (under the state lock, woken by every change) or timeout_s passes."""
         deadline = time.monotonic() + timeout_s
         with self._cond:
-            while not predicate(self.state):
+            while not check():
                 left = deadline - time.monotonic()
                 if left <= 0 or self._closed.is_set():
                     return False
@@ -261,6 +455,8 @@ class MavlinkLink:
         """Send one message: fn receives pymavlink's MAVLink object (e.g. lambda m: m.param_set_send(...))."""
         if self._closed.is_set():
             return
+        if not self.chosen:  # never talk to a system that was not settled as the one to tune
+            raise MavtuneError(f"{self.url}: nothing may be sent before the target system is chosen")
         with self._send_lock:
             fn(self._conn.mav)
 
@@ -268,7 +464,7 @@ class MavlinkLink:
         """Ask the autopilot to stream a message at rate_hz (MAV_CMD_SET_MESSAGE_INTERVAL; ArduPilot streams
         nothing a ground station did not ask for on some links). Unacknowledged: the stream itself is awaited."""
         self.send(lambda m: m.command_long_send(
-            self.target_system or 0, self.target_component, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+            self.target_system, self.target_component, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
             message_id, 1e6 / rate_hz, 0, 0, 0, 0, 0))
 
     def measure_delay(self, samples: int = 10, timeout_s: float = 2.0) -> tuple[float | None, int]:

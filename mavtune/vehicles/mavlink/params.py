@@ -34,7 +34,7 @@ class ParamClient:
     def _request(self, name: str) -> None:
         self.link.send(
             lambda m: m.param_request_read_send(
-                self.link.target_system or 0, self.link.target_component, name.encode(), -1
+                self.link.target_system, self.link.target_component, name.encode(), -1
             )
         )
 
@@ -61,7 +61,7 @@ class ParamClient:
         PARAM_VALUE for 2 × timeout_s at some point, twice."""
         quiet_s = 2 * (self.timeout_s if timeout_s is None else timeout_s)
         for _ in range(2):
-            self.link.send(lambda m: m.param_request_list_send(self.link.target_system or 0,
+            self.link.send(lambda m: m.param_request_list_send(self.link.target_system,
                                                                self.link.target_component))
             arrivals = -1
             while True:
@@ -114,7 +114,7 @@ class ParamClient:
             start = self.link.snapshot().param_arrivals
             self.link.send(
                 lambda m: m.param_set_send(
-                    self.link.target_system or 0, self.link.target_component, name.encode(), want, ptype
+                    self.link.target_system, self.link.target_component, name.encode(), want, ptype
                 )
             )
             ok = self.link.wait_for(

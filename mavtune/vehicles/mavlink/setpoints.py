@@ -103,7 +103,7 @@ class SetpointStreamer:
         self.link.send(
             lambda m: m.set_position_target_local_ned_send(
                 int(t_vehicle_s * 1000) & 0xFFFFFFFF,
-                self.link.target_system or 0,
+                self.link.target_system,
                 self.link.target_component,
                 mavlink.MAV_FRAME_LOCAL_NED,
                 TYPE_MASK,
@@ -122,7 +122,7 @@ def set_mode(link: MavlinkLink, profile: AutopilotProfile, mode: str, timeout_s:
     for _ in range(attempts):
         link.send(
             lambda m: m.command_long_send(
-                link.target_system or 0, link.target_component, mavlink.MAV_CMD_DO_SET_MODE, 0,
+                link.target_system, link.target_component, mavlink.MAV_CMD_DO_SET_MODE, 0,
                 base, main, sub, 0, 0, 0, 0,
             )
         )

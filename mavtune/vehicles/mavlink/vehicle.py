@@ -14,8 +14,9 @@ from pymavlink.dialects.v20 import common as mavlink
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.vehicles.mavlink.config import MavlinkConfig
-from mavtune.vehicles.mavlink.link import MavlinkLink, PositionSample
-from mavtune.vehicles.mavlink.params import ParamClient, ParamNotConfirmed
+from mavtune.vehicles.mavlink.link import MavlinkLink, PositionSample, split_target
+from mavtune.vehicles.mavlink.originals import OriginalsRecord, OriginalsStore, vehicle_key
+from mavtune.vehicles.mavlink.params import ParamClient, ParamNotConfirmed, as_float32
 from mavtune.vehicles.mavlink.primitive import Circle, Setpoint, altitude_cost
 from mavtune.vehicles.mavlink.profiles import profile_from_heartbeat
 from mavtune.vehicles.mavlink.safety import (
@@ -44,8 +45,10 @@ follows the circle late by the delay and the cost grows with it — at 25 ms eac
 class MavlinkVehicle:
     """A vehicle behind a MAVLink URL. Connecting reads the original gains; nothing is changed until `fly`.
 
-    `originals` (param → value), when given, replaces the values read at connect: a resumed run passes the
-    originals journaled by the first run, since the vehicle may still carry candidate gains.
+    The originals are those of the vehicle's record in the state folder (`store`) while it says they are not
+    restored, else (no record) `originals` (param → value) when given (a resumed run passes its journaled ones),
+    else the values read at connect. Connecting puts recorded originals the vehicle does not hold back first,
+    confirmed by reading them back. `fly=False` connects only to read and restore (`mavtune restore`).
     """
 
     def __init__(
@@ -55,8 +58,12 @@ class MavlinkVehicle:
         *,
         name: str | None = None,
         originals: Mapping[str, float] | None = None,
+        store: OriginalsStore | None = None,
+        fly: bool = True,
     ):
         self.config = config or MavlinkConfig()
+        self.store = store or OriginalsStore()
+        self._record_open = False  # the state record says unrestored: candidate gains may be on the vehicle
         self.url = url
         self.name = name or url
         self._lock = threading.Lock()
@@ -72,20 +79,23 @@ class MavlinkVehicle:
         self.link = MavlinkLink(url, source_system=self.config.source_system, target_system=self.config.target_system)
         try:
             self._connect(originals)
+            if fly:
+                self._prepare_flight()
         except BaseException:
             self.link.close()
             raise
 
     # ---- connect ---------------------------------------------------------------------------------------------
     def _connect(self, originals: Mapping[str, float] | None) -> None:
+        """Choose the autopilot, identify it, read the gains, settle the originals (restoring recorded ones)."""
         cfg = self.config
+        self.link.choose_target(cfg.heartbeat_wait_s, cfg.discover_s)
         if not self.link.wait_for(lambda st: st.heartbeats > 0, cfg.heartbeat_wait_s):
             raise MavtuneError(f"{self.url}: no HEARTBEAT from an autopilot within {cfg.heartbeat_wait_s:g} s")
-        self.link.request_rate(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, POSITION_HZ)
-        self.link.request_rate(mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 1.0)
-        if cfg.altitude_source == "distance_sensor":
-            self.link.request_rate(mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR, POSITION_HZ)
         st = self.link.snapshot()
+        ids = self.link.request_version(max(1.0, 2 * cfg.param_timeout_s))
+        self.identity = vehicle_key(st.system, split_target(self.url)[0], *(ids or ()))
+        record = self.store.load(self.identity)
         self.profile = profile_from_heartbeat(st.mav_autopilot)
         if cfg.autopilot != "auto" and cfg.autopilot != self.profile.autopilot.value:
             raise MavtuneError(
@@ -95,19 +105,44 @@ class MavlinkVehicle:
         self.params = ParamClient(self.link, cfg.param_timeout_s, cfg.param_retries)
         gain_map = cfg.gain_map(self.profile.autopilot)
         names = sorted({n for c in gain_map.values() for n, _ in self.profile.family(c.param)})
-        present = self.params.find(names, retries=min(3, cfg.param_retries))
+        unrestored = dict(record.params) if record is not None and not record.restored else {}
+        present = self.params.find(sorted(set(names) | set(unrestored)), retries=min(3, cfg.param_retries))
         self.gains: dict[str, ResolvedGain] = {g: resolve_gain(g, c, self.profile, present) for g, c in gain_map.items()}
-        self.original_params: dict[str, float] = {rg.vehicle_param: present[rg.vehicle_param] for rg in self.gains.values()}
-        if originals:
-            for k, v in originals.items():
-                if k in self.original_params and math.isfinite(float(v)):
-                    if float(v) != self.original_params[k]:
-                        log.warning("%s: %s is %g now; restoring to the journaled original %g", self.name, k,
-                                    self.original_params[k], float(v))
-                    self.original_params[k] = float(v)
-        self.current_params = {rg.vehicle_param: present[rg.vehicle_param] for rg in self.gains.values()}
+        self.found_params = {p: present[p] for p in {rg.vehicle_param for rg in self.gains.values()} | set(unrestored)
+                             if p in present}  # what the vehicle held when we connected
+        for p in unrestored:
+            if p not in present:
+                raise MavtuneError(f"{self.name}: {self.store.path(self.identity)} records an unrestored original "
+                                   f"{p}, which this vehicle does not have; if it is another vehicle, delete the "
+                                   "record")
+        base = unrestored if record is not None else {k: float(v) for k, v in (originals or {}).items()
+                                                      if math.isfinite(float(v))}
+        self.original_params: dict[str, float] = {
+            rg.vehicle_param: as_float32(base.get(rg.vehicle_param, present[rg.vehicle_param]))
+            for rg in self.gains.values()}
+        self.current_params = {p: present[p] for p in self.original_params}
+        wrong = {p: as_float32(v) for p, v in {**unrestored, **self.original_params}.items()
+                 if present[p] != as_float32(v)}
+        if wrong:  # a killed run left candidates: its originals go back before anything else
+            where = f"record {self.store.path(self.identity)}" if unrestored else "run folder's originals"
+            if not self.restore_confirmed(wrong):
+                raise MavtuneError(f"{self.name}: the originals in the {where} could not be set and read back "
+                                   f"({', '.join(f'{p} {v:g}' for p, v in wrong.items())}); nothing else was done")
+            log.warning("%s: restored the originals a run left unrestored (%s), read back: %s", self.name, where,
+                        ", ".join(f"{p} {present[p]:g} → {v:g}" for p, v in wrong.items()))
+        if unrestored or wrong:
+            self._save_record(restored=True)
         self.last_safe_params = dict(self.original_params)
         self.streamer = SetpointStreamer(self.link, cfg.setpoint_hz)
+        self.link_delay_s: float | None = None
+
+    def _prepare_flight(self) -> None:
+        """Ask for the streams a flight needs, measure the link delay, wait for a position."""
+        cfg = self.config
+        self.link.request_rate(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, POSITION_HZ)
+        self.link.request_rate(mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 1.0)
+        if cfg.altitude_source == "distance_sensor":
+            self.link.request_rate(mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR, POSITION_HZ)
         self.link_delay_s, answered = self.link.measure_delay()
         if self.link_delay_s is None:
             log.warning("%s: the autopilot did not answer TIMESYNC; the link delay is unknown (a delay of 25 ms each "
@@ -132,6 +167,9 @@ class MavlinkVehicle:
             return "closed"
         if self._released:
             return self._released
+        duplicate = self.link.duplicate_problem()
+        if duplicate:
+            return duplicate
         problem = preflight_problem(
             self.link.snapshot(), self.link.heartbeat_age_s(), self.profile, self.config.safety, self._in_control
         )
@@ -170,7 +208,41 @@ class MavlinkVehicle:
             raise MavtuneError(f"{self.name}: {exc}") from None
 
     # ---- parameters ------------------------------------------------------------------------------------------
+    def _save_record(self, restored: bool, kept_tuned: bool = False) -> None:
+        """Write this vehicle's originals to its state record (restored: confirmed back on the vehicle)."""
+        self.store.save(OriginalsRecord(self.identity, self.url, dict(self.original_params), restored, kept_tuned))
+        self._record_open = not restored
+
+    def _open_record(self) -> None:
+        """Before the first change: the record says the originals are out, so a killed run leaves them known."""
+        if not self._record_open:
+            self._save_record(restored=False)
+
+    def restore_confirmed(self, values: Mapping[str, float]) -> bool:
+        """Set `values` and read each back afresh (PARAM_REQUEST_READ); True when every one reads as set."""
+        ok = self._restore(values, "the original gains")
+        for name, value in values.items():
+            try:
+                read = self.params.read(name)
+            except MavtuneError as exc:
+                log.error("%s: reading %s back failed: %s", self.name, name, exc)
+                ok = False
+                continue
+            self.current_params[name] = read
+            if read != as_float32(value):
+                log.error("%s: %s reads back %g, not %g", self.name, name, read, value)
+                ok = False
+        return ok
+
+    def restore_originals(self) -> bool:
+        """The originals set and read back; the record marked restored when confirmed."""
+        ok = self.restore_confirmed(self.original_params)
+        if ok:
+            self._save_record(restored=True)
+        return ok
+
     def _set_params(self, values: Mapping[str, float]) -> None:
+        self._open_record()
         for name, value in values.items():
             self.current_params[name] = math.nan  # unknown until confirmed
             self.current_params[name] = self.params.set(name, value)
@@ -409,8 +481,8 @@ class MavlinkVehicle:
                 if not self.config.safety.rejoin_after_link_loss:
                     self._released = f"link lost in round {round_id}"
             # a vehicle leaving the run gets its own gains back now; one that flies on, the last that flew well
-            restored = self._restore(*((self.original_params, "the original gains") if self._released
-                                       else (self.last_safe_params, "the last safe gains")))
+            restored = self.restore_originals() if self._released \
+                else self._restore(self.last_safe_params, "the last safe gains")
         info["restored_last_safe"] = restored
         if not restored and not self._released:
             if reason in ("heartbeat_lost", "position_lost"):
@@ -428,7 +500,7 @@ class MavlinkVehicle:
         run); True when they were confirmed."""
         self._released = "the pilot changed the mode; this vehicle is left to the pilot"
         self._release(pilot=True)
-        return self._restore(self.original_params, "the original gains")
+        return self.restore_originals()
 
     # ---- the end ---------------------------------------------------------------------------------------------
     def finish(self, tuned: Gains | None = None) -> bool:
@@ -438,9 +510,13 @@ class MavlinkVehicle:
                 return True
             if tuned is not None:
                 target, what = self.param_values(tuned), "the tuned gains"
+                self._open_record()
+                ok = self._restore(target, what)
+                if ok:
+                    self._save_record(restored=True, kept_tuned=True)
             else:
                 target, what = self.original_params, "the original gains"
-            ok = self._restore(target, what)
+                ok = self.restore_originals() if self._record_open else self._restore(target, what)
             if ok:
                 log.info("%s: %s set: %s", self.name, what, target)
             self._release(pilot=self._released is not None and "pilot" in self._released)

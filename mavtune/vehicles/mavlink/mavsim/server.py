@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 import time
 from collections import deque
@@ -144,6 +145,7 @@ class SimVehicle:
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=system_id, source_component=1)
         self._send_lock = threading.Lock()
         self.system_id = system_id
+        self.uid = int.from_bytes(os.urandom(8), "little") | 1  # AUTOPILOT_VERSION uid: a new board each start
         self.t_s = 0.0
         self.armed = not on_ground
         self.airborne = not on_ground
@@ -324,7 +326,7 @@ class SimVehicle:
             major, minor, patch = self.version
             sw = (major << 24) | (minor << 16) | (patch << 8) | mavlink.FIRMWARE_VERSION_TYPE_OFFICIAL
             self._send("autopilot_version", CAPABILITIES, sw, 0, 0, 0, b"mavsim\0\0", bytes(8), bytes(8), 0, 0,
-                       self.system_id)
+                       self.uid)
 
     def _periodic(self) -> None:
         now = time.monotonic()

@@ -1,0 +1,1 @@
+"""The plant zoo of benchmarks/quality.py: plants, their common-random-number truth, tuning methods, statistics."""

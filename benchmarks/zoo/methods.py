@@ -1,0 +1,171 @@
+"""Ways to tune a zoo plant: mavtune's engine in a configuration (config.Tuning fields over the defaults), and
+the black-box peers CMA-ES (`cma`) and TPE (`optuna`) on the same vehicles at the same number of flights.
+
+Run i flies vehicles TUNE_SEED + SEED_STRIDE·i + j (j < vehicles), round k its k-th round: every method meets
+the same vehicles, wind and noise in run i (paired), and none of them meets the truth's repeats.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from zoo.plants import PLANTS, Plant
+
+TUNE_SEED = 10_000
+SEED_STRIDE = 100
+PEER_VEHICLES = 2  # the peers fly 2 points a round, one flight each
+
+
+def tune_seed(run: int) -> int:
+    """Vehicle seed of run `run`'s first vehicle (the same for every method: runs are paired)."""
+    return TUNE_SEED + SEED_STRIDE * run
+
+
+@dataclass(frozen=True)
+class Method:
+    """A mavtune configuration (`tuning`: config.Tuning fields over the defaults) or a peer (`peer`: cma/optuna)."""
+
+    label: str
+    tuning: dict[str, Any] = field(default_factory=dict)
+    peer: str | None = None
+
+    def settings(self, plant: Plant, run: int):
+        """The engine's Settings of this configuration on `plant`'s box, seeded by the run."""
+        from mavtune.config import Tuning
+
+        return Tuning.model_validate({**self.tuning, "seed": run}).settings(space=plant.space)
+
+    def key(self) -> str:
+        """Identical settings give one key (a configuration listed twice runs once; the cache keys on it)."""
+        if self.peer:
+            return self.peer
+        from mavtune.config import Tuning
+
+        s = Tuning.model_validate(self.tuning).settings(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
+        return json.dumps([s.fingerprint(), s.vehicles], sort_keys=True, default=str)
+
+
+class ZooFleet:
+    """`vehicles` vehicles of a zoo plant; vehicle j has seed `seed + j` and flies round k with randomness (seed+j, k)."""
+
+    def __init__(self, plant: Plant, vehicles: int, seed: int):
+        self.plant, self._vehicles, self.seed = plant, int(vehicles), int(seed)
+        self.flown = 0
+        self.diverged = 0
+
+    @property
+    def size(self) -> int:
+        return self._vehicles
+
+    def fly(self, assignments, round_id: int):
+        from mavtune.fleet import Flight, Status
+
+        if not assignments:
+            return []
+        x = np.array([[float(a[g]) for g in self.plant.gains] for a in assignments])
+        seeds = self.seed + np.arange(len(assignments))
+        cost, failed = self.plant.fly(x, seeds, np.full(len(assignments), int(round_id)))
+        self.flown += len(assignments)
+        self.diverged += int(np.sum(failed))
+        return [Flight(vehicle=f"v{j}", gains=dict(a), cost=float(c), status=Status.FAILED if f else Status.OK)
+                for j, (a, c, f) in enumerate(zip(assignments, cost, failed))]
+
+    def close(self) -> None:
+        pass
+
+
+def _expected_flights(settings) -> dict[str, float]:
+    """The plan's expected and most flights for these settings (`mavtune plan`)."""
+    from mavtune.plan import make_plan
+
+    p = make_plan(settings)
+    return {"expected": float(p.flights), "max": float(getattr(p, "rounds_max", p.rounds) * settings.vehicles)}
+
+
+def tune_run(plant_name: str, method: Method, run: int) -> dict[str, Any]:
+    """One mavtune tuning of a plant: the answer, flights, its interval per gain, the plan's expectation."""
+    from mavtune.tuner import run_tuning
+
+    plant = PLANTS[plant_name]
+    cpu = time.process_time()
+    settings = method.settings(plant, run)
+    fleet = ZooFleet(plant, settings.vehicles, tune_seed(run))
+    result = run_tuning(settings, fleet)
+    unc = {g: {k: v for k, v in (u or {}).items() if isinstance(v, (int, float, str, bool)) or v is None}
+           for g, u in (result.uncertainty or {}).items()}
+    return {"plant": plant_name, "method": method.label, "run": run, "x": [float(result.gains[g]) for g in plant.gains],
+            "flights": int(result.flights), "rounds": len(result.rounds), "diverged_flights": fleet.diverged,
+            "uncertainty": unc, "stop_reason": str(result.stop_reason)[:200], "cpu_s": time.process_time() - cpu}
+
+
+def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str, Any]:
+    """CMA-ES or TPE on run `run`'s vehicles, PEER_VEHICLES points a round, until `budget` flights; its answer
+    (TPE: the best trial; CMA-ES: its final mean, the estimate of the optimum under noise)."""
+    plant = PLANTS[plant_name]
+    cpu = time.process_time()
+    d = len(plant.gains)
+    fleet = ZooFleet(plant, PEER_VEHICLES, tune_seed(run))
+    rounds = max(1, budget // PEER_VEHICLES)
+
+    def fly(points, k):
+        fl = fleet.fly([{g: float(v) for g, v in zip(plant.gains, p)} for p in points], k)
+        return [f.cost if math.isfinite(f.cost) else 1e9 for f in fl]
+
+    if method.peer == "optuna":
+        import optuna
+
+        optuna.logging.set_verbosity(optuna.logging.WARNING)
+        study = optuna.create_study(sampler=optuna.samplers.TPESampler(seed=run))
+        for k in range(rounds):
+            trials = [study.ask() for _ in range(PEER_VEHICLES)]
+            pts = [[t.suggest_float(g, 0.0, 1.0) for g in plant.gains] for t in trials]
+            for t, c in zip(trials, fly(pts, k)):
+                study.tell(t, c)
+        answer = [study.best_params[g] for g in plant.gains]
+    elif method.peer == "cma":
+        import cma
+
+        es = cma.CMAEvolutionStrategy([0.5] * d, 0.25, {"bounds": [0.0, 1.0], "seed": run + 1, "verbose": -9})
+        asked, told = [], []
+        for k in range(rounds):
+            if not asked or len(told) == len(asked):
+                asked, told = es.ask(), []
+            told += fly(asked[len(told):len(told) + PEER_VEHICLES], k)
+            if len(told) == len(asked):
+                es.tell(asked, told)
+        answer = list(np.clip(es.result.xfavorite, 0.0, 1.0))
+    else:
+        raise ValueError(f"unknown peer {method.peer!r}")
+    return {"plant": plant_name, "method": method.label, "run": run, "x": [float(v) for v in answer],
+            "flights": rounds * PEER_VEHICLES, "rounds": rounds, "diverged_flights": fleet.diverged,
+            "uncertainty": {}, "budget": budget, "cpu_s": time.process_time() - cpu}
+
+
+def _paper() -> dict[str, Any]:
+    from mavtune.config import PAPER_TUNING
+
+    return {k.removeprefix("tuning."): v for k, v in PAPER_TUNING.items()}
+
+
+def candidates() -> list[Method]:
+    """The configurations the default is chosen from (the first is today's default), then the paper's."""
+    return [
+        Method("default (config.Tuning())"),
+        Method("adaptive lean (confidence 0.8, cap 2)", {"confidence": 0.8, "cap": 2}),
+        Method("adaptive, cap 3", {"cap": 3}),
+        Method("adaptive, ε 0.25, cap 4", {"epsilon": 0.25, "cap": 4}),
+        Method("split, 2 vehicles", {"strategy": "split"}),
+        Method("search's answer (no model)", {"answer": "search"}),
+        Method("1 bootstrap", {"bootstraps": 1}),
+        Method("1 bootstrap, ε 0.15, cap 8", {"bootstraps": 1, "epsilon": 0.15, "cap": 8}),
+        Method("paper (PAPER_TUNING)", _paper()),
+    ]
+
+
+PEERS = [Method("CMA-ES", peer="cma"), Method("TPE (optuna)", peer="optuna")]

@@ -1,0 +1,330 @@
+"""The zoo's plants: each flies a batch of normalised gain vectors (every gain in [0, 1]) with randomness
+(vehicle seed, round) and returns (cost, diverged) per flight, so that the same (seed, round) is the same
+vehicle, wind and noise at every gain vector (common random numbers for the truth).
+
+- sim plants: mavtune's simulator (`mavtune.sim.batch.fly`) at a condition, over a box of its normalised gains;
+- mavsim PX4 / ArduPilot: the plant and controller code behind `mavtune mavsim`, in-process (no MAVLink):
+  PX4's cascade as mavsim maps it onto the simulator (k_x = MPC_Z_P · MPC_Z_VEL_P_ACC, k_v = MPC_Z_VEL_P_ACC),
+  ArduCopter's AC_PosControl up-axis cascade (`mavsim.cascade.ArduCopterAltitude`) driving `mavtune.sim.Plant`;
+  the gain ranges are the MAVLink fleet's defaults (`vehicles.mavlink.config.DEFAULT_GAINS`);
+- Crazyflow: the Mellinger state controller's z gains of a Crazyflie on the climbing circle, gusts as a force;
+- analytic costs: asymmetric valleys, heteroscedastic noise, an edge optimum and 4 gains.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+os.environ.setdefault("SCIPY_ARRAY_API", "1")  # Crazyflow needs it set before scipy loads (quality.py sets it first)
+
+FAIL_PENALTY_M = 10.0  # error assumed after a divergence (as the simulator's failure_error_m)
+
+
+@dataclass(frozen=True)
+class Plant:
+    """A zoo plant: `fly(x (n, d) in [0, 1], seeds (n,), rounds (n,)) -> (cost (n,), diverged (n,))`."""
+
+    name: str
+    description: str
+    gains: tuple[str, ...]
+    fly: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+    units: dict[str, tuple[str, float, float]] = field(default_factory=dict)  # gain -> (what, lo, hi) of the box
+    judge_cap: int = 512  # most paired repeats when scoring an answer (slow plants less)
+    chunk: int = 4000  # flights per truth task
+
+    @property
+    def space(self) -> dict[str, tuple[float, float]]:
+        return {g: (0.0, 1.0) for g in self.gains}
+
+
+# ----- mavtune's simulator -------------------------------------------------------------------------------------
+
+
+def _scenario(changes: dict[str, Any]):
+    from mavtune.sim import Scenario
+
+    return Scenario.model_validate(changes)
+
+
+def sim_fly(changes: dict[str, Any], box: tuple[tuple[float, float], tuple[float, float]]):
+    """The simulator under Scenario(**changes), its normalised (kp, kd) box `box` mapped onto [0, 1]²."""
+    (p0, p1), (d0, d1) = box
+
+    def fly(x, seeds, rounds):
+        from mavtune.sim import batch
+        from mavtune.sim import kernel as K
+        from mavtune.sim.gains import to_physical
+
+        sc = _scenario(changes)
+        kx, kv = to_physical(p0 + x[:, 0] * (p1 - p0), d0 + x[:, 1] * (d1 - d0))
+        res = batch.fly(sc, kx, kv, np.asarray(seeds, dtype=np.int64), np.asarray(rounds, dtype=np.int64))
+        return res.cost(sc.cost), res.status != K.OK
+
+    return fly
+
+
+def px4_fly(x, seeds, rounds):
+    """mavsim's PX4 flavour: the simulator's SO(3) altitude loop with k_x = MPC_Z_P · MPC_Z_VEL_P_ACC and
+    k_v = MPC_Z_VEL_P_ACC (mavsim server._apply_gains), the gains over DEFAULT_GAINS' PX4 ranges."""
+    from mavtune.sim import batch
+    from mavtune.sim import kernel as K
+    from mavtune.vehicles.mavlink.config import DEFAULT_GAINS
+    from mavtune.vehicles.mavlink.profiles import Autopilot
+
+    g = DEFAULT_GAINS[Autopilot.PX4]
+    pos_p = g["kp"].min + x[:, 0] * (g["kp"].max - g["kp"].min)
+    vel_p = g["kd"].min + x[:, 1] * (g["kd"].max - g["kd"].min)
+    sc = _scenario({})
+    res = batch.fly(sc, pos_p * vel_p, vel_p, np.asarray(seeds, dtype=np.int64), np.asarray(rounds, dtype=np.int64))
+    return res.cost(sc.cost), res.status != K.OK
+
+
+def ardupilot_fly(x, seeds, rounds):
+    """mavsim's ArduPilot flavour: ArduCopterAltitude (PSC_POSZ_P, PSC_VELZ_P over DEFAULT_GAINS' ArduPilot
+    ranges, the rest at mavsim's defaults) commanding the vertical acceleration of mavtune.sim.Plant, whose own
+    altitude PD is off, as mavsim's server steps them; cost: IAE of the fed-back altitude against the reference
+    over the primitive (after the settle hover), a diverged flight's remaining time at FAIL_PENALTY_M."""
+    from mavtune.sim import Plant, batch
+    from mavtune.vehicles.mavlink.config import DEFAULT_GAINS
+    from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude
+    from mavtune.vehicles.mavlink.profiles import Autopilot
+
+    g = DEFAULT_GAINS[Autopilot.ARDUPILOT]
+    pos_p = g["kp"].min + x[:, 0] * (g["kp"].max - g["kp"].min)
+    vel_p = g["kd"].min + x[:, 1] * (g["kd"].max - g["kd"].min)
+    sc = _scenario({})
+    ref = batch.reference_for(sc)
+    settle = batch.settle_steps(sc)
+    seeds = np.asarray(seeds, dtype=np.int64)
+    rounds = np.asarray(rounds, dtype=np.int64)
+    return _ardupilot_batch(Plant, ArduCopterAltitude, sc, ref, settle, seeds, rounds, pos_p, vel_p)
+
+
+def _ardupilot_batch(Plant, Cascade, sc, ref, settle, seeds, rnd, pos_p, vel_p):
+    """len(seeds) vehicles in one Plant, lane i drawn from (seeds[i], rnd[i]) as its own vehicle would be."""
+    from mavtune.sim import batch
+    from mavtune.sim import kernel as K
+
+    n = len(seeds)
+    cost = np.zeros(n)
+    failed = np.zeros(n, dtype=bool)
+    p = Plant(vehicles=n, scenario=sc, seed=0)
+    p.set_gains(0.0, 0.0)
+    pos0 = np.ascontiguousarray(np.broadcast_to(ref[0, :3], (n, 3)))
+    K.init_batch(batch.seed_array(seeds), np.ascontiguousarray(rnd, dtype=np.int64), p._kx, p._kv, pos0, p._cp, p._X, p._L,
+                 p._RS)  # Plant.reset with these seeds instead of seed + j
+    cascades = [Cascade() for _ in range(n)]
+    for c, pp, vp in zip(cascades, pos_p, vel_p):
+        c.gains["PSC_POSZ_P"], c.gains["PSC_VELZ_P"] = float(pp), float(vp)
+    dt = p.dt_s
+    pos_ref, vel_ref = np.zeros((n, 3)), np.zeros((n, 3))
+    for k in range(ref.shape[0]):
+        r = ref[k]
+        pos, vel = p.position_m, p.velocity_mps
+        acc = np.broadcast_to(r[6:9], (n, 3)).copy()
+        for i, c in enumerate(cascades):
+            if not failed[i]:
+                acc[i, 2] = c.step(dt, r[2], r[5], r[8], pos[i, 2], vel[i, 2])
+        pos_ref[:, :2], pos_ref[:, 2] = r[:2], pos[:, 2]
+        vel_ref[:, :2], vel_ref[:, 2] = r[3:5], vel[:, 2]
+        p.step(pos_ref, vel_ref, acc)
+        err = np.abs(p.altitude_feedback_m - r[2])
+        now = ~failed & (p.failed | ~np.isfinite(err) | (err > FAIL_PENALTY_M))
+        cost[now] += FAIL_PENALTY_M * dt * (ref.shape[0] - max(k, settle))
+        failed |= now
+        if k >= settle:
+            cost[~failed] += err[~failed] * dt
+    return cost, failed
+
+
+# ----- Crazyflow ----------------------------------------------------------------------------------------------
+
+CF_BOX = {"kp": (0.0, 5.0), "kd": (0.0, 2.0)}  # Mellinger z gains (N/m, N s/m): 4x its defaults 1.25, 0.5 (the cost falls
+# with kp until the box edge: no latency in its z loop; a low kd falls out of the sky)
+CF_GUST_N = (0.02, 0.01)  # std of the horizontal / vertical gust force, N (the Crazyflie weighs 0.29 N)
+CF_GUST_TAU_S = 1.0
+CF_HZ = 500  # dynamics and attitude loop, as the Crazyflie's firmware (state controller 100 Hz)
+_CF: dict[int, Any] = {}
+
+
+def _gusts(seeds, rounds, steps: int, dt: float) -> np.ndarray:
+    """Ornstein-Uhlenbeck gust forces (steps, n, 3) of each flight, from (seed, round) alone."""
+    out = np.zeros((steps, len(seeds), 3), dtype=np.float32)
+    a = math.exp(-dt / CF_GUST_TAU_S)
+    sd = np.array([CF_GUST_N[0], CF_GUST_N[0], CF_GUST_N[1]])
+    for i, (s, r) in enumerate(zip(seeds, rounds)):
+        z = np.random.default_rng([int(s), int(r), 7]).standard_normal((steps, 3))
+        f = sd * z[0]
+        for k in range(steps):
+            f = a * f + math.sqrt(1 - a * a) * sd * z[k]
+            out[k, i] = f
+    return out
+
+
+def _cf_program(n: int):
+    """The jitted flight of n Crazyflies (compiled once per n in a process)."""
+    if n in _CF:
+        return _CF[n]
+    os.environ.setdefault("JAX_PLATFORMS", "cpu")
+    import crazyflow  # noqa: F401
+    import jax
+    import jax.numpy as jnp
+    from crazyflow import Control, Sim
+
+    sim = Sim(n_worlds=n, n_drones=1, control=Control.state, freq=CF_HZ, state_freq=100, attitude_freq=CF_HZ,
+              body_rate_freq=CF_HZ, force_torque_freq=CF_HZ)
+    step = sim._step
+    data0 = sim.data
+    params = dict(data0.controls.state.params)
+
+    @jax.jit
+    def fly(cmds, gust, kp_z, kd_z):
+        kp = jnp.broadcast_to(jnp.asarray(params["kp"]), (n, 1, 3)).at[:, 0, 2].set(kp_z)
+        kd = jnp.broadcast_to(jnp.asarray(params["kd"]), (n, 1, 3)).at[:, 0, 2].set(kd_z)
+        st = data0.controls.state.replace(params={**params, "kp": kp, "kd": kd})
+        d = data0.replace(controls=data0.controls.replace(state=st),
+                          states=data0.states.replace(pos=cmds[0, :, :, :3]))
+
+        def one(d, cf):
+            c, f = cf
+            d = d.replace(controls=d.controls.replace(state=d.controls.state.replace(staged_cmd=c)),
+                          states=d.states.replace(force=f[:, None, :]))
+            d = step(d, 1)
+            return d, d.states.pos[:, 0, 2]
+
+        _, z = jax.lax.scan(one, d, (cmds, gust))
+        return z[::CF_HZ // 100]
+
+    _CF[n] = fly
+    return fly
+
+
+def crazyflow_fly(x, seeds, rounds):
+    """Crazyflow 0.4 (its default Crazyflie, first-principles dynamics, Mellinger state controller at 100 Hz)
+    tracking mavtune's climbing circle (2 m diameter, 1 m climb) with OU gust forces; the z gains (kp, kd) of
+    its state controller over CF_BOX; cost: IAE of z over the primitive, a flight leaving by 2 m diverged."""
+    from mavtune.sim import batch
+
+    sc = _scenario({})
+    ref = batch.reference_for(sc)
+    settle = batch.settle_steps(sc)
+    steps, n = ref.shape[0], len(seeds)
+    up = CF_HZ // 100  # simulator steps per reference step
+    size = 2 if n <= 2 else 256 * math.ceil(n / 256)  # few shapes: few compilations
+    cmd = np.zeros((steps * up, size, 1, 16), dtype=np.float32)
+    cmd[:, :, 0, :9] = np.repeat(ref, up, axis=0)[:, None, :]
+    cmd[:, :, 0, 12] = 1.0
+    gust = np.zeros((steps * up, size, 3), dtype=np.float32)
+    gust[:, :n] = np.repeat(_gusts(seeds, rounds, steps, 0.01), up, axis=0)
+    kp = np.full(size, 1.25, dtype=np.float32)
+    kd = np.full(size, 0.5, dtype=np.float32)
+    kp[:n] = CF_BOX["kp"][0] + x[:, 0] * (CF_BOX["kp"][1] - CF_BOX["kp"][0])
+    kd[:n] = CF_BOX["kd"][0] + x[:, 1] * (CF_BOX["kd"][1] - CF_BOX["kd"][0])
+    z = np.asarray(_cf_program(size)(cmd, gust, kp, kd))[:, :n]
+    err = np.abs(z - ref[:, 2:3])
+    bad = ~np.isfinite(err) | (err > 2.0)
+    failed = bad.any(axis=0)
+    first = np.where(failed, bad.argmax(axis=0), steps)
+    k = np.arange(steps)[:, None]
+    live = (k >= settle) & (k < first[None, :])
+    cost = np.where(live, np.nan_to_num(err), 0.0).sum(axis=0) * 0.01
+    cost += FAIL_PENALTY_M * 0.01 * np.where(failed, steps - np.maximum(first, settle), 0)
+    return cost, failed
+
+
+# ----- analytic costs -----------------------------------------------------------------------------------------
+
+
+def _normals(seeds, rounds, k: int) -> np.ndarray:
+    """(n, k) standard normals of each flight, from (seed, round) alone (the same at every gain vector)."""
+    out = np.empty((len(seeds), k))
+    pairs = {}
+    for i, (s, r) in enumerate(zip(seeds, rounds)):
+        key = (int(s), int(r))
+        if key not in pairs:
+            pairs[key] = np.random.default_rng([key[0], key[1], 11]).standard_normal(k)
+        out[i] = pairs[key]
+    return out
+
+
+def valley_fly(x, seeds, rounds):
+    """A curved, asymmetric valley (steep on one side of the optimum, shallow on the other) with noise whose
+    spread grows with the cost (5 % at the optimum)."""
+    u, v = x[:, 0] - 0.62, x[:, 1] - 0.35 - 0.8 * (x[:, 0] - 0.62) ** 2
+    along = np.where(u > 0, 40.0 * u * u, 4.0 * u * u)
+    across = np.where(v > 0, 80.0 * v * v, 15.0 * v * v)
+    c = 1.0 + along + across
+    z = _normals(seeds, rounds, 2)
+    return c * (1.0 + 0.05 * z[:, 0]) + 0.25 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
+
+
+def edge_fly(x, seeds, rounds):
+    """The unconstrained minimum lies beyond kp = 1 (at 1.2): the optimum of the box is on its edge; kd's
+    valley is asymmetric; noise 6 % plus a share growing with the cost."""
+    c = 1.0 + 3.0 * (x[:, 0] - 1.2) ** 2 - 0.48 + np.where(x[:, 1] > 0.3, 20.0, 6.0) * (x[:, 1] - 0.3) ** 2
+    z = _normals(seeds, rounds, 2)
+    return c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 0.52) * z[:, 1], np.zeros(len(c), dtype=bool)
+
+
+def four_fly(x, seeds, rounds):
+    """4 coupled gains (kp, kd, ki, kf): a rotated, unequally curved bowl, the fourth gain's optimum on its
+    lower edge (it only costs), heteroscedastic noise."""
+    opt = np.array([0.4, 0.55, 0.3, -0.1])
+    d = x - opt
+    q = 6 * d[:, 0] ** 2 + 10 * d[:, 1] ** 2 + 3 * d[:, 2] ** 2 + 2 * d[:, 3] ** 2 + 5 * d[:, 0] * d[:, 1] \
+        + 2 * d[:, 1] * d[:, 2] + np.where(d[:, 2] > 0, 4.0, 0.0) * d[:, 2] ** 2
+    c = 1.0 + q
+    z = _normals(seeds, rounds, 2)
+    return c * (1.0 + 0.05 * z[:, 0]) + 0.2 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
+
+
+# ----- the zoo ------------------------------------------------------------------------------------------------
+
+FULL = ((0.0, 1.0), (0.0, 1.0))
+SIM_UNITS = {"kp": ("k_x(z), 1/s²", 0.0, 250.0), "kd": ("k_v(z), 1/s", 0.0, 40.0)}
+
+
+def _sim_units(box) -> dict[str, tuple[str, float, float]]:
+    return {g: (w, lo + b[0] * (hi - lo), lo + b[1] * (hi - lo)) for (g, (w, lo, hi)), b in zip(SIM_UNITS.items(), box)}
+
+
+def _plants() -> dict[str, Plant]:
+    edge_box = ((0.0, 0.3), (0.0, 1.0))  # the nominal optimum's kp (0.42) lies beyond the top of kp
+    corner_box = ((0.0, 0.3), (0.0, 0.4))  # and its kd (0.55) beyond the top of kd
+    gusts = {"wind": {"gust_xy_mps": 2.5, "gust_z_mps": 1.25}, "latency_s": 0.06}
+    out = [
+        Plant("sim nominal", "mavtune's simulator, the paper's circle, default wind/noise/spread", ("kp", "kd"),
+              sim_fly({}, FULL), _sim_units(FULL)),
+        Plant("sim latency +60 ms", "feedback latency 90 ms instead of 30 ms", ("kp", "kd"),
+              sim_fly({"latency_s": 0.09}, FULL), _sim_units(FULL)),
+        Plant("sim heavy +30 %", "0.69 kg payload (30 % of 2.3 kg) the mass estimator does not know", ("kp", "kd"),
+              sim_fly({"payload_kg": 0.69}, FULL), _sim_units(FULL)),
+        Plant("sim gusts x2.5", "gusts x2.5 (2.5 / 1.25 m/s) and 60 ms latency: divergent gains near the optimum",
+              ("kp", "kd"), sim_fly(gusts, FULL), _sim_units(FULL)),
+        Plant("sim edge box", "nominal, kp box [0, 0.3] of the normalised range: the optimum on the kp edge",
+              ("kp", "kd"), sim_fly({}, edge_box), _sim_units(edge_box)),
+        Plant("sim corner box", "nominal, box kp [0, 0.3] x kd [0, 0.4]: the optimum in the corner", ("kp", "kd"),
+              sim_fly({}, corner_box), _sim_units(corner_box)),
+        Plant("mavsim PX4", "PX4 cascade as mavsim flies it, MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15]",
+              ("kp", "kd"), px4_fly, {"kp": ("MPC_Z_P", 0.1, 1.5), "kd": ("MPC_Z_VEL_P_ACC", 2.0, 15.0)}),
+        Plant("analytic valley", "curved asymmetric valley, heteroscedastic noise", ("kp", "kd"), valley_fly),
+        Plant("analytic edge", "optimum on the kp edge, asymmetric kd valley, heteroscedastic noise", ("kp", "kd"),
+              edge_fly),
+        Plant("analytic 4 gains", "4 coupled gains, one optimum on an edge, heteroscedastic noise",
+              ("kp", "kd", "ki", "kf"), four_fly),
+        Plant("mavsim ArduPilot", "ArduCopter AC_PosControl z cascade, PSC_POSZ_P [1, 3] x PSC_VELZ_P [1, 8]",
+              ("kp", "kd"), ardupilot_fly, {"kp": ("PSC_POSZ_P", 1.0, 3.0), "kd": ("PSC_VELZ_P", 1.0, 8.0)},
+              judge_cap=128, chunk=256),
+        Plant("crazyflow", "Crazyflow Crazyflie, Mellinger z gains, climbing circle, OU gust forces", ("kp", "kd"),
+              crazyflow_fly, {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()},
+              judge_cap=128, chunk=1024),
+    ]
+    return {p.name: p for p in out}
+
+
+PLANTS = _plants()

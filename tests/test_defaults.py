@@ -1,0 +1,37 @@
+"""One default: `mavtune.tune()` with no options and `mavtune tune` with no flags run the same settings."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import mavtune
+from mavtune.api import default_settings, paper_options
+from mavtune.cli import run_app
+from mavtune.config import PAPER_TUNING, Tuning, load_config
+
+
+def test_api_and_cli_resolve_the_same_settings():
+    cli = load_config(None).settings()  # what `mavtune tune` with no flags and no file runs
+    assert default_settings() == cli
+    assert cli.initial == Tuning().initial and cli.initial  # `initial` included
+
+
+def test_the_paper_preset_is_one_setting_in_both():
+    assert default_settings(**paper_options()) == load_config(None, PAPER_TUNING).settings()
+    assert default_settings(**paper_options()) != default_settings()
+
+
+def test_api_and_cli_fly_the_same_run(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert run_app(["tune", "-q"]) == 0  # no flags at all: the run goes to runs/tune-<time>
+    (folder,) = Path("runs").iterdir()
+    cli = json.loads((folder / "result.json").read_text())
+    api = mavtune.tune()
+    assert cli["settings"] == json.loads(json.dumps(api.settings))
+    flown = [[(f["gains"], f["cost"]) for f in r["flights"]] for r in cli["rounds_log"]]
+    assert flown == [[(f.gains, f.cost) for f in r.flights] for r in api.rounds]
+    assert cli["gains"] == api.gains
+    for name, u in api.uncertainty.items():
+        assert all(math.isclose(cli["uncertainty"][name][k], v, rel_tol=1e-9) or (math.isnan(v)) for k, v in u.items())

@@ -1,0 +1,125 @@
+"""Several autopilots on one MAVLink link: with no target system chosen and more than one heard, nothing is sent
+and the run is refused naming them; with one chosen, nothing is ever addressed to another; two autopilots answering
+as one system id are refused. Against `mavtune mavsim` behind a relay on 127.0.0.1 that counts what the ground sends."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from pymavlink.dialects.v20 import common as mavlink
+
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Status
+from mavtune.vehicles.mavlink import MavlinkVehicle
+from mavtune.vehicles.mavlink.link import SeqWatch, split_target
+
+from mavlink_harness import Relay, fast_config, free_udp_port, mavsim_on, relayed_mavsim, wait_streaming
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
+
+ACTING = ("PARAM_SET", "PARAM_REQUEST_READ", "PARAM_REQUEST_LIST", "COMMAND_LONG", "SET_MODE",
+          "SET_POSITION_TARGET_LOCAL_NED")
+
+
+def other_autopilot(mav):
+    """A second vehicle's autopilot, system 2: a PX4 quadrotor, armed."""
+    mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 217, 3 << 16, mavlink.MAV_STATE_ACTIVE)
+
+
+def test_two_systems_and_no_target_is_refused_naming_them_and_nothing_is_sent():
+    with relayed_mavsim(autopilot="px4") as (url, relay):
+        wait_streaming(relay, 1)
+        with relay.inject(2, 1, other_autopilot, hz=10):
+            time.sleep(0.3)
+            with pytest.raises(MavtuneError) as err:
+                MavlinkVehicle(url, fast_config(discover_s=2.5))
+    text = str(err.value)
+    assert "\n" not in text and "2 autopilot systems" in text, text
+    assert "1 (PX4, HEXAROTOR)" in text and "2 (PX4, QUADROTOR)" in text and "?target_system=N" in text, text
+    assert not any(kind in ACTING for kind, _ in relay.sent), relay.sent  # not a word to anyone
+
+
+def test_with_a_target_system_only_it_is_tuned():
+    with relayed_mavsim(autopilot="px4") as (url, relay):
+        with relay.inject(2, 1, other_autopilot, hz=10):
+            time.sleep(0.3)  # system 2 speaks first
+            with MavlinkVehicle(url + "?target_system=1", fast_config(discover_s=2.5)) as vehicle:
+                flight = vehicle.fly({"kp": 0.3, "kd": 0.5}, 0)
+    assert flight.status is Status.OK, flight.info
+    assert relay.sent_to(2) == {} and relay.sent_to(0) == {}, relay.sent
+    mine = relay.sent_to(1)
+    assert mine.get("PARAM_SET", 0) >= 4 and mine.get("SET_POSITION_TARGET_LOCAL_NED", 0) > 10, mine
+
+
+def test_a_configured_target_that_is_not_heard_is_named():
+    with relayed_mavsim(autopilot="px4") as (url, relay):
+        wait_streaming(relay, 1)
+        with pytest.raises(MavtuneError, match="no HEARTBEAT from target_system 7 within 2 s; heard 1 \\(PX4"):
+            MavlinkVehicle(url, fast_config(target_system=7, heartbeat_wait_s=2.0))
+    assert not any(kind in ACTING for kind, _ in relay.sent), relay.sent
+
+
+def test_two_autopilots_with_one_system_id_on_one_port_are_refused():
+    relay = Relay(free_udp_port())
+    url = f"udpin:127.0.0.1:{relay.ground[1]}"
+    try:
+        with mavsim_on(relay.port, autopilot="px4", seed=1), mavsim_on(relay.port, autopilot="px4", seed=2):
+            wait_streaming(relay, 2)
+            with pytest.raises(MavtuneError) as err:
+                MavlinkVehicle(url, fast_config(discover_s=2.5))
+    finally:
+        relay.close()
+    text = str(err.value)
+    assert "\n" not in text and "system id 1" in text and "refusing" in text, text
+    assert not any(kind in ACTING for kind, _ in relay.sent), relay.sent
+
+
+def test_a_url_suffix_and_a_config_that_disagree_are_refused():
+    from mavtune.vehicles.mavlink.link import MavlinkLink
+
+    with pytest.raises(MavtuneError, match="says target_system 2, the config says 3"):
+        MavlinkLink(f"udpin:127.0.0.1:{free_udp_port()}?target_system=2", target_system=3)
+    for bad in ("udpin:127.0.0.1:14540?target_system=0", "udpin:127.0.0.1:14540?target_system=x",
+                "udpin:127.0.0.1:14540?sysid=2"):
+        with pytest.raises(MavtuneError, match="target_system"):
+            split_target(bad)
+    assert split_target("tcp:127.0.0.1:5760?target_system=2") == ("tcp:127.0.0.1:5760", 2)
+
+
+@given(start=st.integers(0, 255), gaps=st.lists(st.integers(1, 100), min_size=1, max_size=600))
+def test_one_sender_losing_messages_is_never_taken_for_two(start, gaps):
+    watch, seq = SeqWatch(), start
+    watch.add(seq, 0.0)
+    for i, gap in enumerate(gaps):
+        seq = (seq + gap) % 256
+        watch.add(seq, i * 0.01)
+    assert not watch.interleaved(len(gaps) * 0.01)
+
+
+def test_a_burst_of_lost_messages_only_pauses_a_vehicle():
+    """129+ messages lost in a row step the count back once; even LIMIT such bursts clear after WINDOW_S."""
+    watch, seq = SeqWatch(), 0
+    for burst in range(SeqWatch.LIMIT):
+        watch.add(seq, burst * 1.0)
+        seq = (seq + 200) % 256
+        watch.add(seq, burst * 1.0 + 0.5)
+    assert watch.interleaved(SeqWatch.LIMIT)
+    assert not watch.interleaved(SeqWatch.LIMIT + SeqWatch.WINDOW_S)
+
+
+@given(a=st.integers(0, 255), b=st.integers(0, 255), every=st.integers(1, 20))
+def test_a_second_sender_answering_as_the_first_is_seen_within_a_few_of_its_messages(a, b, every):
+    """The second sends one message for every `every` of the first (a heartbeat-only impostor: every ≈ 50)."""
+    watch, t = SeqWatch(), 0.0
+    for i in range(200):
+        watch.add((a + i) % 256, t)
+        t += 0.01
+        if i % every == 0 and i < 199:
+            watch.add((b + i // every) % 256, t)
+    # an impostor message steps the count back (in or out) unless the two counters are within BACK_MIN of each other
+    apart = [i for i in range(0, 199, every)
+             if SeqWatch.BACK_MIN < ((b + i // every) - (a + i)) % 256 <= 256 - SeqWatch.BACK_MIN]
+    assert watch.interleaved(t) == (len(apart) >= SeqWatch.LIMIT)
