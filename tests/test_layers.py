@@ -12,7 +12,7 @@ given to importlib as strings (the lazy exports of `mavtune` and `mavtune.sim`, 
     application  the public `mavtune.tune` (api: the simulator as its default fleet), run, runfolder, redraw,
                  bank, experiments/ (the paper's reproduction)
     cli          the commands: cli, __main__, and the commands kept beside what they drive (sim/commands.py,
-                 swarm/cli.py)
+                 swarm/cli.py, vehicles/mavlink/restore.py)
 
 A new module must be placed here (the test names any module without a layer)."""
 
@@ -36,7 +36,8 @@ LAYERS = (  # bottom first; a module's layer is that of its longest listed prefi
     ("report", ("mavtune.report",)),
     ("application", ("mavtune", "mavtune.api", "mavtune.run", "mavtune.runfolder", "mavtune.redraw", "mavtune.bank",
                      "mavtune.experiments")),
-    ("cli", ("mavtune.cli", "mavtune.__main__", "mavtune.sim.commands", "mavtune.swarm.cli")),
+    ("cli", ("mavtune.cli", "mavtune.__main__", "mavtune.sim.commands", "mavtune.swarm.cli",
+             "mavtune.vehicles.mavlink.restore")),
 )
 
 

@@ -36,11 +36,11 @@ def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPE
     port = free_udp_port()
     with mavsim_on(port, *args, autopilot=autopilot, seed=seed, speed=speed, sysid=sysid, duration=duration):
         if streaming:
-            wait_streaming(port)
+            wait_positions(port)
         yield f"udpin:127.0.0.1:{port}"
 
 
-def wait_streaming(port: int, timeout_s: float = 240.0) -> None:
+def wait_positions(port: int, timeout_s: float = 240.0) -> None:
     """Wait for the first LOCAL_POSITION_NED on `port`: mavsim's plant is up. With an empty numba cache mavsim
     compiles it first (about a minute on a loaded machine), so a test's own deadlines start from a flying vehicle."""
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
