@@ -60,7 +60,7 @@ def main() -> None:
     config = SwarmConfig(session="bench", key=key, settle_s=0.0, result_timeout_s=30.0)
     fleet = ZenohFleet(endpoint, config)
     env = dict(os.environ, PYTHONPATH=str(REPO), MAVTUNE_SWARM_KEY=key)
-    agents = [subprocess.Popen([sys.executable, "-c", "from mavtune.cli import main; main()", "agent",
+    agents = [subprocess.Popen([sys.executable, "-c", "from mavtune.__main__ import main; main()", "agent",
                                 "--id", f"v{j}", "--connect", endpoint, "--vehicle", args.backend,
                                 "--seed", str(args.seed + j), "--session", "bench"],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, start_new_session=True)

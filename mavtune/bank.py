@@ -7,8 +7,10 @@ holds the end values outside the tuned range (saying so), never extrapolating ga
 
 from __future__ import annotations
 
+import io
 import json
 import math
+import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -161,7 +163,7 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
     are tuned at once on that Dask cluster, each run folder shipped to its worker and back (same gains)."""
     from rich.console import Console
 
-    from mavtune.campaign import folder_files, run_chunks, run_in_folder, write_files
+    from mavtune.campaign import run_chunks
     from mavtune.run import run
     from mavtune.sim.airframe import MASS_KG
 
@@ -190,3 +192,32 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
     chunks = [(config_for(p), folder_files(f)) for p, f in zip(payloads_kg, folders)]
     run_chunks(run_in_folder, chunks, scheduler, landed, name="bank")
     return bank
+
+
+def folder_files(folder: Path) -> dict[str, bytes]:
+    """Every file under `folder` by its relative path (none if the folder does not exist): a run folder to ship."""
+    folder = Path(folder)
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def write_files(folder: Path, files: dict[str, bytes]) -> None:
+    """Write `files` (relative path -> bytes, from `folder_files`) under `folder`."""
+    for rel, data in files.items():
+        path = Path(folder) / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+
+
+def run_in_folder(config: Any, files: dict[str, bytes]) -> tuple[dict[str, bytes], Any]:
+    """`mavtune.run.run(config, folder)` in a scratch folder holding `files` (a chunk for a Dask worker, which
+    need not share a disk with the client): the folder's files afterwards and the result. The journal travels
+    with the folder, so a run resumes wherever it lands."""
+    from rich.console import Console
+
+    from mavtune.run import run  # the application's run: the bank is above it
+
+    with tempfile.TemporaryDirectory(prefix="mavtune-run-") as tmp:
+        folder = Path(tmp) / "run"
+        write_files(folder, files)
+        result = run(config, folder, console=Console(file=io.StringIO(), emoji=False), quiet=True)
+        return folder_files(folder), result

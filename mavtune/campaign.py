@@ -1,5 +1,7 @@
 """Campaigns of independent chunks (surface maps, the paper's reproduction, gain banks): run in this process by
 default, or on an existing Dask cluster (`--scheduler tcp://HOST:8786`), with the same results for the same seeds.
+A runner below everything it runs (it imports nothing of mavtune but its errors): the simulator's surfaces and the
+application's campaigns both use it (tests/test_layers.py).
 
 A chunk is one call `fn(*args)` of a module-level function whose result depends on its arguments alone (the
 simulator draws its randomness from seeds among the arguments), so where a chunk runs, and how often — Dask
@@ -9,10 +11,7 @@ each is fetched as soon as it is done, so a worker lost later costs only its unf
 
 from __future__ import annotations
 
-import io
-import tempfile
 import uuid
-from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
@@ -71,32 +70,3 @@ def _on_dask(fn: Callable[..., Any], chunks: Sequence[tuple], scheduler: str,
         return results
     finally:
         client.close()
-
-
-def folder_files(folder: Path) -> dict[str, bytes]:
-    """Every file under `folder` by its relative path (none if the folder does not exist): a run folder to ship."""
-    folder = Path(folder)
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
-
-
-def write_files(folder: Path, files: dict[str, bytes]) -> None:
-    """Write `files` (relative path -> bytes, from `folder_files`) under `folder`."""
-    for rel, data in files.items():
-        path = Path(folder) / rel
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(data)
-
-
-def run_in_folder(config: Any, files: dict[str, bytes]) -> tuple[dict[str, bytes], Any]:
-    """`mavtune.run.run(config, folder)` in a scratch folder holding `files` (a chunk for a Dask worker, which
-    need not share a disk with the client): the folder's files afterwards and the result. The journal travels
-    with the folder, so a run resumes wherever it lands."""
-    from rich.console import Console
-
-    from mavtune.run import run
-
-    with tempfile.TemporaryDirectory(prefix="mavtune-run-") as tmp:
-        folder = Path(tmp) / "run"
-        write_files(folder, files)
-        result = run(config, folder, console=Console(file=io.StringIO(), emoji=False), quiet=True)
-        return folder_files(folder), result

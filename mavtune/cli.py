@@ -355,9 +355,3 @@ def _say(message: str, colour: str, code: int) -> int:
     typer.secho(text, fg=colour, err=True)
     return code
 
-
-def main() -> None:
-    """The `mavtune` entry point of older installs: see mavtune.__main__.main."""
-    from mavtune.__main__ import main as entry
-
-    entry()

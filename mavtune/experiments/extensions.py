@@ -67,7 +67,7 @@ def variant_run(v: Variant, i: int, seed: int) -> dict[str, Any]:
     cfg = load_config(None, {**PAPER_TUNING, "tuning.strategy": v.strategy, "tuning.vehicles": v.vehicles,
                              "tuning.reuse": v.reuse, "tuning.replicates": v.replicates})
     result = run_tuning(cfg.settings(), SimFleet(v.vehicles, cfg.scenario(), seed=seed + SEED_OFFSET + 10 * i,
-                                                  trace_hz=0.0))
+                                                  trace_hz=0.0), draws=0)  # no interval: the row does not keep one
     return {"variant": v.label, "run": i, "vehicles": v.vehicles, "kp": result.gains["kp"], "kd": result.gains["kd"],
             "rounds": len(result.rounds), "flights": result.flights, "true_cost": math.nan}
 

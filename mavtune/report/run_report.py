@@ -402,15 +402,14 @@ def _plan_section(result, config, summary: dict[str, Any], round_s: float) -> li
 
 
 def _plan(result, config, vehicles: int, round_s: float) -> dict[str, Any] | None:
-    """The plan of the run: from its config, else rebuilt from the result's settings; None if neither works."""
+    """The plan of the run (`round_s` a round): of its config's settings, else of the result's; None if neither
+    works. Made here from the arguments: the report imports nothing of the application that calls it."""
     from mavtune.plan import make_plan
     from mavtune.tuner import Settings
 
     try:
         if config is not None:
-            from mavtune.run import plan_of
-
-            p = plan_of(config)
+            settings = config.settings()
         else:
             s = result.settings or {}
             settings = Settings(space={n: tuple(b) for n, b in s["space"].items()}, method=s["method"],
@@ -418,7 +417,7 @@ def _plan(result, config, vehicles: int, round_s: float) -> dict[str, Any] | Non
                                 strategy=s["strategy"], reuse=s["reuse"], initial=s.get("initial") or {},
                                 replicates=s.get("replicates"), points=s.get("points"),
                                 max_bootstraps=s.get("max_bootstraps") or 10)
-            p = make_plan(settings, primitive_s=round_s, settle_s=0.0)
+        p = make_plan(settings, primitive_s=round_s, settle_s=0.0)
     except (MavtuneError, KeyError, TypeError, ValueError):  # settings the plan cannot read: no plan column
         return None
     return {"rounds": p.rounds, "rounds_max": p.rounds_max, "flight_time_s": p.flight_time_s}

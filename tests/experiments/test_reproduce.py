@@ -16,13 +16,14 @@ import pytest
 from mavtune.experiments.reproduce import RUNS_COLUMNS, Campaign
 
 MAVTUNE = str(Path(sys.executable).with_name("mavtune"))
+pytestmark = pytest.mark.timeout(600)  # the first test also waits for the module's `reproduce --quick` (see quick)
 
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("reproduce")
     proc = subprocess.run([MAVTUNE, "reproduce", "--quick", "--out", str(out), "--seed", "3"], capture_output=True,
-                          text=True, timeout=120)
+                          text=True, timeout=540)  # 174 s with an empty numba cache at load 16 on 2 cores
     assert proc.returncode == 0, proc.stderr
     assert "report:" in proc.stdout
     return out

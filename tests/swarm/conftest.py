@@ -95,7 +95,7 @@ class Procs:
         log = open(self.tmp / f"{name}.log", "ab")
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         env["PYTHONPATH"] = os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])])
-        p = subprocess.Popen([PYTHON, "-c", "from mavtune.cli import main; main()", *args],
+        p = subprocess.Popen([PYTHON, "-c", "from mavtune.__main__ import main; main()", *args],
                              stdout=log, stderr=subprocess.STDOUT, env=env, cwd=REPO, start_new_session=True)
         self.procs[name] = p
         return p

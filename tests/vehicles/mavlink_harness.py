@@ -11,6 +11,7 @@ import time
 from collections import Counter, deque
 from contextlib import contextmanager
 
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavtune.vehicles.mavlink.config import MavlinkConfig, SafetyConfig
@@ -29,20 +30,34 @@ def free_udp_port() -> int:
 
 @contextmanager
 def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1,
-           duration: float = 120.0):
-    """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT); kills it afterwards."""
+           duration: float = 120.0, streaming: bool = True):
+    """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT) once it streams positions
+    (unless not `streaming`: at once); kills it afterwards."""
     port = free_udp_port()
     with mavsim_on(port, *args, autopilot=autopilot, seed=seed, speed=speed, sysid=sysid, duration=duration):
+        if streaming:
+            wait_positions(port)
         yield f"udpin:127.0.0.1:{port}"
+
+
+def wait_positions(port: int, timeout_s: float = 240.0) -> None:
+    """Wait for the first LOCAL_POSITION_NED on `port`: mavsim's plant is up. With an empty numba cache mavsim
+    compiles it first (about a minute on a loaded machine), so a test's own deadlines start from a flying vehicle."""
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
+    try:
+        assert conn.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=timeout_s) is not None, \
+            f"mavsim on port {port} streamed no position within {timeout_s:g} s"
+    finally:
+        conn.close()
 
 
 @contextmanager
 def mavsim_on(port: int, *args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1,
               duration: float = 120.0):
     """Run `mavtune mavsim` sending to 127.0.0.1:port until the block ends."""
-    cmd = [sys.executable, "-c", "from mavtune.cli import main; main()", "mavsim", "--port", str(port),
+    cmd = [sys.executable, "-c", "from mavtune.__main__ import main; main()", "mavsim", "--port", str(port),
            "--autopilot", autopilot, "--seed", str(seed), "--speed", str(speed), "--sysid", str(sysid),
-           "--noise-free", "--duration", str(duration), *args]
+           "--noise-free", "--duration", str(duration), "--offboard-loss-s", str(OFFBOARD_LOSS_S), *args]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         yield
@@ -53,12 +68,27 @@ def mavsim_on(port: int, *args: str, autopilot: str = "px4", seed: int = 0, spee
             proc.stderr.close()
 
 
+# The ground's timeouts are wall time (a real link is lost in wall time), and a loaded machine slows mavsim down
+# (it runs at most SPEED times real time, slower when starved, as SITL does): its HEARTBEATs then come each vehicle
+# second or each wall second, whichever is first, i.e. up to 1 s apart, and its position and parameter answers late.
+# A timeout here is a bound nothing healthy reaches on a loaded CI box; it costs nothing while the vehicle answers.
+FAST_SAFETY = dict(heartbeat_timeout_s=3.0, position_timeout_s=2.0, max_altitude_error_m=1.0)
+
+
+OFFBOARD_LOSS_S = 5.0  # PX4's failsafe after 1 s without setpoints fires when a loaded machine starves the stream
+
+
+def fast_safety(**changes) -> SafetyConfig:
+    """FAST_SAFETY with `changes`."""
+    return SafetyConfig(**{**FAST_SAFETY, **changes})
+
+
 def fast_config(**changes) -> MavlinkConfig:
-    """A short primitive and short timeouts, for a simulator running SPEED times faster than real time."""
+    """A short primitive, for a simulator running up to SPEED times faster than real time, with load-proof timeouts."""
     base = dict(
-        primitive_s=4.0, settle_s=0.5, param_timeout_s=0.3, param_retries=5, heartbeat_wait_s=20.0,
-        mode_timeout_s=2.0, discover_s=0.5,  # mavsim at SPEED sends SPEED heartbeats a second
-        safety=SafetyConfig(heartbeat_timeout_s=0.5, position_timeout_s=1.0, max_altitude_error_m=1.0),
+        primitive_s=4.0, settle_s=0.5, param_timeout_s=0.5, param_retries=5, heartbeat_wait_s=20.0,
+        mode_timeout_s=5.0, discover_s=0.5,  # mavsim at SPEED sends SPEED heartbeats a second
+        safety=fast_safety(),
     )
     base.update(changes)
     return MavlinkConfig(**base)

@@ -15,7 +15,7 @@ from mavtune.vehicles.mavlink.config import GainParam
 
 from mavlink_harness import fast_config, mavsim, read_params, tune_mavlink
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]  # mavsim may compile first
 
 PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
 

@@ -13,7 +13,7 @@ from mavtune.vehicles.mavlink import MavlinkFleet, MavlinkVehicle
 
 from mavlink_harness import fast_config, mavsim, read_params
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]  # mavsim may compile first
 
 PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
 GOOD = {"kp": 0.3, "kd": 0.5}
@@ -27,7 +27,7 @@ def realtime_config():
 
 def test_connecting_to_a_vehicle_already_streaming_in_real_time_waits_for_its_position():
     """The readiness check needs a LOCAL_POSITION_NED; it used to run before the first one arrived."""
-    with mavsim(autopilot="px4", speed=1.0) as url:
+    with mavsim(autopilot="px4", speed=1.0, streaming=False) as url:
         read_params(url, ["MPC_Z_P"])  # the vehicle is up and streaming before the fleet connects
         fleet = MavlinkFleet([url], realtime_config())
         try:

@@ -20,7 +20,7 @@ from mavtune.vehicles.mavlink.profiles import ARDUPILOT, PX4
 
 from mavlink_harness import mavsim
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]  # mavsim may compile first
 
 
 def test_base_mode_is_what_the_autopilots_send():
@@ -40,11 +40,11 @@ def test_pymavlink_decodes_the_px4_mode_from_the_heartbeat(mode):
 
 def _connect(url: str) -> mavutil.mavfile:
     conn = mavutil.mavlink_connection(url, source_system=255)
-    assert conn.wait_heartbeat(timeout=10) is not None
+    assert conn.wait_heartbeat(timeout=60) is not None  # a loaded machine starts Python slowly
     return conn
 
 
-def _param_set(conn, name: str, value: float, kind: int, timeout_s: float = 1.0):
+def _param_set(conn, name: str, value: float, kind: int, timeout_s: float = 5.0):
     conn.mav.param_set_send(conn.target_system, 1, name.encode(), value, kind)
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -52,6 +52,17 @@ def _param_set(conn, name: str, value: float, kind: int, timeout_s: float = 1.0)
         if msg is not None and msg.param_id == name:
             return msg
     return None
+
+
+def _rate_hz(conn, kind: str, messages: int = 8) -> float:
+    """The rate of a stream in vehicle time (its time_boot_ms), from `messages` in a row: a loaded machine slows
+    the simulator's clock and the stream with it, not the rate this measures."""
+    stamps = []
+    while len(stamps) < messages:
+        msg = conn.recv_match(type=kind, blocking=True, timeout=30)
+        assert msg is not None, f"no {kind}"
+        stamps.append(msg.time_boot_ms / 1000.0)
+    return (messages - 1) / (stamps[-1] - stamps[0])
 
 
 def _count(conn, kind: str, seconds: float) -> int:
@@ -63,11 +74,10 @@ def _count(conn, kind: str, seconds: float) -> int:
 
 
 def test_ardupilot_flavour_heartbeat_params_streams_interval_and_version():
-    with mavsim(autopilot="ardupilot", speed=1.0) as url:
-        started = time.monotonic()
+    with mavsim(autopilot="ardupilot", speed=1.0, streaming=False) as url:
         conn = _connect(url)
         try:
-            assert time.monotonic() - started < 5.0  # heartbeats before the plant has compiled
+            assert "LOCAL_POSITION_NED" not in conn.messages  # heartbeats before the plant is up (it compiles)
             hb = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=3)
             assert hb.type == mavlink.MAV_TYPE_HEXAROTOR and hb.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
             assert conn.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=30) is not None  # plant up
@@ -77,7 +87,7 @@ def test_ardupilot_flavour_heartbeat_params_streams_interval_and_version():
             typed = _param_set(conn, "PSC_POSZ_P", 2.0, mavlink.MAV_PARAM_TYPE_INT32)
             assert typed is not None and typed.param_value == 2.0 and typed.param_type == mavlink.MAV_PARAM_TYPE_REAL32
             seen: set[str] = set()
-            deadline = time.monotonic() + 6
+            deadline = time.monotonic() + 40  # HOME_POSITION: every 5 s of vehicle time, slower when loaded
             while time.monotonic() < deadline and len(seen) < 4:
                 m = conn.recv_match(type=["SYS_STATUS", "GLOBAL_POSITION_INT", "ATTITUDE", "HOME_POSITION"],
                                     blocking=True, timeout=0.5)
@@ -88,7 +98,8 @@ def test_ardupilot_flavour_heartbeat_params_streams_interval_and_version():
                                        mavlink.MAVLINK_MSG_ID_ATTITUDE, 200_000, 0, 0, 0, 0, 0)
             ack = conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=2)
             assert ack.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL and ack.result == mavlink.MAV_RESULT_ACCEPTED
-            assert 6 <= _count(conn, "ATTITUDE", 2.0) <= 14  # 5 Hz now (10 Hz by default)
+            conn.recv_match(type="ATTITUDE", blocking=True, timeout=1.0)  # one sent before the change may be queued
+            assert _rate_hz(conn, "ATTITUDE") == pytest.approx(5.0, rel=0.1)  # 5 Hz now (10 Hz by default)
             conn.mav.command_long_send(conn.target_system, 1, mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
                                        mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
             version = conn.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=2)

@@ -26,7 +26,7 @@ pytestmark = [
 ]
 
 ORIGINALS = {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}  # this SITL build's defaults
-MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+MAVTUNE = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
 SHORT = dict(bootstraps=1, epsilon=0.25)
 
 

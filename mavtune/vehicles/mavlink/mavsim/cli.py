@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 import typer
 
 from mavtune.vehicles.mavlink.mavsim.faults import FAULT_HELP, parse_faults
-from mavtune.vehicles.mavlink.mavsim.server import FLAVOURS, SimVehicle
+from mavtune.vehicles.mavlink.mavsim.server import FLAVOURS, OFFBOARD_LOSS_S, SimVehicle
 
 
 def mavsim_command(
@@ -22,6 +22,8 @@ def mavsim_command(
     noise_free: Annotated[bool, typer.Option(help="no wind, no sensor noise")] = False,
     fault: Annotated[Optional[list[str]], typer.Option(help=f"inject a fault (repeatable): {FAULT_HELP}")] = None,
     link_delay_ms: Annotated[float, typer.Option(help="delay every message by this much each way, wall ms")] = 0.0,
+    offboard_loss_s: Annotated[float, typer.Option(help="PX4 COM_OF_LOSS_T: OFFBOARD without setpoints this long "
+                                                   "(vehicle and wall time) falls back to Hold, s")] = OFFBOARD_LOSS_S,
     duration: Annotated[Optional[float], typer.Option(help="stop after this many wall seconds")] = None,
     verbose: Annotated[bool, typer.Option(help="log faults and mode changes")] = False,
 ) -> None:
@@ -30,6 +32,7 @@ def mavsim_command(
     vehicle = SimVehicle(
         port, autopilot, seed=seed, speed=speed, system_id=system_id, altitude_m=altitude, on_ground=on_ground,
         noise_free=noise_free, faults=parse_faults(fault), link_delay_s=link_delay_ms / 1000.0,
+        offboard_loss_s=offboard_loss_s,
     )
     typer.echo(f"mavsim: {autopilot} sysid {system_id} → udp 127.0.0.1:{port}, speed ×{speed:g}"
                + (f", link delay {link_delay_ms:g} ms each way" if link_delay_ms else ""))

@@ -125,6 +125,7 @@ class SimVehicle:
         noise_free: bool = False,
         faults: Faults | None = None,
         link_delay_s: float = 0.0,
+        offboard_loss_s: float = OFFBOARD_LOSS_S,
     ):
         if not (speed > 0 and math.isfinite(speed)):
             raise MavtuneError(f"--speed must be a positive number, got {speed}")
@@ -137,6 +138,9 @@ class SimVehicle:
         self.param_names = sorted(self.params)
         self.speed = speed
         self.link_delay_s = link_delay_s
+        if not (offboard_loss_s > 0 and math.isfinite(offboard_loss_s)):
+            raise MavtuneError(f"--offboard-loss-s must be a positive number, got {offboard_loss_s}")
+        self.offboard_loss_s = offboard_loss_s  # PX4's COM_OF_LOSS_T
         self.faults = faults or Faults()
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=system_id, source_component=1)
         self._send_lock = threading.Lock()
@@ -219,7 +223,8 @@ class SimVehicle:
             age_s = self.t_s - tg.received_s
             if self.profile.autopilot is Autopilot.PX4:
                 # the link lives in wall time: a sped-up simulation waits COM_OF_LOSS_T of both clocks
-                if age_s > OFFBOARD_LOSS_S and time.monotonic() - tg.received_wall_s > OFFBOARD_LOSS_S:
+                loss_s = self.offboard_loss_s
+                if age_s > loss_s and time.monotonic() - tg.received_wall_s > loss_s:
                     log.info("offboard setpoints lost for %.1f s: failsafe to %s", age_s, self.profile.hold_mode)
                     self._set_mode(self.profile.hold_mode)
                     return self._hold_ned, zero, zero
