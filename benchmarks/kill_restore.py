@@ -37,7 +37,7 @@ from common import write_results  # noqa: E402
 from px4_harness import hold_hover, px4_root, px4_vehicles  # noqa: E402
 from sitl_harness import _connect_tcp, guided_hover, sitl_binary, sitl_vehicles  # noqa: E402
 
-MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+MAVTUNE = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
 STOCK = {"ardupilot": {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}, "px4": {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}}
 MOMENTS = ("before_first_set", "after_first_set", "mid_primitive", "during_restore", "between_rounds")
 

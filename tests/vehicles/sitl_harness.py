@@ -226,7 +226,7 @@ def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: st
     key.write_text(f"{session} swarm test key\n")
     (folder / "agent.toml").write_text(f"[swarm]\nsession = \"{session}\"\nkey_file = \"{key}\"\n"
                                        f"result_timeout_s = {result_timeout_s}\n[mavlink]\n{mavlink_toml}")
-    mavtune = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+    mavtune = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
     procs = [subprocess.Popen(
         [*mavtune, "coordinator", "--listen", endpoint, "--vehicles", str(len(urls)), "--out", str(folder / "run"),
          "--session", session, "--key-file", str(key), "--settle-s", "0", "--result-timeout-s",

@@ -23,7 +23,7 @@ from mavlink_harness import fast_config, mavsim, read_params
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
 PX4_ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}
-MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+MAVTUNE = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
 
 
 def tune_config(path: Path, url: str) -> Path:

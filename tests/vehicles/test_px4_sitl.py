@@ -25,7 +25,7 @@ pytestmark = [
 ]
 
 ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}  # this build's defaults (mc_pos_control)
-MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+MAVTUNE = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
 SHORT = dict(bootstraps=1, epsilon=0.25)
 
 

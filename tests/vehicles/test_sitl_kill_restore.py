@@ -22,7 +22,7 @@ pytestmark = [
 ]
 
 ORIGINALS = {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}  # this SITL build's defaults
-MAVTUNE = [sys.executable, "-c", "from mavtune.cli import main; main()"]
+MAVTUNE = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
 
 
 def kill_after_first_change(sitl, out, tmp_path) -> dict[str, float]:
