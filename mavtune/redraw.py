@@ -89,8 +89,7 @@ def redraw(out_dir: str | Path, surface: Path | None = None, console: Console | 
     """Write `out_dir/report.md` with its figures from the journal and config.json, flying nothing; result.json
     then says the report is whole. Returns the report's path."""
     out_dir, console = Path(out_dir), console or Console(emoji=False)
-    journal = out_dir / JOURNAL
-    with claimed(journal) if journal.is_file() else nullcontext():  # replay names a missing journal
+    with claimed(out_dir) if out_dir.is_dir() else nullcontext():  # replay names a missing folder
         return _redraw(out_dir, surface, console)
 
 

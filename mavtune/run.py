@@ -199,7 +199,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     settings = config.settings()
     plan = plan_of(config)
     prepare_folder(out_dir)
-    with Journal(out_dir / JOURNAL) as book, claimed(book.path):
+    with claimed(out_dir), Journal(out_dir / JOURNAL) as book:
         book.bind(config.fingerprint())
         book.check_writable()
         if recorded := len(book):

@@ -29,17 +29,18 @@ def usable_path(path: Path, what: str) -> Path:
 
 
 @contextmanager
-def claimed(journal: Path) -> Iterator[None]:
-    """Hold a run folder for this process by its journal (an advisory lock: no file is added): a second `mavtune
-    tune` or `report` on the folder is refused in one line before it flies or writes anything there. The
+def claimed(folder: Path) -> Iterator[None]:
+    """Hold a run folder for this process (an advisory lock on the folder itself: no file is added, and the journal's
+    own file is never opened here — closing a second descriptor of it would drop SQLite's locks on it): a second
+    `mavtune tune` or `report` on the folder is refused in one line before it flies or writes anything there. The
     operating system drops the claim when the process ends, even by `kill -9`, so a crash never leaves it held."""
-    fd = os.open(journal, os.O_RDONLY)
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise MavtuneError(f"run folder {journal.parent} is in use by another mavtune process; wait for it to "
-                               "end, or choose another --out") from None
+            raise MavtuneError(f"run folder {folder} is in use by another mavtune process; wait for it to end, or "
+                               "choose another --out") from None
         yield
     finally:
         os.close(fd)  # closing drops the lock

@@ -6,7 +6,6 @@ from __future__ import annotations
 import errno
 import json
 import signal
-import sqlite3
 import subprocess
 import sys
 import time
@@ -17,6 +16,7 @@ import pytest
 from mavtune.errors import MavtuneError
 from mavtune.journal import Journal
 from mavtune.runfolder import claimed
+from tests.test_cli_resume import rounds_in
 from tests.test_fuzz import cli
 
 MAVTUNE = str(Path(sys.executable).with_name("mavtune"))
@@ -28,11 +28,6 @@ def one_line(code: int, err: str, *expected: str) -> None:
     assert code == 2 and err.startswith("error: ") and len(err.strip().splitlines()) == 1, (code, err)
     for text in expected:
         assert text in err, err
-
-
-def rounds_in(journal: Path) -> int:
-    with sqlite3.connect(journal) as db:
-        return db.execute("SELECT COUNT(*) FROM rounds").fetchone()[0]
 
 
 @pytest.mark.parametrize("toml, expected", [
@@ -145,7 +140,7 @@ def test_a_full_disk_mid_run_says_both_what_stopped_it_and_what_could_not_be_wri
 def test_a_second_tune_on_a_folder_in_use_flies_nothing(tmp_path):
     folder = tmp_path / "run"
     assert cli("tune", "--out", str(folder), *QUICK, "--stage-rounds", "2")[0] == 0
-    with claimed(folder / "journal.sqlite"):  # another process flying it (a lock is per open file, even in one)
+    with claimed(folder):  # another process flying it (a lock is per open file description, even in one process)
         code, _, err = cli("tune", "--out", str(folder), "-q")
         one_line(code, err, f"run folder {folder} is in use by another mavtune process")
         code, _, err = cli("report", str(folder))
