@@ -106,10 +106,13 @@ class SeqWatch:
     BACK_MIN = 8  # a step back by fewer is a reordered packet, not another sender
     WINDOW_S = 10.0
     LIMIT = 3  # steps back within WINDOW_S that mean two senders (a burst of 129+ lost messages looks like one)
+    SMALL_LIMIT = 20  # repeats or steps back by fewer than BACK_MIN within WINDOW_S: two senders whose counters
+    # run in step (started together, sending alike), which a reordered packet now and then never adds up to
 
     def __init__(self) -> None:
         self.last: int | None = None
         self.backs: deque[float] = deque()
+        self.small: deque[float] = deque()
         self.flagged = False  # interleaved when last looked at (said once per episode)
 
     def add(self, seq: int, now_s: float) -> None:
@@ -118,14 +121,20 @@ class SeqWatch:
             step = (seq - self.last) % 256
             if 128 < step <= 256 - self.BACK_MIN:
                 self.backs.append(now_s)
+            elif step == 0 or step > 256 - self.BACK_MIN:
+                self.small.append(now_s)
         self.last = seq
-        while self.backs and now_s - self.backs[0] > self.WINDOW_S:
-            self.backs.popleft()
+        for times in (self.backs, self.small):
+            while times and now_s - times[0] > self.WINDOW_S:
+                times.popleft()
 
     def interleaved(self, now_s: float) -> bool:
-        """True when two senders seem to share this (system, component): LIMIT steps back within WINDOW_S of
-        now_s (it clears again after WINDOW_S without one, so bursts of lost messages only pause a vehicle)."""
-        return sum(now_s - t <= self.WINDOW_S for t in self.backs) >= self.LIMIT
+        """True when two senders seem to share this (system, component): LIMIT steps back, or SMALL_LIMIT small
+        ones, within WINDOW_S of now_s (it clears again after WINDOW_S without them, so bursts of lost messages
+        only pause a vehicle)."""
+        def within(times: deque[float]) -> int:
+            return sum(now_s - t <= self.WINDOW_S for t in times)
+        return within(self.backs) >= self.LIMIT or within(self.small) >= self.SMALL_LIMIT
 
 
 @dataclass(frozen=True)
