@@ -133,7 +133,8 @@ class Relay:
         self._up_parser = mavlink.MAVLink(None)
         self.last_seq: dict[tuple[int, int], int] = {}  # (system, component) → its last packet sequence number
         self.streaming: set[tuple[str, int]] = set()  # vehicle-side addresses that sent a LOCAL_POSITION_NED
-        self._as_vehicle: dict[tuple[int, int], tuple] = {}  # (system, component) → (MAVLink, queued messages)
+        self._as_vehicle: dict[tuple[int, int], tuple] = {}  # (system, component) → (MAVLink, queued messages,
+        # [how many were put into its stream so far])
         self._lock = threading.Lock()
         self.stop = threading.Event()
         self.threads = [threading.Thread(target=f, daemon=True) for f in (self._up, self._down)]
@@ -147,22 +148,35 @@ class Relay:
                 data, self.vehicle = self.vehicle_side.recvfrom(65535)
             except OSError:
                 continue
-            self.ground_side.sendto(data, self.ground)
             try:
                 msgs = self._up_parser.parse_buffer(data) or []
             except mavlink.MAVError:
-                continue
+                msgs = []
+            with self._lock:
+                raw = not any((m.get_srcSystem(), m.get_srcComponent()) in self._as_vehicle for m in msgs)
+            if raw:  # as it came; else message by message below
+                self.ground_side.sendto(data, self.ground)
             for msg in msgs:
                 me = (msg.get_srcSystem(), msg.get_srcComponent())
                 self.last_seq[me] = msg.get_seq()
                 if msg.get_type() == "LOCAL_POSITION_NED":
                     self.streaming.add(self.vehicle)
                 with self._lock:
-                    queued = self._as_vehicle.get(me)
-                    while queued and queued[1]:
-                        mav = queued[0]
-                        mav.seq = msg.get_seq()  # in the vehicle's own stream, as its own message would be
-                        self.ground_side.sendto(queued[1].popleft().pack(mav), self.ground)
+                    speaking = self._as_vehicle.get(me)
+                    if speaking is None:
+                        if not raw:
+                            self.ground_side.sendto(msg.get_msgbuf(), self.ground)
+                        continue
+                    # in the vehicle's own stream, as its own messages would be: one counter for both, each message
+                    # of the vehicle moved on by those put in before it
+                    mav, queued, shift = speaking
+                    seq = msg.get_seq()  # (packing gives the message the new one)
+                    mav.seq = (seq + shift[0]) % 256
+                    self.ground_side.sendto(msg.pack(mav), self.ground)
+                    while queued:
+                        shift[0] += 1
+                        mav.seq = (seq + shift[0]) % 256
+                        self.ground_side.sendto(queued.popleft().pack(mav), self.ground)
 
     def _down(self):
         self.ground_side.settimeout(0.05)
@@ -192,7 +206,7 @@ class Relay:
         if (system, component) in self.last_seq:
             queued: deque = deque()
             with self._lock:
-                self._as_vehicle[(system, component)] = (mav, queued)
+                self._as_vehicle[(system, component)] = (mav, queued, [0])
             mav.send = lambda msg, force_mavlink1=False: queued.append(msg)
         else:
             mav.send = lambda msg, force_mavlink1=False: self.ground_side.sendto(msg.pack(mav), self.ground)
