@@ -12,9 +12,12 @@ both give the same number for one flight.
 
 Balanced cost (`balanced`): tracking alone drives the altitude gains to the autopilot's limits, where the motors
 work hardest and the loop rings (issue 21). It adds, over the same samples,
-  - motor activity: the mean rate of change of the normalised motor commands u in [0, 1] (PWM 1000–2000 µs, or
-    the simulator's rotor speed command between its limits), mean over motors and time of |du/dt|, in 1/s (full
-    ranges per second) — the motors' and ESCs' wear and heat, and the airframe's vibration;
+  - motor activity: the mean rate of change of the collective motor command, the mean over the motors of their
+    normalised commands u in [0, 1] (PWM 1000–2000 µs, or the simulator's rotor speed command between its
+    limits): mean over time of |dū/dt|, in 1/s (full ranges per second). The collective is what the altitude loop
+    commands (the motors' differential is the attitude loops' work, which the altitude gains do not change: on
+    ArduCopter SITL in 5 m/s of wind it made the per-motor activity the same at every altitude gain); its activity
+    is the throttle's wear and heat on motors and ESCs, and the vertical vibration a noisy altitude loop adds;
   - oscillation: the part of the low-passed altitude error above oscillation_hz (the error minus its own
     first-order low-pass at that cutoff), summed as |·| like the IAE (m per sample) — a loop that rings rather
     than lags; the primitive itself (one 8 s circle) lies far below it;
@@ -43,7 +46,8 @@ class Balance(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     activity_weight_ms: float = Field(BALANCED_ACTIVITY_WEIGHT_MS, ge=0, description="m·s per unit of motor "
-                                      "activity (mean |du/dt| of the normalised motor commands, 1/s) at each sample")
+                                      "activity (mean |dū/dt| of the collective normalised motor command, 1/s) at "
+                                      "each sample")
     oscillation_weight: float = Field(BALANCED_OSCILLATION_WEIGHT, ge=0, description="weight of the altitude "
                                       "error's part above oscillation_hz (same units as the IAE)")
     oscillation_hz: float = Field(1.0, gt=0, description="cutoff above which the altitude error counts as "
@@ -104,15 +108,15 @@ def iae(z_ref_m, z_m, filter_hz: float = 5.0, dt_s: float = 0.01, skip: int = 0)
 
 
 def motor_activity(u, dt_s: float = 0.01, skip: int = 0) -> float:
-    """Mean over motors and steps k > skip of |u_k − u_{k−1}| / dt_s, u (samples, motors) normalised commands in
-    [0, 1] sampled every dt_s: 1/s. NaN without two samples or with a non-finite one."""
+    """Mean over steps k ≥ skip of |ū_k − ū_{k−1}| / dt_s, ū the mean over motors of u (samples, motors), the
+    normalised commands in [0, 1] sampled every dt_s: 1/s. NaN without two samples or with a non-finite one."""
     u = np.asarray(u, dtype=float)
     if u.ndim == 1:
         u = u[:, None]
     if u.shape[1] == 0 or not np.all(np.isfinite(u)):
         return math.nan
-    du = np.abs(np.diff(u[max(skip - 1, 0):], axis=0))  # from skip on, each step against the one before it
-    return float(du.mean(axis=1).sum() / (du.shape[0] * dt_s)) if du.shape[0] else math.nan
+    du = np.abs(np.diff(u.mean(axis=1)[max(skip - 1, 0):]))  # from skip on, each step against the one before
+    return float(du.sum() / (du.shape[0] * dt_s)) if du.shape[0] else math.nan
 
 
 def measures(z_ref_m, z_m, u=None, filter_hz: float = 5.0, dt_s: float = 0.01, skip: int = 0,

@@ -60,7 +60,7 @@ FAST = {"nsz"}
  C_JPX, C_JPY, C_JPZ,  # the plant's inertia, payload included (C_JX.. are the controller's nominal model)
  C_PAYLOAD_NEW,  # the payload mass the estimator does not know yet at the start, kg
  C_OSC_ALPHA,  # low-pass gain at the balanced cost's oscillation cutoff: the error minus its slow part rings
- C_U_SCALE,  # 1 / ((rpm_max - rpm_min) 6 dt): a rotor command step as normalised motor activity, 1/s
+ C_U_SCALE,  # 1 / ((rpm_max - rpm_min) 6 dt): a step of the rotors' summed commands as collective activity, 1/s
  C_ACT_W, C_OSC_W,  # the balanced cost's weights (m s per 1/s of activity at each step; oscillation)
  NCP) = range(51)
 
@@ -629,11 +629,11 @@ def fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
             slow = X[F_SLOW, v] + beta * (d - X[F_SLOW, v])
             X[F_SLOW, v] = slow if ok else X[F_SLOW, v]
             X[F_OSC, v] += on * abs(d - slow) if ok else 0.0
-            du = 0.0
+            du = 0.0  # the collective's step: the rotors' mean command (their differential is the attitude's)
             for i in range(6):
-                du += abs(X[A_RPMCMD + i, v] - X[F_U + i, v])
+                du += X[A_RPMCMD + i, v] - X[F_U + i, v]
                 X[F_U + i, v] = X[A_RPMCMD + i, v]
-            X[F_ACT, v] += on * du * uscale if ok else 0.0
+            X[F_ACT, v] += on * abs(du) * uscale if ok else 0.0
             peak = X[F_PEAK, v]
             X[F_PEAK, v] = e if ok and on * e > peak else peak
             fails = ok and code != OK
