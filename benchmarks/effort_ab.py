@@ -61,6 +61,8 @@ def main() -> None:
     parser.add_argument("--pairs", type=int, default=10)
     parser.add_argument("--speedup", type=int, default=5, help="ArduCopter SITL speed-up")
     parser.add_argument("--sim", nargs="*", default=[], metavar="NAME=VALUE", help="ArduCopter SITL parameters")
+    parser.add_argument("--cost", choices=("balanced", "iae"), default="balanced",
+                        help="the tune's cost (iae: the tracking-only one, for comparison; kept as AUTOPILOT-iae)")
     args = parser.parse_args()
     sim = {k: float(v) for k, v in (item.split("=", 1) for item in args.sim)}
     from mavlink_harness import tune_mavlink
@@ -70,7 +72,7 @@ def main() -> None:
     from mavtune.vehicles.mavlink.originals import OriginalsStore
     from mavtune.vehicles.mavlink.vehicle import MavlinkVehicle
 
-    config = MavlinkConfig(param_timeout_s=0.5, heartbeat_wait_s=30.0)
+    config = MavlinkConfig(param_timeout_s=0.5, heartbeat_wait_s=30.0, cost=args.cost)
     before = machine()
     out = Path(tempfile.mkdtemp(prefix="mavtune-effort-ab-"))
     flights: list[dict] = []
@@ -114,7 +116,8 @@ def main() -> None:
                "balance": Balance().model_dump()}
     path = RESULTS / "effort_ab.json"
     data = json.loads(path.read_text()) if path.exists() else {}
-    data[args.autopilot] = section
+    section["cost"] = args.cost
+    data[args.autopilot + ("" if args.cost == "balanced" else f"-{args.cost}")] = section
     lines = ["# Balanced-cost tune against the stock gains, on SITL", ""]
     for ap, s in sorted(data.items()):
         lines += _section(ap, s)
@@ -130,22 +133,29 @@ def _autopilot(name: str):
 def _section(ap: str, s: dict) -> list[str]:
     """One autopilot's markdown section."""
     t, m = s["tune"], s["machine_before"]
+    cost = s.get("cost", "balanced")
+    ap = ap.split("-")[0]
     where = ", ".join(f"{k} {v:g}" for k, v in s["sim"].items()) or (
         "calm air (PX4 SIH has no wind parameter)" if ap == "px4" else "calm air")
     cmd = f"python benchmarks/effort_ab.py --autopilot {ap} --pairs {s['pairs']}" + (
+        f" --cost {cost}" if cost != "balanced" else "") + (
         " --sim " + " ".join(f"{k}={v:g}" for k, v in s["sim"].items()) if s["sim"] else "")
-    lines = [f"## {'ArduCopter' if ap == 'ardupilot' else 'PX4'} SITL", "",
+    lines = [f"## {'ArduCopter' if ap == 'ardupilot' else 'PX4'} SITL" + (f", tuned on {cost}" if cost != "balanced"
+                                                                             else ""), "",
              f"`{cmd}`: {m['cpu']}, nproc {m['nproc']}, load {m['load'][0]:.1f} before, "
              f"{s['machine_after']['load'][0]:.1f} after; " + (f"SITL ×{s['speedup']}; " if ap == "ardupilot" else
                                                                   "real time; ") + f"conditions: {where}.", "",
-             f"Tune (balanced cost, default weights: activity {s['balance']['activity_weight_ms']:g} m·s, "
-             f"oscillation {s['balance']['oscillation_weight']:g} above {s['balance']['oscillation_hz']:g} Hz; "
+             ("Tune (IAE, tracking only; " if cost == "iae" else
+              f"Tune (balanced cost, default weights: activity {s['balance']['activity_weight_ms']:g} m·s, "
+              f"oscillation {s['balance']['oscillation_weight']:g} above {s['balance']['oscillation_hz']:g} Hz; ") +
              f"ε 0.25, 1 bootstrap): {t['status']}, {t['rounds']} rounds, {t['flights']} flights, "
              f"{t['wall_s']:.0f} s wall = {t['wall_s_per_round']:.1f} s a round.", "",
              "| parameter | stock | tuned |", "| --- | --- | --- |"]
     for name, value in (t["tuned_params"] or {}).items():
         lines.append(f"| `{name}` | {t['stock_params'].get(name, float('nan')):.4g} | {value:.4g} |")
     lines += [""] + [f"- range edge: {e}" for e in t["range_edges"]] + ([""] if t["range_edges"] else [])
+    if not s["pairs"]:
+        return lines
     lines += [f"A/B: {s['complete_pairs']} complete pairs of {s['pairs']} (stock and tuned interleaved, order "
               "alternating).", "",
               "| measure | stock mean | tuned mean | tuned − stock (± se) | tuned lower in | Wilcoxon p | paired t p |",

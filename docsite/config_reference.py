@@ -58,7 +58,9 @@ def tables() -> list[Table]:
         Table("sim", Scenario, skip=("primitive", "primitive_s", "settle_s"),
               note="`primitive`, `primitive_s` and `settle_s` of a simulated flight are taken from `[flight]`."),
         Table("sim.wind", Wind), Table("sim.noise", Noise), Table("sim.spread", Spread),
-        Table("sim.balance", Balance, note="Used with `cost = \"balanced\"`; the same table as `[mavlink.balance]`."),
+        Table("sim.balance", Balance, note="Used with `cost = \"balanced\"`; the same table as `[mavlink.balance]`, "
+              "except that the simulator's default `activity_weight_ms` is 0.001 (the defaults below are the "
+              "vehicles')."),
         Table("fleet", FleetChoice, note="Which vehicles fly: the built-in simulator, swarm agents over Zenoh, "
               "or PX4 / ArduPilot vehicles over MAVLink."),
         Table("swarm", SwarmConfig), Table("swarm.envelope", _Envelope,

@@ -35,7 +35,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 BALANCED_ACTIVITY_WEIGHT_MS = 0.05
-"""Default activity_weight_ms (m·s), chosen on ArduCopter and PX4 SITL: benchmarks/results/effort_weights.md."""
+"""Default activity_weight_ms (m·s) on vehicles, for motor outputs at 50 Hz: on ArduCopter SITL's flights it is
+a fifth to a half of the IAE, and on PX4 SITL's (noisier outputs) about the IAE at the stock gains
+(benchmarks/results/effort_weights_*.md); the simulator has its own (`scenario.SIM_ACTIVITY_WEIGHT_MS`)."""
 BALANCED_OSCILLATION_WEIGHT = 1.0
 """Default oscillation_weight: the ringing part of the error counts twice."""
 
