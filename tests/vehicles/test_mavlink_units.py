@@ -213,3 +213,14 @@ def test_urls_need_a_valid_port():
     for bad in ("udpin:127.0.0.1:abc", "udpin:127.0.0.1:70000", "tcp::5760"):
         with pytest.raises(MavtuneError, match="port"):
             parse_url(bad)
+
+
+def test_cost_settings_are_validated_with_a_line_naming_the_field():
+    """`cost` is balanced by default (iae opts out); a bad weight or PWM range is one line naming the field."""
+    assert MavlinkConfig().cost == "balanced" and load_mavlink_config({"cost": "iae"}).cost == "iae"
+    assert load_mavlink_config({"balance": {"activity_weight_ms": 0.2}}).balance.activity_weight_ms == 0.2
+    for bad, field in (({"cost": "ise"}, "mavlink.cost"), ({"balance": {"activity_weight_ms": -1}},
+                                                            "mavlink.balance.activity_weight_ms"),
+                       ({"motor_pwm_us": [2000, 1000]}, "motor_pwm_us")):
+        with pytest.raises(MavtuneError, match=field.replace(".", r"\.")):
+            load_mavlink_config(bad)
