@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from mavtune.sim.cost import Balance
 
@@ -80,6 +80,12 @@ class Scenario(_Model):
     latency_s: float = Field(0.03, ge=0, le=0.09, description="feedback latency of the position/velocity estimate"
                              " (estimator + link to the flight controller), s; whole 0.01 s steps")
     mass_estimator_km: float = Field(0.5, ge=0, description="MRS mass estimator gain, kg/(m s); 0 turns it off")
+
+    @field_validator("balance", mode="before")
+    @classmethod
+    def _simulator_activity_weight(cls, v):
+        """A [sim.balance] table without activity_weight_ms takes the simulator's, not the vehicles' default."""
+        return {"activity_weight_ms": SIM_ACTIVITY_WEIGHT_MS, **v} if isinstance(v, dict) else v
 
     @classmethod
     def default(cls) -> "Scenario":
