@@ -63,7 +63,11 @@ def main() -> None:
     parser.add_argument("--sim", nargs="*", default=[], metavar="NAME=VALUE", help="ArduCopter SITL parameters")
     parser.add_argument("--cost", choices=("balanced", "iae"), default="balanced",
                         help="the tune's cost (iae: the tracking-only one, for comparison; kept as AUTOPILOT-iae)")
+    parser.add_argument("--render", action="store_true", help="only write the .md again from the .json")
     args = parser.parse_args()
+    if args.render:
+        render(json.loads((RESULTS / "effort_ab.json").read_text()))
+        return
     sim = {k: float(v) for k, v in (item.split("=", 1) for item in args.sim)}
     from mavlink_harness import tune_mavlink
 
@@ -118,6 +122,11 @@ def main() -> None:
     data = json.loads(path.read_text()) if path.exists() else {}
     section["cost"] = args.cost
     data[args.autopilot + ("" if args.cost == "balanced" else f"-{args.cost}")] = section
+    render(data)
+
+
+def render(data: dict) -> None:
+    """effort_ab.md from the sections recorded (`--render`: again from the .json, no flights)."""
     lines = ["# Balanced-cost tune against the stock gains, on SITL", ""]
     for ap, s in sorted(data.items()):
         lines += _section(ap, s)
