@@ -28,6 +28,9 @@ The cost is the controller's own altitude error: at step k the SO(3) law acts on
 is what the gains act on, and what a real vehicle can log, so it is what the paper's cost sums: |e| after the
 first-order low-pass (cutoff `filter_hz`, started at 0), over the primitive. Equivalently the measurement and the
 reference each go through the low-pass started at the first reference altitude, as `cost.iae` computes it.
+The balanced cost's measures are accumulated alongside (`cost.measures` defines them): the error's part above the
+oscillation cutoff, the collective rotor command's steps (motor activity) and the peak |error|; they leave the
+other costs' arithmetic untouched (the same bits as before they were added).
 
 Randomness is a splitmix64 stream per vehicle: the vehicle spread is drawn from the vehicle seed, everything else
 (wind, gusts, sensor noise) from (vehicle seed, round id), so a vehicle's flight does not depend on the batch (nor
