@@ -333,7 +333,8 @@ class SimVehicle:
             lat, lon = _latlon(np.zeros(3))
             self._send("home_position", lat, lon, int(HOME[2] * 1000), 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
                        0.0, 0.0, 0.0)
-        elif msg_id in (mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS):
+        elif msg_id in (mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS) \
+                and not self.faults.no_motor_outputs:
             pwm = self._motor_outputs_us()
             if msg_id == mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW:
                 # outputs 1-8 (9-16 are MAVLink 2 extensions; the ArduPilot flavour speaks MAVLink 1)
