@@ -48,7 +48,7 @@ class Row:
 def tables() -> list[Table]:
     """Every table a config file (or a swarm agent's file) may hold, in the order a reader meets them."""
     from mavtune.config import FleetChoice, FlightPlan, Tuning
-    from mavtune.sim.cost import Balance
+    from mavtune.sim.balance import Balance
     from mavtune.sim.scenario import Noise, Scenario, Spread, Wind
     from mavtune.swarm.config import SwarmConfig
     from mavtune.vehicles.mavlink.config import GainParam, MavlinkConfig, SafetyConfig

@@ -32,29 +32,8 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
-BALANCED_ACTIVITY_WEIGHT_MS = 0.05
-"""Default activity_weight_ms (m·s) on vehicles, for motor outputs at 50 Hz: on ArduCopter SITL's flights it is
-a fifth to a half of the IAE, and on PX4 SITL's (noisier outputs) about the IAE at the stock gains
-(benchmarks/results/effort_weights_*.md); the simulator has its own (`scenario.SIM_ACTIVITY_WEIGHT_MS`)."""
-BALANCED_OSCILLATION_WEIGHT = 1.0
-"""Default oscillation_weight: the ringing part of the error counts twice."""
-
-
-class Balance(BaseModel):
-    """Weights of the balanced cost: tracking error + motor activity + oscillation (see `mavtune.sim.cost`)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    activity_weight_ms: float = Field(BALANCED_ACTIVITY_WEIGHT_MS, ge=0, description="m·s per unit of motor "
-                                      "activity (mean |dū/dt| of the collective normalised motor command, 1/s) at "
-                                      "each sample")
-    oscillation_weight: float = Field(BALANCED_OSCILLATION_WEIGHT, ge=0, description="weight of the altitude "
-                                      "error's part above oscillation_hz (same units as the IAE)")
-    oscillation_hz: float = Field(1.0, gt=0, description="cutoff above which the altitude error counts as "
-                                  "oscillation, Hz (the primitive's circle is 0.125 Hz)")
-
+from mavtune.sim.balance import Balance  # noqa: F401  (the weights, light to import: the config reads them)
 
 @dataclass(frozen=True)
 class Measures:

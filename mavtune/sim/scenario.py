@@ -6,7 +6,7 @@ from typing import Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from mavtune.sim.cost import Balance
+from mavtune.sim.balance import Balance
 
 SIM_ACTIVITY_WEIGHT_MS = 0.001
 """The simulator's default activity weight: on the default scenario it moves the optimum from (0.35, 0.5) to

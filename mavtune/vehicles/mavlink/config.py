@@ -9,7 +9,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mavtune.config import read_toml, validated
-from mavtune.sim.cost import Balance
+from mavtune.sim.balance import Balance
 from mavtune.vehicles.mavlink.profiles import Autopilot
 from mavtune.vehicles.parammap import PARAM_PATTERN, GainBinding
 
