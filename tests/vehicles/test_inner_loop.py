@@ -128,13 +128,12 @@ def test_a_four_gain_run_tunes_all_four_writes_them_in_autopilot_units_and_resto
     assert summary["tuned_params"][b] == pytest.approx({  # Copter 4.7 names; its acceleration gains × 0.1
         "PSC_D_POS_P": 1.0 + 2.0 * gains["kp"], "PSC_D_VEL_P": 1.0 + 7.0 * gains["kd"],
         "PSC_D_ACC_P": 0.1 * (0.2 + 1.3 * gains["ka"]), "PSC_D_ACC_I": 0.1 * (0.2 + 2.8 * gains["ki"])}, rel=1e-6)
-    files = {name: (tmp_path / name).read_text() for name in summary["param_files"]}
-    assert set(files) == {"tuned-1.parm", "tuned-1.params", "tuned-2.parm", "tuned-2.params"} or \
-        set(files) == {"tuned.parm", "tuned.params"}
-    for url in (a, b):
+    assert summary["param_file_vehicles"] == {"tuned-1.parm": [a], "tuned-1.params": [a],  # one file each: two
+                                              "tuned-2.parm": [b], "tuned-2.params": [b]}  # autopilots, two ids
+    for k, url in enumerate((a, b), 1):
         tuned = summary["tuned_params"][url]
-        parm_file = next(tmp_path / n for n in summary["param_files"] if n.endswith(".parm") and
-                         all(p in files[n] for p in tuned))
         parm = mavparm.MAVParmDict()
-        assert parm.load(str(parm_file), use_excludes=False)
+        assert parm.load(str(tmp_path / f"tuned-{k}.parm"), use_excludes=False)
         assert {n: parm[n] for n in tuned} == pytest.approx(tuned, rel=1e-5)
+        rows = [r.split("\t") for r in (tmp_path / f"tuned-{k}.params").read_text().splitlines() if r[:1] != "#"]
+        assert {r[2]: float(r[3]) for r in rows} == pytest.approx(tuned, rel=1e-5)
