@@ -128,7 +128,7 @@ def main() -> None:
     won = sum(r["tuned"] < r["stock"] for r in pairs)
     won_outer = sum(r["tuned"] < r["outer only"] for r in pairs)
     mean = {k: statistics.mean(r[k] for r in pairs) if pairs else None for k in arms}
-    machine = f"{platform.processor() or platform.machine()}, nproc {os.cpu_count()}, load {load:.1f} at start"
+    machine = f"{cpu_model()}, nproc {os.cpu_count()}, load {load:.1f} at start"
     section = {
         "date": started, "machine": machine, "command": "python benchmarks/inner_loop.py " + " ".join(sys.argv[1:]),
         "speedup": args.speedup if args.autopilot == "ardupilot" else 1, "epsilon": args.epsilon,
@@ -142,18 +142,34 @@ def main() -> None:
     }
     path = RESULTS / f"{NAME}.json"
     data = json.loads(path.read_text()) if path.exists() else {}
+    if args.autopilot in data:  # the earlier runs stay, newest first
+        old = data[args.autopilot]
+        section["earlier"] = [{k: v for k, v in old.items() if k != "earlier"}, *old.get("earlier", [])]
     data[args.autopilot] = section
     path.write_text(json.dumps(data, indent=1))
     (RESULTS / f"{NAME}.md").write_text("\n".join(markdown(data)) + "\n")
     print("\n".join(markdown(data)))
 
 
+def cpu_model() -> str:
+    """The CPU's model name as /proc/cpuinfo gives it (else the platform's machine type)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def markdown(data: dict) -> list[str]:
     """The results page of every autopilot measured so far."""
     lines = ["# The inner altitude loop on SITL: a 4-gain tune (gain set altitude-inner) against the stock gains", "",
              "One hovering vehicle; the tune through `mavtune tune --fleet mavlink --gain-set altitude-inner`, then "
-             "stock and tuned gains flown in interleaved pairs with mavtune's cost (sum of |altitude error| over the "
-             "primitive; lower is better). A number measured on one SITL airframe is a claim about that airframe only.",
+             "the stock gains, the four tuned gains and the outer loop alone (tuned kp, kd with the stock inner "
+             "gains) flown in interleaved rounds (order rotated) with mavtune's cost (sum of |altitude error| over "
+             "the primitive; lower is better). A number measured on one SITL airframe is a claim about that "
+             "airframe only; the load average is the whole machine's (other SITLs ran beside).",
              ""]
     for autopilot, s in data.items():
         lines += [f"## {autopilot} ({s['date']}; {s['machine']})", "", f"`{s['command']}` — ε {s['epsilon']}, "
@@ -175,6 +191,13 @@ def markdown(data: dict) -> list[str]:
                       f"{s['ab_tuned_won_vs_outer']} of {s['ab_pairs_ok']} rounds ({(m['tuned'] / m['outer only'] - 1):+.0%})."]
         if s["range_edges"]:
             lines += ["", "Range edges: " + "; ".join(s["range_edges"])]
+        for e in s.get("earlier", []):
+            m = e["ab_mean_cost"]
+            params = ", ".join(f"{p} {v:.4g}" for p, v in e["tuned_params"].items())
+            lines += ["", f"Earlier run ({e['date']}; {e['machine']}; `{e['command']}`): {e['rounds']} rounds, "
+                      f"{e['wall_s_per_round']} s a round; tuned {params}; cost stock {m['stock']:.4g} vs tuned "
+                      f"{m['tuned']:.4g} over {e['ab_pairs_ok']} interleaved rounds (tuned lower in "
+                      f"{e['ab_tuned_won']})."]
         lines.append("")
     return lines
 

@@ -70,7 +70,8 @@ class MavlinkConfig(BaseModel):
     urls: list[str] = Field(default_factory=list)  # one per vehicle (udpin:HOST:PORT, tcp:HOST:PORT, serial:DEV:BAUD)
     autopilot: Literal["auto", "px4", "ardupilot"] = "auto"  # auto: as the vehicle's HEARTBEAT says
     gains: dict[str, GainParam] | None = None  # None: the gain set's map for the detected autopilot
-    gain_set: str | None = None  # a named set of gains (config.GAIN_SETS); None: "altitude" (DEFAULT_GAINS)
+    gain_set: str | None = None  # the gains to tune by name: "altitude" (kp, kd; the default) or "altitude-inner"
+    # (kp, kd, ka, ki: the inner loop too); it sets tuning.space. Not together with [mavlink.gains] tables
     primitive_s: float = Field(8.0, ge=1.0)  # one circle (paper: 8 s); under 1 s it measures too little
     settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
     calm_tolerance_m: float = Field(0.15, gt=0)  # after settle_s, also wait until |altitude error| is below this
