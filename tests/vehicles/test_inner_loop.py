@@ -53,6 +53,14 @@ def test_choosing_a_gain_set_makes_it_the_tuning_space():
     assert load_config(None, {**MAVLINK, "mavlink.gain_set": "altitude"}).tuning.space == {"kp": (0, 1), "kd": (0, 1)}
 
 
+def test_a_gain_set_run_resumes_with_its_space_and_swarm_agents_share_it():
+    config = load_config(None, {**MAVLINK, "mavlink.gain_set": "altitude-inner"})
+    again = load_config(base=config.model_dump(mode="json"))  # as a resumed run reads its folder's config.json
+    assert again.tuning.space == config.tuning.space and again.mavlink["gain_set"] == "altitude-inner"
+    swarm = load_config(None, {"fleet.kind": "zenoh", "mavlink.gain_set": "altitude-inner"})  # agents' [mavlink]
+    assert list(swarm.tuning.space) == ["kp", "kd", "ka", "ki"]
+
+
 @pytest.mark.parametrize("flags, message", [
     ({"mavlink.gain_set": "inner"}, "config mavlink.gain_set: unknown gain set 'inner'; known: altitude, altitude-inner"),
     ({"mavlink.gain_set": "altitude-inner", "tuning.space": {"kp": [0, 1], "kd": [0, 1]}},
