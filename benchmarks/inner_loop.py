@@ -189,6 +189,11 @@ def markdown(data: dict) -> list[str]:
             lines += ["", f"Outer loop only (the tuned kp, kd with the stock inner gains: {outer}): mean cost "
                       f"{m['outer only']:.4g}; the four tuned gains cost less than it in "
                       f"{s['ab_tuned_won_vs_outer']} of {s['ab_pairs_ok']} rounds ({(m['tuned'] / m['outer only'] - 1):+.0%})."]
+        spread = [f"{k} {min(c):.4g}–{max(c):.4g}" for k in m
+                  if (c := [r[k] for r in s["ab_pairs"] if r.get(k) is not None])]
+        if spread:
+            lines += ["", "Cost of single flights, lowest–highest (the flight-to-flight spread at the same gains): "
+                      + ", ".join(spread) + "."]
         if s["range_edges"]:
             lines += ["", "Range edges: " + "; ".join(s["range_edges"])]
         for e in s.get("earlier", []):
