@@ -74,6 +74,19 @@ def test_a_wrong_gain_set_is_one_line_naming_it(flags, message):
     assert str(err.value).startswith(message) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize("args, expected", [
+    (("--gain-set", "altitude-inner"), "error: --gain-set applies to --fleet mavlink only; this run's fleet is sim"),
+    (("--fleet", "mavlink", "--mavlink", "udpin:127.0.0.1:9", "--gain-set", "inner"),
+     "error: config mavlink.gain_set: unknown gain set 'inner'; known: altitude, altitude-inner"),
+])
+def test_the_gain_set_flag_refuses_in_one_line_before_anything_flies(tmp_path, args, expected):
+    from tests.test_fuzz import cli
+
+    code, _, err = cli("tune", *args, "--out", str(tmp_path / "run"))
+    assert code == 2 and err.strip() == expected
+    assert not (tmp_path / "run").exists()
+
+
 def test_an_unknown_gain_set_in_the_mavlink_table_alone_is_one_line():
     with pytest.raises(MavtuneError, match=r"^config mavlink: unknown gain set 'x'; known: altitude, altitude-inner$"):
         load_mavlink_config({"gain_set": "x"})
