@@ -135,7 +135,8 @@ def test_a_four_gain_run_tunes_all_four_writes_them_in_autopilot_units_and_resto
     originals = {"px4": {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0, "MPC_Z_VEL_D_ACC": 0.0, "MPC_Z_VEL_I_ACC": 2.0},
                  "ardupilot-4.7": {"PSC_D_POS_P": 1.0, "PSC_D_VEL_P": 5.0, "PSC_D_ACC_P": 0.05, "PSC_D_ACC_I": 0.1}}
     with mavsim(autopilot="px4", seed=1) as a, mavsim(autopilot="ardupilot-4.7", seed=2, sysid=2) as b:
-        summary = tune_mavlink([a, b], tmp_path, fast_config(gain_set="altitude-inner"), bootstraps=1, epsilon=0.25)
+        summary = tune_mavlink([a, b], tmp_path, fast_config(gain_set="altitude-inner"), bootstraps=1, epsilon=0.25,
+                               adaptive=False)  # one flight a point: 4 line searches stay short
         back = {url: read_params(url, list(originals[flavour])) for url, flavour in ((a, "px4"), (b, "ardupilot-4.7"))}
     assert back[a] == originals["px4"]
     assert back[b] == pytest.approx(originals["ardupilot-4.7"], rel=1e-6)  # float32 on the wire
