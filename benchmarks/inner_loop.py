@@ -108,7 +108,11 @@ def main() -> None:
     parser.add_argument("--speedup", type=int, default=5, help="ArduCopter SITL speed-up (PX4 SIH runs at real time)")
     parser.add_argument("--epsilon", type=float, default=0.25)
     parser.add_argument("--bootstraps", type=int, default=1)
+    parser.add_argument("--again", type=int, default=0, help="no tune: fly this many more interleaved rounds of the "
+                        "recorded run's gains and add them to its rounds")
     args = parser.parse_args()
+    if args.again:
+        return again(args)
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     load = os.getloadavg()[0]
     out = Path(tempfile.mkdtemp(prefix=f"mavtune-inner-{args.autopilot}-"))
@@ -124,10 +128,6 @@ def main() -> None:
         arms = {"stock": stock, "tuned": tuned,
                 "outer only": {**stock, "kp": tuned["kp"], "kd": tuned["kd"]}}  # the inner loop left stock
         rows = ab(url, config, arms, args.pairs)
-    pairs = [r for r in rows if all(r.get(k) is not None for k in arms)]
-    won = sum(r["tuned"] < r["stock"] for r in pairs)
-    won_outer = sum(r["tuned"] < r["outer only"] for r in pairs)
-    mean = {k: statistics.mean(r[k] for r in pairs) if pairs else None for k in arms}
     machine = f"{cpu_model()}, nproc {os.cpu_count()}, load {load:.1f} at start"
     section = {
         "date": started, "machine": machine, "command": "python benchmarks/inner_loop.py " + " ".join(sys.argv[1:]),
@@ -137,15 +137,53 @@ def main() -> None:
         "wall_s_per_round": round(tune_s / max(1, result["rounds"]), 2), "restored": result["restored"],
         "gains": result["gains"], "stock_params": originals, "tuned_params": result["tuned_params"][url],
         "range_edges": [e.get("message") for e in result.get("range_edges", [])],
-        "ab_pairs": rows, "ab_mean_cost": mean, "ab_tuned_won": won, "ab_tuned_won_vs_outer": won_outer,
-        "ab_pairs_ok": len(pairs), "outer_only_params": outer_params(originals, result["param_maps"][url], tuned),
+        "ab_pairs": rows, "ab_mean_cost": dict.fromkeys(arms),
+        "outer_only_params": outer_params(originals, result["param_maps"][url], tuned),
     }
+    summarise(section)
     path = RESULTS / f"{NAME}.json"
     data = json.loads(path.read_text()) if path.exists() else {}
     if args.autopilot in data:  # the earlier runs stay, newest first
         old = data[args.autopilot]
         section["earlier"] = [{k: v for k, v in old.items() if k != "earlier"}, *old.get("earlier", [])]
     data[args.autopilot] = section
+    path.write_text(json.dumps(data, indent=1))
+    (RESULTS / f"{NAME}.md").write_text("\n".join(markdown(data)) + "\n")
+    print("\n".join(markdown(data)))
+
+
+def summarise(section: dict) -> None:
+    """The section's cost means and win counts over every complete round of its interleaved flights."""
+    rows = [r for r in section["ab_pairs"] if all(r.get(k) is not None for k in section["ab_mean_cost"])]
+    section["ab_mean_cost"] = {k: statistics.mean(r[k] for r in rows) if rows else None
+                               for k in section["ab_mean_cost"]}
+    section["ab_tuned_won"] = sum(r["tuned"] < r["stock"] for r in rows)
+    if "outer only" in section["ab_mean_cost"]:
+        section["ab_tuned_won_vs_outer"] = sum(r["tuned"] < r["outer only"] for r in rows)
+    section["ab_pairs_ok"] = len(rows)
+
+
+def again(args) -> None:
+    """More interleaved rounds of the recorded run's stock, tuned and outer-only gains on a fresh vehicle."""
+    from mavtune.vehicles.mavlink.config import gain_set_map
+    from mavtune.vehicles.mavlink.profiles import Autopilot
+
+    path = RESULTS / f"{NAME}.json"
+    data = json.loads(path.read_text())
+    section = data[args.autopilot]
+    bound = gain_set_map("altitude-inner", Autopilot(args.autopilot))
+    stock = {g: (section["stock_params"][c.param] - c.min) / (c.max - c.min) for g, c in bound.items()}
+    tuned = section["gains"]
+    arms = {"stock": stock, "tuned": tuned, "outer only": {**stock, "kp": tuned["kp"], "kd": tuned["kd"]}}
+    config = MavlinkConfig(autopilot=args.autopilot, gain_set="altitude-inner", heartbeat_wait_s=30.0)
+    started, load = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), os.getloadavg()[0]
+    with vehicles(args.autopilot, args.speedup) as url:
+        rows = ab(url, config, arms, args.again)
+    section["ab_pairs"] += rows
+    section.setdefault("ab_added", []).append({
+        "date": started, "machine": f"{cpu_model()}, nproc {os.cpu_count()}, load {load:.1f} at start",
+        "command": "python benchmarks/inner_loop.py " + " ".join(sys.argv[1:]), "rounds": len(rows)})
+    summarise(section)
     path.write_text(json.dumps(data, indent=1))
     (RESULTS / f"{NAME}.md").write_text("\n".join(markdown(data)) + "\n")
     print("\n".join(markdown(data)))
@@ -189,6 +227,9 @@ def markdown(data: dict) -> list[str]:
             lines += ["", f"Outer loop only (the tuned kp, kd with the stock inner gains: {outer}): mean cost "
                       f"{m['outer only']:.4g}; the four tuned gains cost less than it in "
                       f"{s['ab_tuned_won_vs_outer']} of {s['ab_pairs_ok']} rounds ({(m['tuned'] / m['outer only'] - 1):+.0%})."]
+        for a in s.get("ab_added", []):
+            lines += ["", f"{a['rounds']} of these rounds were flown later on a fresh vehicle ({a['date']}; "
+                      f"{a['machine']}; `{a['command']}`)."]
         spread = [f"{k} {min(c):.4g}–{max(c):.4g}" for k in m
                   if (c := [r[k] for r in s["ab_pairs"] if r.get(k) is not None])]
         if spread:
