@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -28,7 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests" / "vehicles"))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
-from common import RESULTS  # noqa: E402
+from common import RESULTS, cpu_model  # noqa: E402
 from mavlink_harness import tune_mavlink  # noqa: E402
 
 from mavtune.vehicles.mavlink.config import MavlinkConfig  # noqa: E402
@@ -187,17 +186,6 @@ def again(args) -> None:
     path.write_text(json.dumps(data, indent=1))
     (RESULTS / f"{NAME}.md").write_text("\n".join(markdown(data)) + "\n")
     print("\n".join(markdown(data)))
-
-
-def cpu_model() -> str:
-    """The CPU's model name as /proc/cpuinfo gives it (else the platform's machine type)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def markdown(data: dict) -> list[str]:
