@@ -1,4 +1,5 @@
-"""What every benchmark here shares: CPU time of this process, the CPU model, and writing a result as markdown + JSON."""
+"""What every benchmark here shares: CPU time of this process, the CPU model, and writing a result as markdown and
+JSON."""
 
 from __future__ import annotations
 
