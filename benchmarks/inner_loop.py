@@ -214,7 +214,8 @@ def markdown(data: dict) -> list[str]:
             outer = ", ".join(f"{p} {v:.4g}" for p, v in s["outer_only_params"].items())
             lines += ["", f"Outer loop only (the tuned kp, kd with the stock inner gains: {outer}): mean cost "
                       f"{m['outer only']:.4g}; the four tuned gains cost less than it in "
-                      f"{s['ab_tuned_won_vs_outer']} of {s['ab_pairs_ok']} rounds ({(m['tuned'] / m['outer only'] - 1):+.0%})."]
+                      f"{s['ab_tuned_won_vs_outer']} of {s['ab_pairs_ok']} rounds "
+                      f"({(m['tuned'] / m['outer only'] - 1):+.0%})."]
         for a in s.get("ab_added", []):
             lines += ["", f"{a['rounds']} of these rounds were flown later on a fresh vehicle ({a['date']}; "
                       f"{a['machine']}; `{a['command']}`)."]

@@ -116,7 +116,8 @@ class ParamMap(BaseModel):
 
 
 # ---- named gain sets a MAVLink run selects by `[mavlink] gain_set` (the names it tunes: config.GAIN_SETS) ----------
-# Each gain: (parameter in ArduCopter ≤ 4.6 / PX4 names and units, min, max); 4.7's PSC_D_* names are found by probing.
+# Each gain: (parameter in ArduCopter ≤ 4.6 / PX4 names and units, min, max); 4.7's PSC_D_* names are found by
+# probing.
 # "altitude" is the built-in default map (mavtune.vehicles.mavlink.config.DEFAULT_GAINS). "altitude-inner" adds the
 # inner altitude loop: ki, the integrator that carries the hover thrust (ArduCopter PSC_ACCZ_I on the acceleration
 # error, PX4 MPC_Z_VEL_I_ACC on the climb-rate error), and ka, the innermost damping (ArduCopter PSC_ACCZ_P on the

@@ -62,7 +62,8 @@ def test_a_gain_set_run_resumes_with_its_space_and_swarm_agents_share_it():
 
 
 @pytest.mark.parametrize("flags, message", [
-    ({"mavlink.gain_set": "inner"}, "config mavlink.gain_set: unknown gain set 'inner'; known: altitude, altitude-inner"),
+    ({"mavlink.gain_set": "inner"},
+     "config mavlink.gain_set: unknown gain set 'inner'; known: altitude, altitude-inner"),
     ({"mavlink.gain_set": "altitude-inner", "tuning.space": {"kp": [0, 1], "kd": [0, 1]}},
      "config tuning.space: gain set altitude-inner tunes kp, kd, ka, ki, not kp, kd"),
     ({"mavlink.gain_set": "altitude-inner", "mavlink.gains": {"kp": {"param": "MPC_Z_P", "min": 0.1, "max": 1}}},

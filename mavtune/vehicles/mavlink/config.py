@@ -114,7 +114,8 @@ def gain_set_map(name: str, autopilot: Autopilot) -> dict[str, GainParam]:
     """The gain → parameter map of a named gain set on an autopilot, in the set's tuning order."""
     if name not in GAIN_SET_BINDINGS:
         return dict(DEFAULT_GAINS[autopilot])
-    return {g: GainParam(param=p, min=lo, max=hi) for g, (p, lo, hi) in GAIN_SET_BINDINGS[name][autopilot.value].items()}
+    bindings = GAIN_SET_BINDINGS[name][autopilot.value]
+    return {g: GainParam(param=p, min=lo, max=hi) for g, (p, lo, hi) in bindings.items()}
 
 
 def load_mavlink_config(source: str | Path | dict[str, Any] | None) -> MavlinkConfig:
