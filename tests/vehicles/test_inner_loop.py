@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given, strategies as st
 from pymavlink import mavparm
 
 from mavtune.config import GAIN_SETS, load_config
@@ -32,6 +33,14 @@ def test_every_gain_set_binds_its_gains_in_order_within_the_documented_limits():
                 spec = profile.spec(c.param)
                 assert spec is not None and spec.min <= c.min < c.max <= spec.max, (name, g, c)
                 assert c.min <= spec.default <= c.max, (name, g, c)  # the stock gains can be flown for comparison
+
+
+@given(name=st.sampled_from(sorted(GAIN_SETS)), autopilot=st.sampled_from(list(Autopilot)),
+       g=st.floats(0.0, 1.0))
+def test_any_normalised_gain_of_a_set_is_a_value_inside_the_documented_limits(name, autopilot, g):
+    for c in gain_set_map(name, autopilot).values():
+        spec = PROFILES[autopilot].spec(c.param)
+        assert spec.min <= c.physical(g) <= spec.max
 
 
 def test_the_inner_set_tunes_the_inner_loop_of_both_autopilots():
