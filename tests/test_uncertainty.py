@@ -175,7 +175,7 @@ def test_a_gain_vector_is_ruled_out_only_by_a_worse_nearest_flown_point():
     line = {(x, 0.2): [1.0 + 10 * (x - 0.2) ** 2] * 4 for x in (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)}  # kp flown, kd held
     spans = plausible_region(line, pool, [(0.0, 1.0), (0.0, 1.0)])
     assert spans[1] == (0.0, 1.0)  # kd never flown elsewhere: nothing rules any kd out
-    assert spans[0] == pytest.approx((0.125, 0.3), abs=0.03)  # kp: the best point's cell, its worse neighbours' cells out
+    assert spans[0] == pytest.approx((0.125, 0.3), abs=0.03)  # kp: the best point's cell; worse ones' are out
     failed = {**line, (0.2, 0.9): [math.inf]}
     assert plausible_region(failed, pool, [(0.0, 1.0), (0.0, 1.0)])[1][1] < 0.9  # nearer a failure: ruled out
     assert plausible_region({(0.5,): [1.0, 1.1]}, pool, [(0.0, 1.0)]) is None  # one point: nothing to compare
