@@ -15,8 +15,8 @@ PX4 holds it); entering GUIDED holds the current position until a new target com
 message each way.
 
 Gain mapping: see `mavtune.vehicles.mavlink.mavsim.cascade` (ArduCopter's PSC_POSZ_P → PSC_VELZ_P → PSC_ACCZ_*
-cascade with its limits and filters) and, for PX4, the P position loop feeding a P velocity loop in acceleration
-units: k_x(z) = MPC_Z_P · MPC_Z_VEL_P_ACC [1/s²], k_v(z) = MPC_Z_VEL_P_ACC [1/s]. The diverge fault adds a growing
+cascade with its limits and filters; PX4's MPC_Z_P position loop feeding the MPC_Z_VEL_P/I/D_ACC velocity PID in
+acceleration units): every altitude gain of either autopilot acts on the flight. The diverge fault adds a growing
 altitude oscillation to the reference while the named parameter is above its threshold.
 """
 
@@ -36,7 +36,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavtune.errors import MavtuneError
-from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude
+from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude, Px4Altitude
 from mavtune.vehicles.mavlink.mavsim.faults import Faults
 from mavtune.vehicles.mavlink.mavsim.plant import make_plant
 from mavtune.vehicles.mavlink.params import as_float32
@@ -66,8 +66,6 @@ OFFBOARD_LOSS_S = 1.0  # PX4 COM_OF_LOSS_T: OFFBOARD without setpoints for this 
 GUIDED_TIMEOUT_S = 3.0  # ArduCopter GUIDED: a velocity/acceleration target older than this is stopped
 FLAVOURS = ("px4", "ardupilot", "ardupilot-4.7")
 VERSIONS = {"px4": (1, 15, 0), "ardupilot": (4, 6, 0), "ardupilot-4.7": (4, 7, 0)}
-POS_P_NAMES = ("MPC_Z_P", "PSC_POSZ_P", "PSC_D_POS_P")
-VEL_P_NAMES = ("MPC_Z_VEL_P_ACC", "PSC_VELZ_P", "PSC_D_VEL_P")
 IGNORE_POS = 0b111
 IGNORE_VEL = 0b111 << 3
 IGNORE_ACC = 0b111 << 6
@@ -165,7 +163,7 @@ class SimVehicle:
         self.plant_kind = "starting"
         self._plant_args = (seed, noise_free)
         self._built: tuple[Any, str] | None = None
-        self.cascade = ArduCopterAltitude() if self.profile.autopilot is Autopilot.ARDUPILOT else None
+        self.cascade = ArduCopterAltitude() if self.profile.autopilot is Autopilot.ARDUPILOT else Px4Altitude()
         self.mode = "POSCTL" if self.profile.autopilot is Autopilot.PX4 else "LOITER"
         self._hold_ned = self._ned_position()
         self._target: _Target | None = None
@@ -214,15 +212,11 @@ class SimVehicle:
             self._diverge_since = None
         if self.plant is None:
             return
-        if self.cascade is not None:  # ArduCopter: the cascade commands the acceleration; the plant's PD is off
-            for name, value in self.params.items():
-                canonical, scale = self.profile.family(name)[0][0], dict(self.profile.family(name))[name]
-                self.cascade.gains[canonical] = value / scale
-            self.plant.set_gains(0.0, 0.0)
-            return
-        pos_p = next(self.params[n] for n in POS_P_NAMES if n in self.params)
-        vel_p = next(self.params[n] for n in VEL_P_NAMES if n in self.params)
-        self.plant.set_gains(max(pos_p, 0.0) * max(vel_p, 0.0), max(vel_p, 0.0))  # the plant takes no negative gain
+        # the autopilot's cascade commands the vertical acceleration; the plant's own altitude PD is off
+        for name, value in self.params.items():
+            canonical, scale = self.profile.family(name)[0][0], dict(self.profile.family(name))[name]
+            self.cascade.gains[canonical] = value / scale
+        self.plant.set_gains(0.0, 0.0)
 
     def _reference(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The NED reference the autopilot tracks now, by mode."""
@@ -254,12 +248,11 @@ class SimVehicle:
         flip = np.array([1.0, -1.0, -1.0])  # NED → the plant's z-up frame (a proper rotation)
         pos, vel, acc = pos * flip, vel * flip, acc * flip
         if self.airborne:
-            if self.cascade is not None:
-                p, v = self.plant.position_m[0], self.plant.velocity_mps[0]
-                acc = acc.copy()
-                acc[2] = self.cascade.step(DT_S, pos[2], vel[2], acc[2], p[2], v[2])
-                pos, vel = pos.copy(), vel.copy()
-                pos[2], vel[2] = p[2], v[2]
+            p, v = self.plant.position_m[0], self.plant.velocity_mps[0]
+            acc = acc.copy()
+            acc[2] = self.cascade.step(DT_S, pos[2], vel[2], acc[2], p[2], v[2])
+            pos, vel = pos.copy(), vel.copy()
+            pos[2], vel[2] = p[2], v[2]
             self.plant.step(pos, vel, acc)
         self.t_s += DT_S
         for when, action in list(self._timed):
