@@ -416,6 +416,7 @@ class MavlinkVehicle:
             if reason:  # the new gains do not hold a calm hover: their fault, not the weather's
                 return ("not_settled" if reason == "not_calm" else reason), recorded
             circle = Circle(self._hover_ned, cfg.primitive_s, cfg.circle_diameter_m, cfg.elevation_m)
+            self.link.request_rate(motor_id, cfg.motor_hz)  # again (unacknowledged): a lost request loses a flight
             t0 = self.link.state.position.t_s
             base = self._altitude(self.link.state.position) if cfg.altitude_source == "distance_sensor" else hover_alt
             self.streamer.set_target(lambda t: circle.at(t - t0))
