@@ -121,12 +121,15 @@ class SeqWatch:
     WINDOW_S = 10.0
     LIMIT = 3  # steps back within WINDOW_S that mean two senders (a burst of 129+ lost messages looks like one)
     SMALL_LIMIT = 20  # repeats or steps back by fewer than BACK_MIN within WINDOW_S: two senders whose counters
-    # run in step (started together, sending alike), which a reordered packet now and then never adds up to
+    # run in step (started together, sending alike) …
+    SMALL_SHARE = 0.2  # … when they are also this share of all its messages (two in step: about half), which one
+    # fast sender whose packets now and then leave out of order (PX4 at 50 Hz streams) never reaches
 
     def __init__(self) -> None:
         self.last: int | None = None
         self.backs: deque[float] = deque()
         self.small: deque[float] = deque()
+        self.seen: deque[float] = deque()  # every message's time within WINDOW_S
         self.flagged = False  # interleaved when last looked at (said once per episode)
 
     def add(self, seq: int, now_s: float) -> None:
@@ -138,17 +141,20 @@ class SeqWatch:
             elif step == 0 or step > 256 - self.BACK_MIN:
                 self.small.append(now_s)
         self.last = seq
-        for times in (self.backs, self.small):
+        self.seen.append(now_s)
+        for times in (self.backs, self.small, self.seen):
             while times and now_s - times[0] > self.WINDOW_S:
                 times.popleft()
 
     def interleaved(self, now_s: float) -> bool:
         """True when two senders seem to share this (system, component): LIMIT steps back, or SMALL_LIMIT small
-        ones, within WINDOW_S of now_s (it clears again after WINDOW_S without them, so bursts of lost messages
+        ones that are SMALL_SHARE of its messages, within WINDOW_S of now_s (it clears again after WINDOW_S without them, so bursts of lost messages
         only pause a vehicle)."""
         def within(times: deque[float]) -> int:
             return sum(now_s - t <= self.WINDOW_S for t in times)
-        return within(self.backs) >= self.LIMIT or within(self.small) >= self.SMALL_LIMIT
+        small = within(self.small)
+        return (within(self.backs) >= self.LIMIT
+                or small >= max(self.SMALL_LIMIT, self.SMALL_SHARE * within(self.seen)))
 
 
 @dataclass(frozen=True)
