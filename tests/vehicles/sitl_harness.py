@@ -158,6 +158,7 @@ def guided_hover(master: mavutil.mavfile, altitude_m: float = HOVER_M, timeout_s
             texts = (texts + [msg.text])[-3:]
         now = time.monotonic()
         if mode is not None and mode != guided and now >= next_arm:
+            next_arm = now + 1.0
             master.set_mode(guided)
         if not armed and prearm_ok is not False and mode == guided and now >= next_arm:
             next_arm = now + 1.0
