@@ -134,7 +134,7 @@ def main() -> None:
         for name in args.setups:  # one PX4 per setup, all flying in turn: the same load for each
             params, settings, _ = SETUPS[name]
             (px4,) = stack.enter_context(px4_vehicles(1, env={f"PX4_PARAM_{k}": v for k, v in params.items()}))
-            fleets[name] = MavlinkFleet([px4.tuner_url], MavlinkConfig(autopilot="px4", **settings))
+            fleets[name] = MavlinkFleet([px4.tuner_url], MavlinkConfig(autopilot="px4", cost="iae", **settings))
             stack.callback(fleets[name].close)
         for r in range(args.flights):
             for name, fleet in fleets.items():

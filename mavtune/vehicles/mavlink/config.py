@@ -8,9 +8,10 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from mavtune.config import read_toml, validated
+from mavtune.config import GAIN_SETS, read_toml, validated
+from mavtune.sim.balance import Balance
 from mavtune.vehicles.mavlink.profiles import Autopilot
-from mavtune.vehicles.parammap import PARAM_PATTERN, GainBinding
+from mavtune.vehicles.parammap import GAIN_SET_BINDINGS, PARAM_PATTERN, GainBinding
 
 
 class GainParam(BaseModel):
@@ -69,7 +70,9 @@ class MavlinkConfig(BaseModel):
 
     urls: list[str] = Field(default_factory=list)  # one per vehicle (udpin:HOST:PORT, tcp:HOST:PORT, serial:DEV:BAUD)
     autopilot: Literal["auto", "px4", "ardupilot"] = "auto"  # auto: as the vehicle's HEARTBEAT says
-    gains: dict[str, GainParam] | None = None  # None: DEFAULT_GAINS of the detected autopilot
+    gains: dict[str, GainParam] | None = None  # None: the gain set's map for the detected autopilot
+    gain_set: str | None = None  # the gains to tune by name: "altitude" (kp, kd; the default) or "altitude-inner"
+    # (kp, kd, ka, ki: the inner loop too); it sets tuning.space. Not together with [mavlink.gains] tables
     primitive_s: float = Field(8.0, ge=1.0)  # one circle (paper: 8 s); under 1 s it measures too little
     settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
     calm_tolerance_m: float = Field(0.15, gt=0)  # after settle_s, also wait until |altitude error| is below this
@@ -80,6 +83,14 @@ class MavlinkConfig(BaseModel):
     elevation_m: float = Field(1.0, ge=0)  # altitude difference over the circle
     setpoint_hz: float = Field(20.0, ge=10.0, le=100.0)  # SET_POSITION_TARGET_LOCAL_NED rate (PX4 needs > 2 Hz)
     filter_hz: float = Field(5.0, gt=0)  # low-pass cutoff of the cost, as the simulator's Scenario.filter_hz
+    cost: Literal["balanced", "iae"] = "balanced"  # balanced: altitude IAE + weighted motor activity and
+    # oscillation (`balance`; motor outputs from SERVO_OUTPUT_RAW / ACTUATOR_OUTPUT_STATUS); iae: tracking only
+    balance: Balance = Balance()  # the balanced cost's weights (as the simulator's [sim.balance])
+    motors: int | None = Field(None, ge=1, le=16)  # motor output channels 1..N (None: 4/6/8 by the HEARTBEAT's
+    # vehicle type: quad-, hexa-, octorotor; other types 4)
+    motor_pwm_us: tuple[float, float] = (1000.0, 2000.0)  # motor output at 0 and full command (MOT_PWM_MIN/MAX,
+    # PWM_MAIN_MIN/MAX): outputs are normalised to [0, 1] by it for the motor activity
+    motor_hz: float = Field(50.0, ge=5.0, le=100.0)  # motor output rate asked of the autopilot during a primitive
     altitude_source: Literal["local_position", "distance_sensor"] = "local_position"  # or the downward rangefinder
     keep_tuned: bool = False  # at the end leave the tuned gains on the vehicle instead of the originals
     heartbeat_wait_s: float = Field(10.0, gt=0)  # how long to wait for the first HEARTBEAT
@@ -93,9 +104,34 @@ class MavlinkConfig(BaseModel):
     source_system: int = Field(255, ge=1, le=255)  # our (ground station) system id
     safety: SafetyConfig = SafetyConfig()
 
+    @model_validator(mode="after")
+    def _pwm_range(self) -> "MavlinkConfig":
+        lo, hi = self.motor_pwm_us
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"motor_pwm_us: need finite min < max, got [{lo}, {hi}]")
+        return self
+
+    @model_validator(mode="after")
+    def _known_gain_set(self) -> "MavlinkConfig":
+        if self.gain_set is not None and self.gain_set not in GAIN_SETS:
+            raise ValueError(f"unknown gain set {self.gain_set!r}; known: {', '.join(GAIN_SETS)}")
+        if self.gain_set is not None and self.gains is not None:
+            raise ValueError("give either gain_set or [mavlink.gains] tables, not both")
+        return self
+
     def gain_map(self, autopilot: Autopilot) -> dict[str, GainParam]:
         """The gain → parameter map in force for a vehicle of this autopilot."""
-        return dict(self.gains) if self.gains is not None else dict(DEFAULT_GAINS[autopilot])
+        if self.gains is not None:
+            return dict(self.gains)
+        return gain_set_map(self.gain_set or "altitude", autopilot)
+
+
+def gain_set_map(name: str, autopilot: Autopilot) -> dict[str, GainParam]:
+    """The gain → parameter map of a named gain set on an autopilot, in the set's tuning order."""
+    if name not in GAIN_SET_BINDINGS:
+        return dict(DEFAULT_GAINS[autopilot])
+    bindings = GAIN_SET_BINDINGS[name][autopilot.value]
+    return {g: GainParam(param=p, min=lo, max=hi) for g, (p, lo, hi) in bindings.items()}
 
 
 def load_mavlink_config(source: str | Path | dict[str, Any] | None) -> MavlinkConfig:
