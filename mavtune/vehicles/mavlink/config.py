@@ -1,4 +1,5 @@
-"""Configuration of MAVLink tuning: which parameter each normalised gain drives, the primitive, and safety limits."""
+"""Configuration of MAVLink tuning: which loop is tuned (altitude or horizontal), which parameter each normalised gain
+drives, the primitive, and safety limits."""
 
 from __future__ import annotations
 
@@ -6,10 +7,10 @@ import math
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 from mavtune.config import read_toml, validated
-from mavtune.vehicles.mavlink.profiles import Autopilot
+from mavtune.vehicles.mavlink.profiles import Autopilot, param_loop
 from mavtune.vehicles.parammap import PARAM_PATTERN, GainBinding
 
 
@@ -47,12 +48,31 @@ DEFAULT_GAINS: dict[Autopilot, dict[str, GainParam]] = {
 }
 
 
+DEFAULT_XY_GAINS: dict[Autopilot, dict[str, GainParam]] = {
+    # PX4: MPC_XY_P (1/s) gives the velocity target, MPC_XY_VEL_P_ACC (m/s² per m/s) the acceleration; the range is
+    # the documented one, MPC_XY_P from 0.2 instead of 0 (no position feedback at all)
+    Autopilot.PX4: {
+        "kp": GainParam(param="MPC_XY_P", min=0.2, max=2.0),
+        "kd": GainParam(param="MPC_XY_VEL_P_ACC", min=1.2, max=5.0),
+    },
+    # ArduCopter: PSC_POSXY_P (1/s, documented 0.5–2) then PSC_VELXY_P (documented 0.1–6, here from 0.5: below it
+    # the velocity loop is left to PSC_VELXY_I alone)
+    Autopilot.ARDUPILOT: {
+        "kp": GainParam(param="PSC_POSXY_P", min=0.5, max=2.0),
+        "kd": GainParam(param="PSC_VELXY_P", min=0.5, max=6.0),
+    },
+}
+LOOP_PRIMITIVE = {"altitude": "the climbing circle (altitude error)",
+                  "horizontal": "the horizontal out-and-back (error along mavlink.axis)"}
+
+
 class SafetyConfig(BaseModel):
     """When to refuse to start and when to abort a primitive."""
 
     model_config = ConfigDict(extra="forbid")
 
     max_altitude_error_m: float = Field(1.5, gt=0)  # abort when |z − z_ref| exceeds this
+    max_horizontal_error_m: float = Field(2.0, gt=0)  # loop = "horizontal": abort when |error along the axis| exceeds this
     heartbeat_timeout_s: float = Field(3.0, gt=0)  # wall time without a HEARTBEAT that counts as link loss
     min_altitude_m: float = Field(2.0, ge=0)  # airborne means at least this high (LOCAL_POSITION_NED, up)
     require_armed: bool = True  # refuse to start unless every vehicle is armed
@@ -69,7 +89,13 @@ class MavlinkConfig(BaseModel):
 
     urls: list[str] = Field(default_factory=list)  # one per vehicle (udpin:HOST:PORT, tcp:HOST:PORT, serial:DEV:BAUD)
     autopilot: Literal["auto", "px4", "ardupilot"] = "auto"  # auto: as the vehicle's HEARTBEAT says
-    gains: dict[str, GainParam] | None = None  # None: DEFAULT_GAINS of the detected autopilot
+    loop: Literal["altitude", "horizontal"] = "altitude"  # the loop tuned: its default gains, primitive and cost
+    # (altitude: the climbing circle, altitude error; horizontal: an out-and-back along `axis` at the hover altitude,
+    # the error along that axis)
+    gains: dict[str, GainParam] | None = None  # None: the loop's defaults (DEFAULT_GAINS / DEFAULT_XY_GAINS) of the
+    # detected autopilot; gains of the other loop are refused
+    axis: Literal["north", "east"] = "north"  # loop = "horizontal": the axis of the out-and-back
+    travel_m: float = Field(2.0, gt=0, le=10.0)  # loop = "horizontal": how far out (and back) within primitive_s
     primitive_s: float = Field(8.0, ge=1.0)  # one circle (paper: 8 s); under 1 s it measures too little
     settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
     calm_tolerance_m: float = Field(0.15, gt=0)  # after settle_s, also wait until |altitude error| is below this
@@ -93,9 +119,23 @@ class MavlinkConfig(BaseModel):
     source_system: int = Field(255, ge=1, le=255)  # our (ground station) system id
     safety: SafetyConfig = SafetyConfig()
 
+    @field_validator("gains")
+    @classmethod
+    def _gains_of_the_loop(cls, gains: dict[str, GainParam] | None, info: ValidationInfo):
+        """Gains of the other loop than the one flown are refused (their primitive would not excite them)."""
+        tuned = info.data.get("loop", "altitude")
+        for name, gain in (gains or {}).items():
+            loop = param_loop(gain.param)
+            if loop is not None and loop != tuned:
+                raise ValueError(f"{name}: {gain.param} is a {loop}-loop gain, but loop = {tuned!r} flies "
+                                 f"{LOOP_PRIMITIVE[tuned]}; set loop = {loop!r} or give {tuned}-loop gains")
+        return gains
+
     def gain_map(self, autopilot: Autopilot) -> dict[str, GainParam]:
         """The gain → parameter map in force for a vehicle of this autopilot."""
-        return dict(self.gains) if self.gains is not None else dict(DEFAULT_GAINS[autopilot])
+        if self.gains is not None:
+            return dict(self.gains)
+        return dict((DEFAULT_XY_GAINS if self.loop == "horizontal" else DEFAULT_GAINS)[autopilot])
 
 
 def load_mavlink_config(source: str | Path | dict[str, Any] | None) -> MavlinkConfig:
