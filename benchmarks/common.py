@@ -15,6 +15,18 @@ def cpu_s() -> float:
     return r.ru_utime + r.ru_stime
 
 
+def cpu_model() -> str:
+    """This machine's CPU model as /proc/cpuinfo names it (the platform's processor string elsewhere)."""
+    import platform
+
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        lines = []
+    return next((ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")),
+                platform.processor() or platform.machine())
+
+
 def write_results(name: str, lines: list[str], data: dict) -> None:
     """benchmarks/results/NAME.md (the lines) and NAME.json (the data); the lines are printed too."""
     RESULTS.mkdir(exist_ok=True)
