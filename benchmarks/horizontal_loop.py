@@ -20,6 +20,9 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+from pymavlink import mavutil
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests" / "vehicles"))
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -61,9 +64,30 @@ def stock_normalised(autopilot: str) -> dict[str, float]:
             for g, p in DEFAULT_XY_GAINS[Autopilot(autopilot)].items()}
 
 
+def hover_wander(url: str, seconds: float) -> dict:
+    """How far the hovering vehicle (the pilot's hold, before tuning) wanders: range of x, y (m) and the standard
+    deviation of vx, vy (m/s) from LOCAL_POSITION_NED over `seconds` of wall time."""
+    conn = mavutil.mavlink_connection(url)
+    rows = []
+    try:
+        conn.wait_heartbeat(timeout=30)
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            m = conn.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=2)
+            if m is not None:
+                rows.append((m.x, m.y, m.vx, m.vy))
+    finally:
+        conn.close()
+    a = np.asarray(rows)
+    return {"seconds": seconds, "samples": len(rows),
+            "x_range_m": round(float(np.ptp(a[:, 0])), 3), "y_range_m": round(float(np.ptp(a[:, 1])), 3),
+            "vx_sd_mps": round(float(a[:, 2].std()), 3), "vy_sd_mps": round(float(a[:, 3].std()), 3)}
+
+
 def measure(autopilot: str, pairs: int) -> dict:
     cfg = config(autopilot)
     with vehicles(autopilot) as (v,), tempfile.TemporaryDirectory() as folder:
+        wander = hover_wander(v.tuner_url, 20.0)
         started = time.monotonic()
         result = tune_mavlink([v.tuner_url], Path(folder), cfg, **SHORT)
         tune_wall_s = time.monotonic() - started
@@ -89,6 +113,8 @@ def measure(autopilot: str, pairs: int) -> dict:
                    f"load {os.getloadavg()[0]:.1f} at the end",
         "command": f"python benchmarks/horizontal_loop.py --autopilot {autopilot} --pairs {pairs}",
         "primitive": {"travel_m": cfg.travel_m, "axis": cfg.axis, "primitive_s": cfg.primitive_s},
+        "calm": {"calm_horizontal_m": cfg.calm_horizontal_m, "calm_speed_mps": cfg.calm_speed_mps},
+        "hover_wander": wander,
         "status": result["status"], "rounds": result["rounds"], "flights": result["flights"],
         "flights_by_status": result["flights_by_status"], "tune_wall_s": round(tune_wall_s, 1),
         "wall_s_per_round": round(tune_wall_s / max(result["rounds"], 1), 1),
@@ -105,17 +131,23 @@ def table(entries: dict) -> list[str]:
              "One run each with `loop = \"horizontal\"` (out 2 m north and back in 8 s at the hover altitude; cost = "
              "sum of |north error| on a 100 Hz grid, low-passed at 5 Hz, as the altitude cost), ε 0.25, 1 bootstrap, "
              "one vehicle; then the stock and the tuned gains flown alternately on the same vehicle.", "",
-             "| autopilot | date | machine | rounds | wall s / round | tuned parameters | stock parameters | "
-             "cost stock (mean, n) | cost tuned (mean, n) | tuned better in | command |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| autopilot (calm test along the axis) | date | machine | rounds (lost) | wall s / round | tuned parameters | stock parameters | "
+             "cost stock (mean, n) | cost tuned (mean, n) | tuned better in | hover wander before (x, y range; vx, "
+             "vy sd) | command |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for e in entries.values():
         def mean(xs):
             return f"{statistics.mean(xs):.1f} (n {len(xs)})" if xs else "–"
         fmt = ", ".join(f"{k} {v:.3g}" for k, v in e["tuned_params"].items())
         stock = ", ".join(f"{k} {v:.3g}" for k, v in e["stock_params"].items())
-        lines.append(f"| {e['autopilot']} | {e['date']} | {e['machine']} | {e['rounds']} | {e['wall_s_per_round']} | "
-                     f"{fmt} | {stock} | {mean(e['stock_cost'])} | {mean(e['tuned_cost'])} | "
-                     f"{e['tuned_better_pairs']} of {e['pairs']} pairs | `{e['command']}` |")
+        w = e.get("hover_wander")
+        wander = (f"{w['x_range_m']:.2f} m, {w['y_range_m']:.2f} m; {w['vx_sd_mps']:.2f}, {w['vy_sd_mps']:.2f} m/s "
+                  f"({w['seconds']:g} s)") if w else "not measured"
+        lost = e["flights_by_status"].get("lost", 0)
+        calm = e["calm"]["calm_horizontal_m"]
+        lines.append(f"| {e['autopilot']} (calm ±{calm:g} m) | {e['date']} | {e['machine']} | {e['rounds']} ({lost}) | "
+                     f"{e['wall_s_per_round']} | {fmt} | {stock} | {mean(e['stock_cost'])} | {mean(e['tuned_cost'])} | "
+                     f"{e['tuned_better_pairs']} of {e['pairs']} pairs | {wander} | `{e['command']}` |")
     lines += ["", "Range edges the runs reported:", ""]
     lines += [f"- {e['autopilot']}: {m}" for e in entries.values() for m in e["range_edges"]] or ["- none"]
     lines += ["", "Costs are per flight on one simulated airframe each; a claim about these SITL models only."]

@@ -384,7 +384,7 @@ class MavlinkVehicle:
             if cfg.loop != "horizontal":
                 return True
             i = AXES[cfg.axis]
-            return abs((s.x_m, s.y_m)[i] - self._hover_ned[i]) < cfg.calm_tolerance_m and \
+            return abs((s.x_m, s.y_m)[i] - self._hover_ned[i]) < cfg.calm_horizontal_m and \
                 abs((s.vx_mps, s.vy_mps)[i]) < cfg.calm_speed_mps
         return calm
 
