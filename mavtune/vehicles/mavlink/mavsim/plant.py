@@ -45,6 +45,10 @@ class StandInPlant:
         self._kz = (np.broadcast_to(np.asarray(kx, float), (self.vehicles,)).copy(),
                     np.broadcast_to(np.asarray(kv, float), (self.vehicles,)).copy())
 
+    def horizontal_from_reference(self) -> None:
+        """The horizontal acceleration is the reference's alone (no x-y gains), as sim.Plant's."""
+        self.XY_GAINS = (0.0, 0.0)
+
     def step(self, ref_pos_m, ref_vel_mps, ref_acc_mps2) -> None:
         """Advance 0.01 s tracking the reference (z up)."""
         ref_pos = np.broadcast_to(np.asarray(ref_pos_m, float), (self.vehicles, 3))

@@ -184,6 +184,7 @@ class SimVehicle:
         plant.reset(self._start_m)
         plant.step(self._start_m)  # the first step compiles
         plant.reset(self._start_m)
+        plant.horizontal_from_reference()  # the autopilot's horizontal cascade (self.horizontal) commands it
         self._built = (plant, kind)  # the serving loop adopts it (one thread touches the plant)
 
     def _adopt_plant(self) -> None:
@@ -250,7 +251,7 @@ class SimVehicle:
         if self.airborne:
             p, v = self.plant.position_m[0], self.plant.velocity_mps[0]
             pos, vel, acc = pos.copy(), vel.copy(), acc.copy()
-            # the autopilot's horizontal cascade commands the acceleration; the plant's own x-y law sees no error
+            # the autopilot's horizontal cascade commands the acceleration; the plant's own x-y law is off
             acc[:2] = self.horizontal.step(DT_S, pos[:2], vel[:2], acc[:2], p[:2], v[:2])
             pos[:2], vel[:2] = p[:2], v[:2]
             if self.cascade is not None:
