@@ -71,6 +71,9 @@ def hover_wander(url: str, seconds: float) -> dict:
     rows = []
     try:
         conn.wait_heartbeat(timeout=30)
+        conn.mav.command_long_send(conn.target_system, conn.target_component,  # ArduPilot streams it on request
+                                   mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                   mavutil.mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 50_000, 0, 0, 0, 0, 0)
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             m = conn.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=2)
@@ -78,6 +81,8 @@ def hover_wander(url: str, seconds: float) -> dict:
                 rows.append((m.x, m.y, m.vx, m.vy))
     finally:
         conn.close()
+    if not rows:
+        return {"seconds": seconds, "samples": 0}
     a = np.asarray(rows)
     return {"seconds": seconds, "samples": len(rows),
             "x_range_m": round(float(np.ptp(a[:, 0])), 3), "y_range_m": round(float(np.ptp(a[:, 1])), 3),
@@ -141,8 +146,9 @@ def table(entries: dict) -> list[str]:
         fmt = ", ".join(f"{k} {v:.3g}" for k, v in e["tuned_params"].items())
         stock = ", ".join(f"{k} {v:.3g}" for k, v in e["stock_params"].items())
         w = e.get("hover_wander")
-        wander = (f"{w['x_range_m']:.2f} m, {w['y_range_m']:.2f} m; {w['vx_sd_mps']:.2f}, {w['vy_sd_mps']:.2f} m/s "
-                  f"({w['seconds']:g} s)") if w else "not measured"
+        wander = "not measured" if not w or not w.get("samples") else (
+            f"{w['x_range_m']:.2f} m, {w['y_range_m']:.2f} m; {w['vx_sd_mps']:.2f}, {w['vy_sd_mps']:.2f} m/s "
+            f"({w['seconds']:g} s)")
         lost = e["flights_by_status"].get("lost", 0)
         calm = e["calm"]["calm_horizontal_m"]
         lines.append(f"| {e['autopilot']} (calm ±{calm:g} m) | {e['date']} | {e['machine']} | {e['rounds']} ({lost}) | "

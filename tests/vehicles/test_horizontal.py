@@ -110,3 +110,18 @@ def test_mavsim_run_tunes_both_xy_gains_writes_them_and_restores(tmp_path, autop
     assert all(0 < c < math.inf for c in costs) and len(set(costs)) > 1  # the horizontal error, told apart by gains
     print(f"mavsim {autopilot} horizontal: {result['rounds']} rounds, tuned {tuned}, costs {min(costs):.3g}–"
           f"{max(costs):.3g}")
+
+
+def test_with_its_horizontal_law_off_the_plant_moves_by_the_reference_acceleration_alone():
+    from mavtune.sim import Plant, Scenario
+
+    plant = Plant(vehicles=1, scenario=Scenario.noise_free(), seed=0)
+    plant.reset((0.0, 0.0, 5.0))
+    plant.horizontal_from_reference()
+    for _ in range(100):  # a reference 5 m away, without acceleration: no horizontal push
+        plant.step((5.0, -3.0, 5.0))
+    assert abs(plant.position_m[0, 0]) < 0.02 and abs(plant.position_m[0, 1]) < 0.02
+    for _ in range(100):  # 1 m/s² north for 1 s: about half a metre (less the attitude's lag)
+        plant.step((0.0, 0.0, 5.0), None, (1.0, 0.0, 0.0))
+    assert 0.2 < plant.position_m[0, 0] < 0.6 and abs(plant.position_m[0, 1]) < 0.02
+    assert abs(plant.position_m[0, 2] - 5.0) < 0.05  # the altitude is held as before

@@ -102,7 +102,7 @@ class MavlinkConfig(BaseModel):
     calm_speed_mps: float = Field(0.3, gt=0)  # … and |vertical speed| below this (after an abort the vehicle recovers)
     calm_horizontal_m: float = Field(0.5, gt=0)  # loop = "horizontal": … and |offset from the hover point along the
     # axis| below this (and its speed below calm_speed_mps); wider than calm_tolerance_m: a GPS position wanders more
-    # than an altitude (PX4 SIH hovering on a loaded machine: ±0.5 m, benchmarks/results/horizontal_loop.md)
+    # than an altitude (PX4 SIH hovering on a loaded machine wandered over 1 m: benchmarks/results/horizontal_loop.md)
     calm_timeout_s: float = Field(10.0, gt=0)  # vehicle seconds to wait for calm before the flight is lost
     recover_s: float = Field(5.0, ge=0)  # after an abort: hover this long, then stay calm this long (vehicle s)
     circle_diameter_m: float = Field(2.0, ge=0)  # of the circle flown about the hover point
