@@ -154,6 +154,12 @@ def table(entries: dict) -> list[str]:
         lines.append(f"| {e['autopilot']} (calm ±{calm:g} m) | {e['date']} | {e['machine']} | {e['rounds']} ({lost}) | "
                      f"{e['wall_s_per_round']} | {fmt} | {stock} | {mean(e['stock_cost'])} | {mean(e['tuned_cost'])} | "
                      f"{e['tuned_better_pairs']} of {e['pairs']} pairs | {wander} | `{e['command']}` |")
+    lines += ["", "ArduCopter SITL runs at ×10 (wall s / round is at that speed-up), PX4 SIH at real time. The rows with a "
+              "±0.15 m calm test are the first runs, before the horizontal loop had its own calm tolerance "
+              "(`calm_horizontal_m`, 0.5 m; the 0.15 m altitude tolerance was used along the axis): on PX4 they lost "
+              "7 of 36 rounds to `not_calm`, with 0.5 m 2 of 34. Two runs of one autopilot differ by the flights' "
+              "noise; both end with tuned gains ahead of the stock ones in most pairs. The cost measures tracking "
+              "only: on ArduCopter it drives both gains to their documented maxima (2, 6)."]
     lines += ["", "Range edges the runs reported:", ""]
     lines += [f"- {e['autopilot']}: {m}" for e in entries.values() for m in e["range_edges"]] or ["- none"]
     lines += ["", "Costs are per flight on one simulated airframe each; a claim about these SITL models only."]
