@@ -48,19 +48,18 @@ DEFAULT_GAINS: dict[Autopilot, dict[str, GainParam]] = {
 }
 
 
+def _position_loop(position: tuple[str, float, float], velocity: tuple[str, float, float]) -> dict[str, GainParam]:
+    """A position loop's two gains: kp the position gain, kd the velocity gain, each (param, min, max)."""
+    return {g: GainParam(param=p, min=lo, max=hi) for g, (p, lo, hi) in (("kp", position), ("kd", velocity))}
+
+
 DEFAULT_XY_GAINS: dict[Autopilot, dict[str, GainParam]] = {
     # PX4: MPC_XY_P (1/s) gives the velocity target, MPC_XY_VEL_P_ACC (m/s² per m/s) the acceleration; the range is
     # the documented one, MPC_XY_P from 0.2 instead of 0 (no position feedback at all)
-    Autopilot.PX4: {
-        "kp": GainParam(param="MPC_XY_P", min=0.2, max=2.0),
-        "kd": GainParam(param="MPC_XY_VEL_P_ACC", min=1.2, max=5.0),
-    },
+    Autopilot.PX4: _position_loop(("MPC_XY_P", 0.2, 2.0), ("MPC_XY_VEL_P_ACC", 1.2, 5.0)),
     # ArduCopter: PSC_POSXY_P (1/s, documented 0.5–2) then PSC_VELXY_P (documented 0.1–6, here from 0.5: below it
     # the velocity loop is left to PSC_VELXY_I alone)
-    Autopilot.ARDUPILOT: {
-        "kp": GainParam(param="PSC_POSXY_P", min=0.5, max=2.0),
-        "kd": GainParam(param="PSC_VELXY_P", min=0.5, max=6.0),
-    },
+    Autopilot.ARDUPILOT: _position_loop(("PSC_POSXY_P", 0.5, 2.0), ("PSC_VELXY_P", 0.5, 6.0)),
 }
 LOOP_PRIMITIVE = {"altitude": "the climbing circle (altitude error)",
                   "horizontal": "the horizontal out-and-back (error along mavlink.axis)"}
