@@ -72,6 +72,16 @@ def test_gains_of_the_other_loop_are_one_line_errors(loop, param, other):
     assert "\n" not in msg and "mavlink.gains" in msg and param in msg and f"loop = '{other}'" in msg
 
 
+def test_the_report_names_the_position_a_horizontal_run_tracks():
+    from mavtune.config import load_config
+    from mavtune.report.run_report import tracked_quantity
+
+    horizontal = load_config(None, {"fleet.kind": "mavlink", "mavlink": {"loop": "horizontal", "axis": "east"}})
+    assert tracked_quantity(horizontal) == "east position"
+    assert tracked_quantity(load_config(None, {"fleet.kind": "mavlink"})) == "altitude"
+    assert tracked_quantity(load_config(None, {})) == tracked_quantity(None) == "altitude"
+
+
 def test_unknown_loop_or_axis_is_a_one_line_error():
     for field, value in (("loop", "roll"), ("axis", "up")):
         with pytest.raises(MavtuneError) as err:
@@ -108,6 +118,14 @@ def test_mavsim_run_tunes_both_xy_gains_writes_them_and_restores(tmp_path, autop
     assert {r[2] for r in rows} == set(originals)
     costs = [f["cost"] for r in result["rounds_log"] for f in r["flights"]]
     assert all(0 < c < math.inf for c in costs) and len(set(costs)) > 1  # the horizontal error, told apart by gains
+    from typer.testing import CliRunner
+
+    from mavtune.cli import app
+
+    done = CliRunner().invoke(app, ["report", str(tmp_path)])  # the report says what the traces follow
+    assert done.exit_code == 0, done.output
+    text = (tmp_path / "report.md").read_text()
+    assert "east position reference" in text and "|east position error|" in text and "altitude reference" not in text
     print(f"mavsim {autopilot} horizontal: {result['rounds']} rounds, tuned {tuned}, costs {min(costs):.3g}–"
           f"{max(costs):.3g}")
 
