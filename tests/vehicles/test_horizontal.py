@@ -143,3 +143,15 @@ def test_with_its_horizontal_law_off_the_plant_moves_by_the_reference_accelerati
         plant.step((0.0, 0.0, 5.0), None, (1.0, 0.0, 0.0))
     assert 0.2 < plant.position_m[0, 0] < 0.6 and abs(plant.position_m[0, 1]) < 0.02
     assert abs(plant.position_m[0, 2] - 5.0) < 0.05  # the altitude is held as before
+
+
+def test_later_copter_names_of_the_horizontal_gains_are_found():
+    from mavtune.vehicles.mavlink.mavsim.server import flavour_params
+    from mavtune.vehicles.mavlink.safety import resolve_gain
+
+    for flavour, names in (("ardupilot", ("PSC_POSXY_P", "PSC_VELXY_P")), ("ardupilot-4.7", ("PSC_NE_POS_P",
+                                                                                            "PSC_NE_VEL_P"))):
+        present = flavour_params(flavour)[1]
+        gains = DEFAULT_XY_GAINS[Autopilot.ARDUPILOT]
+        bound = [resolve_gain(g, c, ARDUPILOT, present).vehicle_param for g, c in gains.items()]
+        assert tuple(bound) == names
