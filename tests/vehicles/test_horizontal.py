@@ -82,6 +82,18 @@ def test_the_report_names_the_position_a_horizontal_run_tracks():
     assert tracked_quantity(load_config(None, {})) == tracked_quantity(None) == "altitude"
 
 
+@settings(max_examples=80, deadline=None)
+@given(param=st.sampled_from(sorted({s.name for p in (PX4, ARDUPILOT) for s in p.specs} | {"ATC_RAT_RLL_P"})),
+       loop=st.sampled_from(["altitude", "horizontal"]))
+def test_a_gain_is_accepted_exactly_when_it_belongs_to_the_loop_flown(param, loop):
+    data = {"mavlink": {"loop": loop, "gains": {"kp": {"param": param, "min": 0.0, "max": 1.0}}}}
+    if param_loop(param) in (None, loop):
+        assert load_mavlink_config(data).gain_map(Autopilot.PX4)["kp"].param == param
+    else:
+        with pytest.raises(MavtuneError, match=f"{param} is a {param_loop(param)}-loop gain"):
+            load_mavlink_config(data)
+
+
 def test_unknown_loop_or_axis_is_a_one_line_error():
     for field, value in (("loop", "roll"), ("axis", "up")):
         with pytest.raises(MavtuneError) as err:
