@@ -167,3 +167,22 @@ def test_later_copter_names_of_the_horizontal_gains_are_found():
         gains = DEFAULT_XY_GAINS[Autopilot.ARDUPILOT]
         bound = [resolve_gain(g, c, ARDUPILOT, present).vehicle_param for g, c in gains.items()]
         assert tuple(bound) == names
+
+
+@settings(max_examples=60, deadline=None)
+@given(error=st.one_of(st.floats(-5.0, 5.0), st.just(math.nan), st.just(math.inf)))
+def test_the_horizontal_error_aborts_beyond_its_limit_as_the_gains_fault(error):
+    from mavtune.vehicles.mavlink.config import SafetyConfig
+    from mavtune.vehicles.mavlink.link import VehicleState
+    from mavtune.vehicles.mavlink.safety import GAIN_FAULTS, abort_reason
+
+    safety = SafetyConfig(max_horizontal_error_m=1.5)
+    st_ = VehicleState(mode="OFFBOARD", armed=True)
+    reason = abort_reason(5.0, 5.0, st_, 0.1, PX4, safety, error)
+    if not math.isfinite(error):
+        assert reason == "non_finite"
+    elif abs(error) > 1.5:
+        assert reason == "horizontal_error" and reason in GAIN_FAULTS
+    else:
+        assert reason is None
+    assert abort_reason(5.0, 5.0, st_, 0.1, PX4, safety) is None  # the altitude loop: no horizontal error
