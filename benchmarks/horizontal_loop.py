@@ -136,7 +136,8 @@ def table(entries: dict) -> list[str]:
              "One run each with `loop = \"horizontal\"` (out 2 m north and back in 8 s at the hover altitude; cost = "
              "sum of |north error| on a 100 Hz grid, low-passed at 5 Hz, as the altitude cost), ε 0.25, 1 bootstrap, "
              "one vehicle; then the stock and the tuned gains flown alternately on the same vehicle.", "",
-             "| autopilot (calm test along the axis) | date | machine | rounds (lost) | wall s / round | tuned parameters | stock parameters | "
+             "| autopilot (calm test along the axis) | date | machine | rounds (lost) | wall s / round | "
+             "tuned parameters | stock parameters | "
              "cost stock (mean, n) | cost tuned (mean, n) | tuned better in | hover wander before (x, y range; vx, "
              "vy sd) | command |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -151,10 +152,12 @@ def table(entries: dict) -> list[str]:
             f"({w['seconds']:g} s)")
         lost = e["flights_by_status"].get("lost", 0)
         calm = e["calm"]["calm_horizontal_m"]
-        lines.append(f"| {e['autopilot']} (calm ±{calm:g} m) | {e['date']} | {e['machine']} | {e['rounds']} ({lost}) | "
-                     f"{e['wall_s_per_round']} | {fmt} | {stock} | {mean(e['stock_cost'])} | {mean(e['tuned_cost'])} | "
+        lines.append(f"| {e['autopilot']} (calm ±{calm:g} m) | {e['date']} | {e['machine']} | "
+                     f"{e['rounds']} ({lost}) | {e['wall_s_per_round']} | {fmt} | {stock} | "
+                     f"{mean(e['stock_cost'])} | {mean(e['tuned_cost'])} | "
                      f"{e['tuned_better_pairs']} of {e['pairs']} pairs | {wander} | `{e['command']}` |")
-    lines += ["", "ArduCopter SITL runs at ×10 (wall s / round is at that speed-up), PX4 SIH at real time. The rows with a "
+    lines += ["", "ArduCopter SITL runs at ×10 (wall s / round is at that speed-up), PX4 SIH at real time. The rows "
+              "with a "
               "±0.15 m calm test are the first runs, before the horizontal loop had its own calm tolerance "
               "(`calm_horizontal_m`, 0.5 m; the 0.15 m altitude tolerance was used along the axis): on PX4 7 of 36 "
               "rounds were lost (6 to `not_calm`, 1 to `position_lost`), with 0.5 m 2 of 34 (one each); on ArduCopter, "

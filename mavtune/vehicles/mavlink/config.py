@@ -71,7 +71,7 @@ class SafetyConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     max_altitude_error_m: float = Field(1.5, gt=0)  # abort when |z − z_ref| exceeds this
-    max_horizontal_error_m: float = Field(2.0, gt=0)  # loop = "horizontal": abort when |error along the axis| exceeds this
+    max_horizontal_error_m: float = Field(2.0, gt=0)  # loop "horizontal": abort when |error along axis| exceeds this
     heartbeat_timeout_s: float = Field(3.0, gt=0)  # wall time without a HEARTBEAT that counts as link loss
     min_altitude_m: float = Field(2.0, ge=0)  # airborne means at least this high (LOCAL_POSITION_NED, up)
     require_armed: bool = True  # refuse to start unless every vehicle is armed
@@ -88,20 +88,20 @@ class MavlinkConfig(BaseModel):
 
     urls: list[str] = Field(default_factory=list)  # one per vehicle (udpin:HOST:PORT, tcp:HOST:PORT, serial:DEV:BAUD)
     autopilot: Literal["auto", "px4", "ardupilot"] = "auto"  # auto: as the vehicle's HEARTBEAT says
-    loop: Literal["altitude", "horizontal"] = "altitude"  # the loop tuned: its default gains, primitive and cost
-    # (altitude: the climbing circle, altitude error; horizontal: an out-and-back along `axis` at the hover altitude,
-    # the error along that axis)
-    gains: dict[str, GainParam] | None = None  # None: the loop's defaults (DEFAULT_GAINS / DEFAULT_XY_GAINS) of the
-    # detected autopilot; gains of the other loop are refused
+    loop: Literal["altitude", "horizontal"] = "altitude"  # the loop tuned (its default gains, primitive and cost)
+    # altitude: the climbing circle, altitude error; horizontal: an out-and-back along `axis` at the hover altitude,
+    # the error along that axis
+    gains: dict[str, GainParam] | None = None  # None: the loop's default gains; gains of the other loop are refused
+    # (the defaults: DEFAULT_GAINS / DEFAULT_XY_GAINS of the detected autopilot)
     axis: Literal["north", "east"] = "north"  # loop = "horizontal": the axis of the out-and-back
     travel_m: float = Field(2.0, gt=0, le=10.0)  # loop = "horizontal": how far out (and back) within primitive_s
     primitive_s: float = Field(8.0, ge=1.0)  # one circle (paper: 8 s); under 1 s it measures too little
     settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
     calm_tolerance_m: float = Field(0.15, gt=0)  # after settle_s, also wait until |altitude error| is below this
     calm_speed_mps: float = Field(0.3, gt=0)  # … and |vertical speed| below this (after an abort the vehicle recovers)
-    calm_horizontal_m: float = Field(0.5, gt=0)  # loop = "horizontal": … and |offset from the hover point along the
-    # axis| below this (and its speed below calm_speed_mps); wider than calm_tolerance_m: a GPS position wanders more
-    # than an altitude (PX4 SIH hovering on a loaded machine wandered over 1 m: benchmarks/results/horizontal_loop.md)
+    calm_horizontal_m: float = Field(0.5, gt=0)  # loop = "horizontal": … and |offset along the axis| below this
+    # (and its speed below calm_speed_mps); wider than calm_tolerance_m: a GPS position wanders more than an altitude
+    # (PX4 SIH hovering on a loaded machine wandered over 1 m: benchmarks/results/horizontal_loop.md)
     calm_timeout_s: float = Field(10.0, gt=0)  # vehicle seconds to wait for calm before the flight is lost
     recover_s: float = Field(5.0, ge=0)  # after an abort: hover this long, then stay calm this long (vehicle s)
     circle_diameter_m: float = Field(2.0, ge=0)  # of the circle flown about the hover point

@@ -16,8 +16,8 @@ Gain mapping: see `mavtune.vehicles.mavlink.mavsim.cascade` (ArduCopter's PSC_PO
 cascade with its limits and filters) and, for PX4, the P position loop feeding a P velocity loop in acceleration
 units: k_x(z) = MPC_Z_P · MPC_Z_VEL_P_ACC [1/s²], k_v(z) = MPC_Z_VEL_P_ACC [1/s]. Horizontally both flavours fly
 their autopilot's own cascade with its gains (`mavtune.vehicles.mavlink.mavsim.horizontal`: PSC_POSXY_P →
-PSC_VELXY_P/_I/_D, MPC_XY_P → MPC_XY_VEL_P_ACC/_I_ACC), commanding the plant's horizontal acceleration. The diverge fault adds a growing
-altitude oscillation to the reference while the named parameter is above its threshold.
+PSC_VELXY_P/_I/_D, MPC_XY_P → MPC_XY_VEL_P_ACC/_I_ACC), commanding the plant's horizontal acceleration. The
+diverge fault adds a growing altitude oscillation to the reference while the named parameter is above its threshold.
 """
 
 from __future__ import annotations
