@@ -1,8 +1,10 @@
-"""What every benchmark here shares: CPU time of this process, and writing a result as markdown + JSON."""
+"""What every benchmark here shares: CPU time of this process, the CPU model, and writing a result as markdown and
+JSON."""
 
 from __future__ import annotations
 
 import json
+import platform
 import resource
 from pathlib import Path
 
@@ -16,15 +18,14 @@ def cpu_s() -> float:
 
 
 def cpu_model() -> str:
-    """This machine's CPU model as /proc/cpuinfo names it (the platform's processor string elsewhere)."""
-    import platform
-
+    """The CPU's model name as /proc/cpuinfo gives it (else the platform's machine type), for a result's machine."""
     try:
-        lines = Path("/proc/cpuinfo").read_text().splitlines()
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
     except OSError:
-        lines = []
-    return next((ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")),
-                platform.processor() or platform.machine())
+        pass
+    return platform.processor() or platform.machine()
 
 
 def write_results(name: str, lines: list[str], data: dict) -> None:

@@ -30,7 +30,7 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 from common import RESULTS, cpu_model, write_results  # noqa: E402
 from mavlink_harness import tune_mavlink  # noqa: E402
 
-from mavtune.vehicles.mavlink.config import DEFAULT_XY_GAINS, MavlinkConfig  # noqa: E402
+from mavtune.vehicles.mavlink.config import gain_set_map, MavlinkConfig  # noqa: E402
 from mavtune.vehicles.mavlink.fleet import MavlinkFleet  # noqa: E402
 from mavtune.vehicles.mavlink.profiles import Autopilot, profile_for  # noqa: E402
 
@@ -61,7 +61,7 @@ def stock_normalised(autopilot: str) -> dict[str, float]:
     """The autopilot's default gains as points of the horizontal tuning space."""
     profile = profile_for(autopilot)
     return {g: (profile.spec(p.param).default - p.min) / (p.max - p.min)
-            for g, p in DEFAULT_XY_GAINS[Autopilot(autopilot)].items()}
+            for g, p in gain_set_map("horizontal", Autopilot(autopilot)).items()}
 
 
 def hover_wander(url: str, seconds: float) -> dict:

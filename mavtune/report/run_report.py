@@ -306,10 +306,15 @@ def _read_json(path: Path) -> dict[str, Any]:
 def tracked_quantity(config=None) -> str:
     """What the flights' traces follow: "altitude", or for a MAVLink run of the horizontal loop the position
     along its axis ("north position")."""
-    mav = getattr(config, "mavlink", None) or {}
-    if getattr(getattr(config, "fleet", None), "kind", None) == "mavlink" and mav.get("loop") == "horizontal":
-        return f"{mav.get('axis', 'north')} position"
-    return "altitude"
+    if getattr(getattr(config, "fleet", None), "kind", None) != "mavlink":
+        return "altitude"
+    from mavtune.vehicles.mavlink.config import load_mavlink_config
+
+    try:
+        mav = load_mavlink_config(dict(getattr(config, "mavlink", None) or {}))
+    except MavtuneError:
+        return "altitude"  # the run stopped at its own config error: nothing was flown
+    return f"{mav.axis} position" if mav.tuned_loop == "horizontal" else "altitude"
 
 
 def round_seconds(config=None) -> float:

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from pymavlink import mavparm
 
 from mavtune.errors import MavtuneError
-from mavtune.vehicles.mavlink.config import DEFAULT_XY_GAINS, GainParam, MavlinkConfig, load_mavlink_config
+from mavtune.vehicles.mavlink.config import MavlinkConfig, gain_set_map, load_mavlink_config
 from mavtune.vehicles.mavlink.mavsim.horizontal import ArduCopterHorizontal, Px4Horizontal
 from mavtune.vehicles.mavlink.params import as_float32
 from mavtune.vehicles.mavlink.primitive import OutAndBack
@@ -49,7 +49,8 @@ def test_horizontal_gains_belong_to_the_horizontal_loop():
         == {"horizontal"}
     assert {param_loop(p) for p in ("MPC_Z_P", "PSC_VELZ_P", "PSC_D_POS_P", "PSC_ACCZ_I")} == {"altitude"}
     assert param_loop("ATC_RAT_RLL_P") is None
-    for profile, gains in ((PX4, DEFAULT_XY_GAINS[Autopilot.PX4]), (ARDUPILOT, DEFAULT_XY_GAINS[Autopilot.ARDUPILOT])):
+    for profile in (PX4, ARDUPILOT):
+        gains = gain_set_map("horizontal", profile.autopilot)
         for g in gains.values():  # the default ranges lie inside the documented limits
             spec = profile.spec(g.param)
             assert spec is not None and spec.min <= g.min < spec.default < g.max <= spec.max
@@ -69,7 +70,7 @@ def test_gains_of_the_other_loop_are_one_line_errors(loop, param, other):
     with pytest.raises(MavtuneError) as err:
         load_mavlink_config(data)
     msg = str(err.value)
-    assert "\n" not in msg and "mavlink.gains" in msg and param in msg and f"loop = '{other}'" in msg
+    assert "\n" not in msg and "gains.kp" in msg and param in msg and f"loop = '{other}'" in msg
 
 
 def test_the_report_names_the_position_a_horizontal_run_tracks():
@@ -92,6 +93,17 @@ def test_a_gain_is_accepted_exactly_when_it_belongs_to_the_loop_flown(param, loo
     else:
         with pytest.raises(MavtuneError, match=f"{param} is a {param_loop(param)}-loop gain"):
             load_mavlink_config(data)
+
+
+def test_the_horizontal_gain_set_flies_the_horizontal_loop_and_other_sets_refuse_it():
+    cfg = load_mavlink_config({"mavlink": {"gain_set": "horizontal"}})
+    assert cfg.tuned_loop == "horizontal" and {g.param for g in cfg.gain_map(Autopilot.PX4).values()} == set(PX4_XY)
+    assert load_mavlink_config({"mavlink": {"gains": {"kp": {"param": "MPC_XY_P", "min": 0.5, "max": 1.5}}}}) \
+        .tuned_loop == "horizontal"  # horizontal parameters alone choose their loop
+    for gain_set, loop in (("horizontal", "altitude"), ("altitude-inner", "horizontal")):
+        with pytest.raises(MavtuneError) as err:
+            load_mavlink_config({"mavlink": {"gain_set": gain_set, "loop": loop}})
+        assert "\n" not in str(err.value) and f"gain_set {gain_set!r}" in str(err.value)
 
 
 def test_unknown_loop_or_axis_is_a_one_line_error():
@@ -121,7 +133,7 @@ def test_mavsim_run_tunes_both_xy_gains_writes_them_and_restores(tmp_path, autop
     assert result["original_params"] == {url: originals}
     assert result["flights_by_status"]["ok"] == result["flights"] > 0
     tuned = result["tuned_params"][url]
-    spans = {g.param: (g.min, g.max) for g in DEFAULT_XY_GAINS[Autopilot(autopilot)].values()}
+    spans = {g.param: (g.min, g.max) for g in gain_set_map("horizontal", Autopilot(autopilot)).values()}
     assert set(tuned) == set(originals) and all(spans[p][0] <= v <= spans[p][1] for p, v in tuned.items())
     parm = mavparm.MAVParmDict()
     assert parm.load(str(tmp_path / "tuned.parm"), use_excludes=False)
@@ -164,7 +176,7 @@ def test_later_copter_names_of_the_horizontal_gains_are_found():
     for flavour, names in (("ardupilot", ("PSC_POSXY_P", "PSC_VELXY_P")), ("ardupilot-4.7", ("PSC_NE_POS_P",
                                                                                             "PSC_NE_VEL_P"))):
         present = flavour_params(flavour)[1]
-        gains = DEFAULT_XY_GAINS[Autopilot.ARDUPILOT]
+        gains = gain_set_map("horizontal", Autopilot.ARDUPILOT)
         bound = [resolve_gain(g, c, ARDUPILOT, present).vehicle_param for g, c in gains.items()]
         assert tuple(bound) == names
 

@@ -9,7 +9,7 @@ import time
 import pytest
 from pymavlink import mavparm
 
-from mavtune.vehicles.mavlink.config import DEFAULT_XY_GAINS, MavlinkConfig
+from mavtune.vehicles.mavlink.config import gain_set_map, MavlinkConfig
 from mavtune.vehicles.mavlink.params import as_float32
 from mavtune.vehicles.mavlink.profiles import Autopilot
 
@@ -29,7 +29,7 @@ def check_run(result: dict, url: str, folder, originals: dict[str, float], autop
     assert result["original_params"] == {url: originals}
     assert result["flights_by_status"]["ok"] > 0 and recorded_rounds(folder) == result["rounds"]
     tuned = result["tuned_params"][url]
-    spans = {g.param: (g.min, g.max) for g in DEFAULT_XY_GAINS[autopilot].values()}
+    spans = {g.param: (g.min, g.max) for g in gain_set_map("horizontal", autopilot).values()}
     assert set(tuned) == set(originals) and all(spans[p][0] <= v <= spans[p][1] for p, v in tuned.items())
     parm = mavparm.MAVParmDict()
     assert parm.load(str(folder / "tuned.parm"), use_excludes=False)

@@ -7,11 +7,11 @@ import math
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from mavtune.config import read_toml, validated
+from mavtune.config import GAIN_SETS, read_toml, validated
 from mavtune.vehicles.mavlink.profiles import Autopilot, param_loop
-from mavtune.vehicles.parammap import PARAM_PATTERN, GainBinding
+from mavtune.vehicles.parammap import GAIN_SET_BINDINGS, PARAM_PATTERN, GainBinding
 
 
 class GainParam(BaseModel):
@@ -48,19 +48,7 @@ DEFAULT_GAINS: dict[Autopilot, dict[str, GainParam]] = {
 }
 
 
-def _position_loop(position: tuple[str, float, float], velocity: tuple[str, float, float]) -> dict[str, GainParam]:
-    """A position loop's two gains: kp the position gain, kd the velocity gain, each (param, min, max)."""
-    return {g: GainParam(param=p, min=lo, max=hi) for g, (p, lo, hi) in (("kp", position), ("kd", velocity))}
-
-
-DEFAULT_XY_GAINS: dict[Autopilot, dict[str, GainParam]] = {
-    # PX4: MPC_XY_P (1/s) gives the velocity target, MPC_XY_VEL_P_ACC (m/s² per m/s) the acceleration; the range is
-    # the documented one, MPC_XY_P from 0.2 instead of 0 (no position feedback at all)
-    Autopilot.PX4: _position_loop(("MPC_XY_P", 0.2, 2.0), ("MPC_XY_VEL_P_ACC", 1.2, 5.0)),
-    # ArduCopter: PSC_POSXY_P (1/s, documented 0.5–2) then PSC_VELXY_P (documented 0.1–6, here from 0.5: below it
-    # the velocity loop is left to PSC_VELXY_I alone)
-    Autopilot.ARDUPILOT: _position_loop(("PSC_POSXY_P", 0.5, 2.0), ("PSC_VELXY_P", 0.5, 6.0)),
-}
+LOOP_OF_GAIN_SET = {"horizontal": "horizontal"}  # the other gain sets tune the altitude loop
 LOOP_PRIMITIVE = {"altitude": "the climbing circle (altitude error)",
                   "horizontal": "the horizontal out-and-back (error along mavlink.axis)"}
 
@@ -88,13 +76,15 @@ class MavlinkConfig(BaseModel):
 
     urls: list[str] = Field(default_factory=list)  # one per vehicle (udpin:HOST:PORT, tcp:HOST:PORT, serial:DEV:BAUD)
     autopilot: Literal["auto", "px4", "ardupilot"] = "auto"  # auto: as the vehicle's HEARTBEAT says
-    loop: Literal["altitude", "horizontal"] = "altitude"  # the loop tuned (its default gains, primitive and cost)
+    gains: dict[str, GainParam] | None = None  # None: the gain set's map for the detected autopilot
+    gain_set: str | None = None  # the gains to tune by name: "altitude" (kp, kd; the default), "altitude-inner"
+    # (kp, kd, ka, ki: the inner loop too) or "horizontal" (kp, kd of the horizontal position loop); it sets
+    # tuning.space. Not together with [mavlink.gains] tables
+    loop: Literal["altitude", "horizontal"] | None = None  # the primitive and cost; None: the gain set's or gains'
     # altitude: the climbing circle, altitude error; horizontal: an out-and-back along `axis` at the hover altitude,
-    # the error along that axis
-    gains: dict[str, GainParam] | None = None  # None: the loop's default gains; gains of the other loop are refused
-    # (the defaults: DEFAULT_GAINS / DEFAULT_XY_GAINS of the detected autopilot)
-    axis: Literal["north", "east"] = "north"  # loop = "horizontal": the axis of the out-and-back
-    travel_m: float = Field(2.0, gt=0, le=10.0)  # loop = "horizontal": how far out (and back) within primitive_s
+    # the error along that axis. Gains of the other loop are refused
+    axis: Literal["north", "east"] = "north"  # the horizontal loop: the axis of the out-and-back
+    travel_m: float = Field(2.0, gt=0, le=10.0)  # the horizontal loop: how far out (and back) within primitive_s
     primitive_s: float = Field(8.0, ge=1.0)  # one circle (paper: 8 s); under 1 s it measures too little
     settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
     calm_tolerance_m: float = Field(0.15, gt=0)  # after settle_s, also wait until |altitude error| is below this
@@ -121,23 +111,55 @@ class MavlinkConfig(BaseModel):
     source_system: int = Field(255, ge=1, le=255)  # our (ground station) system id
     safety: SafetyConfig = SafetyConfig()
 
-    @field_validator("gains")
-    @classmethod
-    def _gains_of_the_loop(cls, gains: dict[str, GainParam] | None, info: ValidationInfo):
-        """Gains of the other loop than the one flown are refused (their primitive would not excite them)."""
-        tuned = info.data.get("loop", "altitude")
-        for name, gain in (gains or {}).items():
+    @model_validator(mode="after")
+    def _known_gain_set(self) -> "MavlinkConfig":
+        if self.gain_set is not None and self.gain_set not in GAIN_SETS:
+            raise ValueError(f"unknown gain set {self.gain_set!r}; known: {', '.join(GAIN_SETS)}")
+        if self.gain_set is not None and self.gains is not None:
+            raise ValueError("give either gain_set or [mavlink.gains] tables, not both")
+        return self
+
+    @model_validator(mode="after")
+    def _one_loop(self) -> "MavlinkConfig":
+        """The gains tuned and the primitive flown belong to one loop: gains of the other loop are refused."""
+        implied = self._implied_loop()
+        if self.gain_set is not None and self.loop not in (None, implied):
+            raise ValueError(f"gain_set {self.gain_set!r} tunes the {implied} loop, but loop = {self.loop!r} flies "
+                             f"{LOOP_PRIMITIVE[self.loop]}; drop loop or set it to {implied!r}")
+        flown = self.loop or implied
+        for name, gain in (self.gains or {}).items():
             loop = param_loop(gain.param)
-            if loop is not None and loop != tuned:
-                raise ValueError(f"{name}: {gain.param} is a {loop}-loop gain, but loop = {tuned!r} flies "
-                                 f"{LOOP_PRIMITIVE[tuned]}; set loop = {loop!r} or give {tuned}-loop gains")
-        return gains
+            if loop is not None and loop != flown:
+                raise ValueError(f"gains.{name}: {gain.param} is a {loop}-loop gain, but loop = {flown!r} flies "
+                                 f"{LOOP_PRIMITIVE[flown]}; set loop = {loop!r} or give {flown}-loop gains")
+        return self
+
+    def _implied_loop(self) -> str:
+        """The loop the gain set, else the first configured gain of a known loop, belongs to (altitude by default)."""
+        if self.gain_set is not None:
+            return LOOP_OF_GAIN_SET.get(self.gain_set, "altitude")
+        known = [param_loop(g.param) for g in (self.gains or {}).values() if param_loop(g.param) is not None]
+        return known[0] if known else "altitude"
+
+    @property
+    def tuned_loop(self) -> str:
+        """The loop flown: "altitude" (the climbing circle) or "horizontal" (the out-and-back along `axis`)."""
+        return self.loop or self._implied_loop()
 
     def gain_map(self, autopilot: Autopilot) -> dict[str, GainParam]:
         """The gain → parameter map in force for a vehicle of this autopilot."""
         if self.gains is not None:
             return dict(self.gains)
-        return dict((DEFAULT_XY_GAINS if self.loop == "horizontal" else DEFAULT_GAINS)[autopilot])
+        return gain_set_map(self.gain_set or ("horizontal" if self.tuned_loop == "horizontal" else "altitude"),
+                            autopilot)
+
+
+def gain_set_map(name: str, autopilot: Autopilot) -> dict[str, GainParam]:
+    """The gain → parameter map of a named gain set on an autopilot, in the set's tuning order."""
+    if name not in GAIN_SET_BINDINGS:
+        return dict(DEFAULT_GAINS[autopilot])
+    bindings = GAIN_SET_BINDINGS[name][autopilot.value]
+    return {g: GainParam(param=p, min=lo, max=hi) for g, (p, lo, hi) in bindings.items()}
 
 
 def load_mavlink_config(source: str | Path | dict[str, Any] | None) -> MavlinkConfig:

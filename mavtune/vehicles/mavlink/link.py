@@ -319,7 +319,11 @@ class MavlinkLink:
                     self._cond.notify_all()
 
     def _watch(self, src: int, comp: int, msg) -> None:
-        """Follow every sender's sequence numbers and AUTOPILOT_VERSION ids: two autopilots answering as one."""
+        """Follow every sender's sequence numbers and AUTOPILOT_VERSION ids: two autopilots answering as one.
+        System 0 is MAVLink's broadcast address, no vehicle's id (PX4 SITL sends a stream as 0/0 whose counter
+        interleaves with another's): not followed."""
+        if src == 0:
+            return
         key = (src, comp)
         watch = self._seq.get(key)
         if watch is None:

@@ -381,7 +381,7 @@ class MavlinkVehicle:
         def calm(s: PositionSample) -> bool:
             if not (abs(-s.z_m - hover_alt_m) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps):
                 return False
-            if cfg.loop != "horizontal":
+            if cfg.tuned_loop != "horizontal":
                 return True
             i = AXES[cfg.axis]
             return abs((s.x_m, s.y_m)[i] - self._hover_ned[i]) < cfg.calm_horizontal_m and \
@@ -420,7 +420,7 @@ class MavlinkVehicle:
                 return ("not_settled" if reason == "not_calm" else reason), recorded
             t0 = self.link.state.position.t_s
             base = self._altitude(self.link.state.position) if cfg.altitude_source == "distance_sensor" else hover_alt
-            if cfg.loop == "horizontal":  # out and back along the axis at the hover altitude, its error measured
+            if cfg.tuned_loop == "horizontal":  # out and back along the axis at the hover altitude, its error measured
                 line = OutAndBack(self._hover_ned, cfg.primitive_s, cfg.travel_m, cfg.axis)
                 i = AXES[cfg.axis]
                 self.streamer.set_target(lambda t: line.at(t - t0))

@@ -13,9 +13,9 @@ PX4 holds it); entering GUIDED holds the current position until a new target com
 message each way.
 
 Gain mapping: see `mavtune.vehicles.mavlink.mavsim.cascade` (ArduCopter's PSC_POSZ_P → PSC_VELZ_P → PSC_ACCZ_*
-cascade with its limits and filters) and, for PX4, the P position loop feeding a P velocity loop in acceleration
-units: k_x(z) = MPC_Z_P · MPC_Z_VEL_P_ACC [1/s²], k_v(z) = MPC_Z_VEL_P_ACC [1/s]. Horizontally both flavours fly
-their autopilot's own cascade with its gains (`mavtune.vehicles.mavlink.mavsim.horizontal`: PSC_POSXY_P →
+cascade with its limits and filters; PX4's MPC_Z_P position loop feeding the MPC_Z_VEL_P/I/D_ACC velocity PID in
+acceleration units): every altitude gain of either autopilot acts on the flight. Horizontally both flavours fly their
+autopilot's own cascade with its gains (`mavtune.vehicles.mavlink.mavsim.horizontal`: PSC_POSXY_P →
 PSC_VELXY_P/_I/_D, MPC_XY_P → MPC_XY_VEL_P_ACC/_I_ACC), commanding the plant's horizontal acceleration. The
 diverge fault adds a growing altitude oscillation to the reference while the named parameter is above its threshold.
 """
@@ -36,7 +36,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavtune.errors import MavtuneError
-from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude
+from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude, Px4Altitude
 from mavtune.vehicles.mavlink.mavsim.faults import Faults
 from mavtune.vehicles.mavlink.mavsim.horizontal import ArduCopterHorizontal, Px4Horizontal
 from mavtune.vehicles.mavlink.mavsim.plant import make_plant
@@ -63,8 +63,6 @@ OFFBOARD_LOSS_S = 1.0  # PX4 COM_OF_LOSS_T: OFFBOARD without setpoints for this 
 GUIDED_TIMEOUT_S = 3.0  # ArduCopter GUIDED: a velocity/acceleration target older than this is stopped
 FLAVOURS = ("px4", "ardupilot", "ardupilot-4.7")
 VERSIONS = {"px4": (1, 15, 0), "ardupilot": (4, 6, 0), "ardupilot-4.7": (4, 7, 0)}
-POS_P_NAMES = ("MPC_Z_P", "PSC_POSZ_P", "PSC_D_POS_P")
-VEL_P_NAMES = ("MPC_Z_VEL_P_ACC", "PSC_VELZ_P", "PSC_D_VEL_P")
 IGNORE_POS = 0b111
 IGNORE_VEL = 0b111 << 3
 IGNORE_ACC = 0b111 << 6
@@ -158,7 +156,7 @@ class SimVehicle:
         self.plant_kind = "starting"
         self._plant_args = (seed, noise_free)
         self._built: tuple[Any, str] | None = None
-        self.cascade = ArduCopterAltitude() if self.profile.autopilot is Autopilot.ARDUPILOT else None
+        self.cascade = ArduCopterAltitude() if self.profile.autopilot is Autopilot.ARDUPILOT else Px4Altitude()
         self.horizontal = ArduCopterHorizontal() if self.profile.autopilot is Autopilot.ARDUPILOT else Px4Horizontal()
         self.mode = "POSCTL" if self.profile.autopilot is Autopilot.PX4 else "LOITER"
         self._hold_ned = self._ned_position()
@@ -209,15 +207,11 @@ class SimVehicle:
             self._diverge_since = None
         if self.plant is None:
             return
+        # the autopilot's cascades command the accelerations; the plant's own altitude PD (and x-y law) are off
         canonical = {self.profile.family(n)[0][0]: v / dict(self.profile.family(n))[n] for n, v in self.params.items()}
+        self.cascade.gains.update(canonical)
         self.horizontal.gains.update({n: v for n, v in canonical.items() if n in self.horizontal.gains})
-        if self.cascade is not None:  # ArduCopter: the cascade commands the acceleration; the plant's PD is off
-            self.cascade.gains.update(canonical)
-            self.plant.set_gains(0.0, 0.0)
-            return
-        pos_p = next(self.params[n] for n in POS_P_NAMES if n in self.params)
-        vel_p = next(self.params[n] for n in VEL_P_NAMES if n in self.params)
-        self.plant.set_gains(max(pos_p, 0.0) * max(vel_p, 0.0), max(vel_p, 0.0))  # the plant takes no negative gain
+        self.plant.set_gains(0.0, 0.0)
 
     def _reference(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The NED reference the autopilot tracks now, by mode."""
@@ -253,10 +247,9 @@ class SimVehicle:
             pos, vel, acc = pos.copy(), vel.copy(), acc.copy()
             # the autopilot's horizontal cascade commands the acceleration; the plant's own x-y law is off
             acc[:2] = self.horizontal.step(DT_S, pos[:2], vel[:2], acc[:2], p[:2], v[:2])
+            acc[2] = self.cascade.step(DT_S, pos[2], vel[2], acc[2], p[2], v[2])
             pos[:2], vel[:2] = p[:2], v[:2]
-            if self.cascade is not None:
-                acc[2] = self.cascade.step(DT_S, pos[2], vel[2], acc[2], p[2], v[2])
-                pos[2], vel[2] = p[2], v[2]
+            pos[2], vel[2] = p[2], v[2]
             self.plant.step(pos, vel, acc)
         self.t_s += DT_S
         for when, action in list(self._timed):
