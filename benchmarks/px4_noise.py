@@ -68,7 +68,7 @@ def fly_setup(name: str, flights: int, rec: Recorder) -> dict:
     params, settings, what = SETUPS[name]
     rows = []
     with px4_vehicles(1, env={f"PX4_PARAM_{k}": v for k, v in params.items()}) as (px4,):
-        fleet = MavlinkFleet([px4.tuner_url], MavlinkConfig(autopilot="px4", **settings))
+        fleet = MavlinkFleet([px4.tuner_url], MavlinkConfig(autopilot="px4", cost="iae", **settings))  # as measured
         try:
             for r in range(flights):
                 rec.clear()

@@ -191,6 +191,8 @@ class Config(_Section):
             mark["scenario"] = self.scenario().model_dump(mode="json")  # payload, wind, noise, cost, ...
         if self.fleet.kind == "mavlink":
             mark["urls"] = list(self.mavlink.get("urls") or [])
+            mark["cost"] = {k: self.mavlink[k] for k in ("cost", "balance", "motors", "motor_pwm_us", "filter_hz")
+                            if k in self.mavlink}  # what a vehicle flight's cost means (the defaults: {})
         return mark
 
     def ignored(self) -> list[str]:

@@ -33,6 +33,7 @@ from mavtune.report import markdown as md
 from mavtune.report.searches import SearchView, as_float, flown_point, noise, search_views, uncertainty
 from mavtune.report import units as U
 from mavtune.report.figure_rules import many
+from mavtune.report.points import flown_points, points_section
 from mavtune.report.traces import has_traces, vehicle_order
 from mavtune.report.units import GainUnit, gain_units
 
@@ -280,6 +281,10 @@ def _rounds(rep: Report) -> list[str]:
     return ["## Rounds", "", _rounds_table(rep.rounds, rep.units), ""]
 
 
+def _points(rep: Report) -> list[str]:
+    return points_section(flown_points(rep.rounds), rep.units)
+
+
 def _fleet_events(rep: Report) -> list[str]:
     events = rep.summary.get("events") or []
     return ["## Fleet events", "", _events_table(events), ""] if events else []
@@ -291,7 +296,7 @@ def _tuned_params(rep: Report) -> list[str]:
 
 SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _line_searches, _tuned_params,
                                                   _plan_vs_actual, _tuning, _timeline, _cost_surface, _rounds,
-                                                  _fleet_events]
+                                                  _points, _fleet_events]
 
 
 def _read_json(path: Path) -> dict[str, Any]:

@@ -5,11 +5,17 @@ from __future__ import annotations
 import numpy as np
 
 from mavtune.errors import MavtuneError
+from mavtune.sim import airframe as af
 from mavtune.sim import batch
 from mavtune.sim import kernel as K
 from mavtune.sim.gains import MRS_DEFAULT_KV, MRS_DEFAULT_KX
 from mavtune.sim.scenario import Scenario
 from mavtune.sim.tracker import DT_S
+
+
+def motor_fraction(rpm) -> np.ndarray:
+    """Rotor speed commands (rpm) as normalised motor commands in [0, 1] (the kernel's activity uses the same)."""
+    return (np.asarray(rpm, dtype=float) - af.RPM_MIN) / (af.RPM_MAX - af.RPM_MIN)
 
 
 class Plant:
@@ -125,6 +131,12 @@ class Plant:
     def failed(self) -> np.ndarray:
         """(B,) bool: the vehicle diverged (non-finite, ground, tilt > 90 deg) and is frozen."""
         return self._status != K.OK
+
+    @property
+    def motor_command(self) -> np.ndarray:
+        """The controller's rotor commands (B, 6) normalised to [0, 1] between the rotors' least and greatest speed:
+        the motor outputs an autopilot reports, and what the balanced cost's motor activity measures."""
+        return motor_fraction(self._X[K.A_RPMCMD:K.A_RPMCMD + 6].T)
 
     @property
     def rotor_rpm(self) -> np.ndarray:

@@ -10,6 +10,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mavtune.config import GAIN_SETS, read_toml, validated
+from mavtune.sim.balance import Balance
 from mavtune.vehicles.mavlink.profiles import Autopilot, param_loop
 from mavtune.vehicles.parammap import GAIN_SET_BINDINGS, PARAM_PATTERN, GainBinding
 
@@ -98,6 +99,14 @@ class MavlinkConfig(BaseModel):
     elevation_m: float = Field(1.0, ge=0)  # altitude difference over the circle
     setpoint_hz: float = Field(20.0, ge=10.0, le=100.0)  # SET_POSITION_TARGET_LOCAL_NED rate (PX4 needs > 2 Hz)
     filter_hz: float = Field(5.0, gt=0)  # low-pass cutoff of the cost, as the simulator's Scenario.filter_hz
+    cost: Literal["balanced", "iae"] = "balanced"  # balanced: altitude IAE + weighted motor activity and
+    # oscillation (`balance`; motor outputs from SERVO_OUTPUT_RAW / ACTUATOR_OUTPUT_STATUS); iae: tracking only
+    balance: Balance = Balance()  # the balanced cost's weights (as the simulator's [sim.balance])
+    motors: int | None = Field(None, ge=1, le=16)  # motor output channels 1..N (None: 4/6/8 by the HEARTBEAT's
+    # vehicle type: quad-, hexa-, octorotor; other types 4)
+    motor_pwm_us: tuple[float, float] = (1000.0, 2000.0)  # motor output at 0 and full command (MOT_PWM_MIN/MAX,
+    # PWM_MAIN_MIN/MAX): outputs are normalised to [0, 1] by it for the motor activity
+    motor_hz: float = Field(50.0, ge=5.0, le=100.0)  # motor output rate asked of the autopilot during a primitive
     altitude_source: Literal["local_position", "distance_sensor"] = "local_position"  # or the downward rangefinder
     keep_tuned: bool = False  # at the end leave the tuned gains on the vehicle instead of the originals
     heartbeat_wait_s: float = Field(10.0, gt=0)  # how long to wait for the first HEARTBEAT
@@ -110,6 +119,13 @@ class MavlinkConfig(BaseModel):
     # other autopilots on the link before sending anything (they send HEARTBEATs at 1 Hz)
     source_system: int = Field(255, ge=1, le=255)  # our (ground station) system id
     safety: SafetyConfig = SafetyConfig()
+
+    @model_validator(mode="after")
+    def _pwm_range(self) -> "MavlinkConfig":
+        lo, hi = self.motor_pwm_us
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"motor_pwm_us: need finite min < max, got [{lo}, {hi}]")
+        return self
 
     @model_validator(mode="after")
     def _known_gain_set(self) -> "MavlinkConfig":

@@ -86,6 +86,20 @@ def parse_url(url: str) -> tuple[str, int]:
     return url, 57600
 
 
+MOTOR_MESSAGES = ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS")
+"""The autopilot's motor outputs: ArduPilot sends SERVO_OUTPUT_RAW (PWM µs), PX4 both (ACTUATOR_OUTPUT_STATUS,
+the mixer's outputs, is taken from PX4)."""
+UINT32_US_S = 2**32 / 1e6  # SERVO_OUTPUT_RAW's time_usec is 32 bits: it wraps every 71.6 min of vehicle time
+
+
+@dataclass
+class MotorSample:
+    """One motor output message: vehicle time since boot and every output channel's raw value (PWM µs)."""
+
+    t_s: float
+    values: tuple[float, ...]
+
+
 @dataclass
 class PositionSample:
     """One LOCAL_POSITION_NED (or DISTANCE_SENSOR) reading: vehicle time and position, NED metres."""
@@ -215,6 +229,9 @@ class MavlinkLink:
         self._cond = threading.Condition()
         self._send_lock = threading.Lock()
         self._listeners: list[Callable[[PositionSample], None]] = []
+        self._motor_listeners: list[Callable[[MotorSample], None]] = []
+        self.motor_message = "SERVO_OUTPUT_RAW"  # which of MOTOR_MESSAGES is taken (the vehicle sets it)
+        self.motor_samples = 0  # how many were received
         self._closed = threading.Event()
         self._thread = threading.Thread(target=self._read_loop, name=f"mavlink-read {url}", daemon=True)
         self._thread.start()
@@ -282,6 +299,8 @@ class MavlinkLink:
                 self._cond.notify_all()
             for fn in listeners:
                 fn(sample)
+        elif mtype == self.motor_message:
+            self._motor(msg)
         elif mtype == "DISTANCE_SENSOR":
             if msg.orientation != DOWNWARD:
                 self._ignore(f"DISTANCE_SENSOR {msg.id} with orientation {msg.orientation} (not looking down)")
@@ -317,6 +336,26 @@ class MavlinkLink:
                 if msg.ts1 in self._timesync and self._timesync[msg.ts1] < 0:
                     self._timesync[msg.ts1] = time.monotonic_ns() - msg.ts1
                     self._cond.notify_all()
+
+    def _motor(self, msg) -> None:
+        """A motor output message to the motor listeners, on the position's clock (SERVO_OUTPUT_RAW's 32-bit
+        microseconds unwrapped against the last position sample's time since boot)."""
+        if msg.get_type() == "SERVO_OUTPUT_RAW":
+            if msg.port != 0:
+                return  # servos 17-32: no motor of a multicopter
+            t_s = msg.time_usec / 1e6
+            pos = self.state.position
+            if pos is not None:
+                t_s += round((pos.t_s - t_s) / UINT32_US_S) * UINT32_US_S
+            values = tuple(float(getattr(msg, f"servo{i}_raw", 0)) for i in range(1, 17))  # 9-16: MAVLink 2 only
+        else:
+            t_s, values = msg.time_usec / 1e6, tuple(float(v) for v in msg.actuator[:max(0, msg.active)])
+        sample = MotorSample(t_s, values)
+        with self._cond:
+            self.motor_samples += 1
+            listeners = list(self._motor_listeners)
+        for fn in listeners:
+            fn(sample)
 
     def _watch(self, src: int, comp: int, msg) -> None:
         """Follow every sender's sequence numbers and AUTOPILOT_VERSION ids: two autopilots answering as one.
@@ -464,6 +503,17 @@ class MavlinkLink:
         with self._cond:
             if fn in self._listeners:
                 self._listeners.remove(fn)
+
+    def add_motor_listener(self, fn: Callable[[MotorSample], None]) -> None:
+        """Call fn(sample) from the reader thread for every motor output message (`motor_message`)."""
+        with self._cond:
+            self._motor_listeners.append(fn)
+
+    def remove_motor_listener(self, fn: Callable[[MotorSample], None]) -> None:
+        """Stop calling fn."""
+        with self._cond:
+            if fn in self._motor_listeners:
+                self._motor_listeners.remove(fn)
 
     # ---- sending -------------------------------------------------------------------------------------------
     def send(self, fn: Callable[[object], None]) -> None:

@@ -7,7 +7,9 @@ plant is compiled in the background meanwhile), the PARAM_* protocol with the au
 (ArduPilot stores any PARAM_SET, negative or of another type, and echoes it; PX4 drops a PARAM_SET whose type is
 not the parameter's), MAV_CMD_DO_SET_MODE / SET_MODE, arming and takeoff, SET_MESSAGE_INTERVAL,
 REQUEST_MESSAGE and AUTOPILOT_VERSION, and streams LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE,
-DISTANCE_SENSOR, SYS_STATUS, EXTENDED_SYS_STATE and HOME_POSITION. It follows SET_POSITION_TARGET_LOCAL_NED in
+DISTANCE_SENSOR, SYS_STATUS, EXTENDED_SYS_STATE, HOME_POSITION and the motor outputs: SERVO_OUTPUT_RAW (both; PWM
+1000–2000 µs from the plant's rotor commands, channels past the motors 0 on ArduPilot, 900 on PX4, as SITL sends
+them) and, PX4 only, ACTUATOR_OUTPUT_STATUS. It follows SET_POSITION_TARGET_LOCAL_NED in
 OFFBOARD (PX4) or GUIDED (ArduPilot) from the moment it arrives (ArduPilot advances the target by its velocity,
 PX4 holds it); entering GUIDED holds the current position until a new target comes. `link_delay_s` delays every
 message each way.
@@ -56,7 +58,11 @@ STREAM_HZ = {  # default rates (vehicle time); SET_MESSAGE_INTERVAL changes them
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.2,
+    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
+    mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.0,  # PX4 only, when asked (ArduPilot refuses it)
 }
+PWM_US = (1000.0, 2000.0)  # motor output at command 0 and 1 (MOT_PWM_MIN/MAX, PWM_MAIN_MIN/MAX)
+UNUSED_OUTPUT_US = {Autopilot.PX4: 900.0, Autopilot.ARDUPILOT: 0.0}  # what the autopilots send on other outputs
 HOME = (-35.363262, 149.165237, 584.0)  # lat, lon (deg), altitude AMSL (m): ArduPilot SITL's default home
 EARTH_RADIUS_M = 6378137.0
 OFFBOARD_LOSS_S = 1.0  # PX4 COM_OF_LOSS_T: OFFBOARD without setpoints for this long falls back to Hold
@@ -145,6 +151,11 @@ class SimVehicle:
         self.offboard_loss_s = offboard_loss_s  # PX4's COM_OF_LOSS_T
         self.faults = faults or Faults()
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=system_id, source_component=1)
+        if self.profile.autopilot is Autopilot.PX4:  # PX4 speaks MAVLink 2 from its first message (as its SITL
+            # does; ACTUATOR_OUTPUT_STATUS has no MAVLink 1 form), the ground switches to it on the first byte
+            self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=system_id, srcComponent=1)
+            self.conn.mav.robust_parsing = True
+            self.conn.WIRE_PROTOCOL_VERSION, self.conn.first_byte = "2.0", False
         self._send_lock = threading.Lock()
         self.system_id = system_id
         self.uid = int.from_bytes(os.urandom(8), "little") | 1  # AUTOPILOT_VERSION uid: a new board each start
@@ -323,11 +334,26 @@ class SimVehicle:
             lat, lon = _latlon(np.zeros(3))
             self._send("home_position", lat, lon, int(HOME[2] * 1000), 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
                        0.0, 0.0, 0.0)
+        elif msg_id in (mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS) \
+                and not self.faults.no_motor_outputs:
+            pwm = self._motor_outputs_us()
+            if msg_id == mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW:
+                # outputs 1-8 (9-16 are MAVLink 2 extensions; the ArduPilot flavour speaks MAVLink 1)
+                self._send("servo_output_raw", int(self.t_s * 1e6) % 2**32, 0, *(int(round(v)) for v in pwm[:8]))
+            else:
+                self._send("actuator_output_status", int(self.t_s * 1e6), 16, [*pwm[:16], *([0.0] * 16)])
         elif msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             major, minor, patch = self.version
             sw = (major << 24) | (minor << 16) | (patch << 8) | mavlink.FIRMWARE_VERSION_TYPE_OFFICIAL
             self._send("autopilot_version", CAPABILITIES, sw, 0, 0, 0, b"mavsim\0\0", bytes(8), bytes(8), 0, 0,
                        self.uid)
+
+    def _motor_outputs_us(self) -> list[float]:
+        """The 16 main outputs, µs: the plant's motor commands on the first channels (idle before take-off)."""
+        lo, hi = PWM_US
+        u = self.plant.motor_command[0] if self.plant is not None and self.armed else np.zeros(0)
+        outputs = [lo + (hi - lo) * float(min(max(x, 0.0), 1.0)) for x in u]
+        return outputs + [UNUSED_OUTPUT_US[self.profile.autopilot]] * (16 - len(outputs))
 
     def _periodic(self) -> None:
         now = time.monotonic()
@@ -442,6 +468,8 @@ class SimVehicle:
         """MAV_CMD_SET_MESSAGE_INTERVAL: interval in µs, 0 the default rate, −1 off."""
         if msg_id not in STREAM_HZ or not math.isfinite(interval_us):
             return mavlink.MAV_RESULT_DENIED
+        if msg_id == mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS and self.profile.autopilot is not Autopilot.PX4:
+            return mavlink.MAV_RESULT_DENIED  # as ArduCopter SITL answers
         if interval_us == 0:
             self._rates[msg_id] = STREAM_HZ[msg_id]
         elif interval_us < 0:
