@@ -38,10 +38,12 @@ PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`
     "tuning.adaptive": False, "tuning.answer": "search", "tuning.initial": {"kd": 0.2}, "tuning.edges": False}
 
 
-GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki")}
+GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
+                                         "horizontal": ("kp", "kd")}
 """The named gain sets a MAVLink run selects by `[mavlink] gain_set` (or --gain-set), each with the gains it tunes in
 order (their parameters per autopilot: mavtune.vehicles.parammap): "altitude" is the paper's two altitude gains,
-"altitude-inner" adds the inner altitude loop (ka, ki)."""
+"altitude-inner" adds the inner altitude loop (ka, ki), "horizontal" is the horizontal position loop's two gains
+(flown with the horizontal out-and-back)."""
 
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",

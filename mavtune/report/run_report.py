@@ -246,12 +246,14 @@ def _timeline(rep: Report) -> list[str]:
         return parts + ["No round was flown.", ""]
     if not rep.figures:
         return []
-    from mavtune.report.timeline import plot_timeline
+    from mavtune.report.timeline import error_label, plot_timeline
 
-    plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG, units=rep.units)
+    tracked = tracked_quantity(rep.config)
+    plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG, units=rep.units, tracked=tracked)
     whose = ("over the vehicles (median and 10–90 % band), the" if many(len(vehicle_order(rep.rounds)))
              else "each vehicle's")
-    what = (f"{whose} altitude reference (dashed) and measurement and tracking error |z − z_ref| (thin) with its "
+    what = (f"{whose} {tracked} reference (dashed) and measurement and tracking error {error_label(tracked)} (thin) "
+            "with its "
             "mean over each flight (bar), both scaled to the normal flights (a diverged or failed flight is "
             "clipped, marked ^ and counted); " if has_traces(rep.rounds)
             else "no altitude traces were recorded (e.g. a callable fleet); ")
@@ -304,6 +306,20 @@ def _read_json(path: Path) -> dict[str, Any]:
     except (OSError, ValueError):  # missing, unreadable, not JSON
         return {}
     return data if isinstance(data, dict) else {}
+
+
+def tracked_quantity(config=None) -> str:
+    """What the flights' traces follow: "altitude", or for a MAVLink run of the horizontal loop the position
+    along its axis ("north position")."""
+    if getattr(getattr(config, "fleet", None), "kind", None) != "mavlink":
+        return "altitude"
+    from mavtune.vehicles.mavlink.config import load_mavlink_config
+
+    try:
+        mav = load_mavlink_config(dict(getattr(config, "mavlink", None) or {}))
+    except MavtuneError:
+        return "altitude"  # the run stopped at its own config error: nothing was flown
+    return f"{mav.axis} position" if mav.tuned_loop == "horizontal" else "altitude"
 
 
 def round_seconds(config=None) -> float:

@@ -66,6 +66,13 @@ class Plant:
         self._X[K.V_KXZ] = kx
         self._X[K.V_KVZ] = kv
 
+    def horizontal_from_reference(self) -> None:
+        """Turn the controller's own horizontal law off (its x-y position and velocity gains and both horizontal
+        integrators): the horizontal acceleration is then the reference's alone, for an outside cascade (mavsim's
+        autopilot) that commands it. For every vehicle of this plant; vertical control is unchanged."""
+        for c in (K.C_KX_XY, K.C_KV_XY, K.C_KIW, K.C_KIB):
+            self._cp[c] = 0.0
+
     def step(self, ref_pos_m, ref_vel_mps=None, ref_acc_mps2=None) -> None:
         """Advance 0.01 s towards the reference ((3,) or (B, 3) each; velocity/acceleration default to 0)."""
         refs = np.zeros((self.vehicles, 9))

@@ -132,7 +132,17 @@ INNER_ALTITUDE_GAINS: dict[str, dict[str, tuple[str, float, float]]] = {
     "px4": {"kp": ("MPC_Z_P", 0.1, 1.5), "kd": ("MPC_Z_VEL_P_ACC", 2.0, 15.0),
             "ka": ("MPC_Z_VEL_D_ACC", 0.0, 2.0), "ki": ("MPC_Z_VEL_I_ACC", 0.2, 3.0)},
 }
+# "horizontal": the horizontal position loop, flown with the out-and-back primitive (MavlinkConfig.loop): kp the
+# position gain (ArduCopter PSC_POSXY_P, AC_PosControl @Range 0.5–2; PX4 MPC_XY_P, mc_pos_control @min/@max 0–2,
+# here from 0.2: 0 leaves no position feedback), kd the velocity gain (PSC_VELXY_P @Range 0.1–6, here from 0.5: below
+# it the velocity loop is left to PSC_VELXY_I; MPC_XY_VEL_P_ACC 1.2–5). Later Copter's PSC_NE_* names are found by
+# probing.
+HORIZONTAL_GAINS: dict[str, dict[str, tuple[str, float, float]]] = {
+    "ardupilot": {"kp": ("PSC_POSXY_P", 0.5, 2.0), "kd": ("PSC_VELXY_P", 0.5, 6.0)},
+    "px4": {"kp": ("MPC_XY_P", 0.2, 2.0), "kd": ("MPC_XY_VEL_P_ACC", 1.2, 5.0)},
+}
 GAIN_SET_BINDINGS: dict[str, dict[str, dict[str, tuple[str, float, float]]]] = {
     "altitude-inner": INNER_ALTITUDE_GAINS,
+    "horizontal": HORIZONTAL_GAINS,
 }
 """{gain set: {autopilot: {gain: (parameter, min, max)}}} beyond the default "altitude" set."""

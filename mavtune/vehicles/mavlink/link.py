@@ -110,6 +110,8 @@ class PositionSample:
     z_m: float  # NED down (altitude is −z)
     vz_mps: float
     wall_s: float
+    vx_mps: float = 0.0  # NED north speed (the horizontal loop's calm test)
+    vy_mps: float = 0.0  # NED east speed
 
 
 class SeqWatch:
@@ -295,7 +297,7 @@ class MavlinkLink:
             return  # only the autopilot says where the vehicle is, what it holds and what it did
         if mtype == "LOCAL_POSITION_NED":
             sample = PositionSample(
-                msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z, msg.vz, time.monotonic()
+                msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z, msg.vz, time.monotonic(), msg.vx, msg.vy
             )
             with self._cond:
                 st.position = sample

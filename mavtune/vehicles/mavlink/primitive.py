@@ -1,7 +1,11 @@
-"""The reference primitive flown over MAVLink (the paper's circle) and the measures (costs) of a flown one.
+"""The reference primitives flown over MAVLink (the paper's circle; the horizontal out-and-back) and the measures
+(costs) of a flown one.
 
-The circle starts and ends at the hover point: one turn of diameter `circle_diameter_m` in `primitive_s`,
-climbing `elevation_m` and back, z_up(t) = elevation/2 · (1 − cos ωt).
+Altitude loop: the paper's circle, starting and ending at the hover point: one turn of diameter `circle_diameter_m`
+in `primitive_s`, climbing `elevation_m` and back, z_up(t) = elevation/2 · (1 − cos ωt).
+Horizontal loop: an out-and-back along one horizontal axis at the hover altitude, the same smooth profile,
+d(t) = travel/2 · (1 − cos ωt): out `travel_m` and back in `primitive_s`, peak speed π·travel/T and peak
+acceleration 2π²·travel/T² (2 m in 8 s: 0.79 m/s, 0.62 m/s²).
 """
 
 from __future__ import annotations
@@ -59,6 +63,35 @@ class Circle:
         return -self.at(t_s).pos_m[2]
 
 
+AXES = {"north": 0, "east": 1}  # index in NED
+
+
+@dataclass(frozen=True)
+class OutAndBack:
+    """Out `travel_m` along `axis` and back, at the hover point's altitude, as a function of time since its start."""
+
+    hover_ned_m: tuple[float, float, float]
+    duration_s: float = 8.0
+    travel_m: float = 2.0
+    axis: str = "north"
+
+    def at(self, t_s: float) -> Setpoint:
+        """The setpoint at time t_s (the hover point outside [0, duration])."""
+        t = min(max(t_s, 0.0), self.duration_s)
+        w = 2.0 * math.pi / self.duration_s
+        h = self.travel_m / 2.0
+        i = AXES[self.axis]
+        pos, vel, acc = list(self.hover_ned_m), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        pos[i] += h * (1.0 - math.cos(w * t))
+        if 0.0 < t_s < self.duration_s:
+            vel[i], acc[i] = h * w * math.sin(w * t), h * w * w * math.cos(w * t)
+        return Setpoint(tuple(pos), tuple(vel), tuple(acc))
+
+    def reference_m(self, t_s: float) -> float:
+        """The reference position along the axis (NED metres, as LOCAL_POSITION_NED's x or y) at time t_s."""
+        return self.at(t_s).pos_m[AXES[self.axis]]
+
+
 MOTORS_BY_TYPE = {mavlink.MAV_TYPE_TRICOPTER: 3, mavlink.MAV_TYPE_QUADROTOR: 4, mavlink.MAV_TYPE_HEXAROTOR: 6,
                   mavlink.MAV_TYPE_OCTOROTOR: 8, mavlink.MAV_TYPE_DECAROTOR: 10, mavlink.MAV_TYPE_DODECAROTOR: 12}
 
@@ -75,7 +108,8 @@ def _grid(t_s, dt_s: float) -> np.ndarray:
 
 
 def altitude_cost(t_s, z_ref_m, z_m, filter_hz: float = 5.0, dt_s: float = 0.01) -> float:
-    """The simulator's IAE of a flown primitive: samples (at the telemetry rate) interpolated onto its 100 Hz grid."""
+    """The simulator's IAE of a flown primitive: samples (at the telemetry rate) interpolated onto its 100 Hz grid.
+    The horizontal loop's samples are positions along its axis (reference and measured), summed the same way."""
     return flight_measures(t_s, z_ref_m, z_m, filter_hz=filter_hz, dt_s=dt_s).iae
 
 

@@ -17,7 +17,7 @@ from mavtune.vehicles.mavlink.config import MavlinkConfig
 from mavtune.vehicles.mavlink.link import MavlinkLink, MotorSample, PositionSample, split_target
 from mavtune.vehicles.mavlink.originals import OriginalsRecord, OriginalsStore, vehicle_key
 from mavtune.vehicles.mavlink.params import ParamClient, ParamNotConfirmed, as_float32
-from mavtune.vehicles.mavlink.primitive import Circle, Setpoint, flight_measures, motor_channels
+from mavtune.vehicles.mavlink.primitive import AXES, Circle, OutAndBack, Setpoint, flight_measures, motor_channels
 from mavtune.vehicles.mavlink.profiles import profile_from_heartbeat
 from mavtune.vehicles.mavlink.safety import (
     GAIN_FAULTS,
@@ -332,10 +332,11 @@ class MavlinkVehicle:
         return t is None or sample.t_s - t > self.config.safety.position_timeout_s
 
     def _phase(self, samples: "queue.Queue[PositionSample]", t0: float, duration_s: float, ref, record,
-               calm=None, check_error: bool = True, hold_s: float = CALM_HOLD_S) -> str | None:
+               calm=None, check_error: bool = True, hold_s: float = CALM_HOLD_S, track=None) -> str | None:
         """Follow the streamed target for duration_s of vehicle time from t0, checking every sample for an abort;
         with `calm` (a sample → bool), go on after duration_s until calm(sample) has held for hold_s, up to
-        config.calm_timeout_s after it."""
+        config.calm_timeout_s after it. `track` ((t, sample) → (reference, position) along the horizontal loop's
+        axis) records that axis instead of the altitude and aborts on its error too."""
         safety = self.config.safety
         last_wall = time.monotonic()
         calm_since: float | None = None
@@ -359,9 +360,12 @@ class MavlinkVehicle:
                 return "position_lost"
             t = s.t_s - t0
             z, z_ref = self._altitude(s), ref(t)
+            along = track(t, s) if track is not None else None
             reason = abort_reason(z, z_ref if check_error else z, self.link.state, self.link.heartbeat_age_s(),
-                                  self.profile, safety)
-            if record is not None and math.isfinite(z):
+                                  self.profile, safety, along[1] - along[0] if along is not None else 0.0)
+            if record is not None and along is not None:
+                record.append((t, *along))
+            elif record is not None and math.isfinite(z):
                 record.append((t, z_ref, z))
             if reason:
                 return reason
@@ -378,9 +382,19 @@ class MavlinkVehicle:
         self._abort_request = reason
 
     def _calm(self, hover_alt_m: float):
-        """The calm test around the hover altitude: small altitude error and small vertical speed."""
+        """The calm test around the hover altitude: small altitude error and small vertical speed; for the
+        horizontal loop also a small offset from the hover point and a small speed along its axis."""
         cfg = self.config
-        return lambda s: abs(-s.z_m - hover_alt_m) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps
+
+        def calm(s: PositionSample) -> bool:
+            if not (abs(-s.z_m - hover_alt_m) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps):
+                return False
+            if cfg.tuned_loop != "horizontal":
+                return True
+            i = AXES[cfg.axis]
+            return abs((s.x_m, s.y_m)[i] - self._hover_ned[i]) < cfg.calm_horizontal_m and \
+                abs((s.vx_mps, s.vy_mps)[i]) < cfg.calm_speed_mps
+        return calm
 
     def _recover(self) -> str | None:
         """Before new gains: hover with the current (safe) gains until calm. After an aborted primitive, hover
@@ -399,7 +413,8 @@ class MavlinkVehicle:
             self.link.remove_position_listener(samples.put)
 
     def _fly_primitive(self) -> tuple[str | None, list[tuple[float, float, float]]]:
-        """Settle, then fly the circle; (abort reason or None, samples (t_s, z_ref_m, z_m))."""
+        """Settle, then fly the loop's primitive; (abort reason or None, samples (t_s, reference_m, position_m):
+        altitude up, or the position along the horizontal axis)."""
         cfg = self.config
         samples: queue.Queue[PositionSample] = queue.Queue()
         self.link.add_position_listener(samples.put)
@@ -415,10 +430,18 @@ class MavlinkVehicle:
             reason = self._phase(samples, start.t_s, cfg.settle_s, lambda t: base, None, self._calm(hover_alt))
             if reason:  # the new gains do not hold a calm hover: their fault, not the weather's
                 return ("not_settled" if reason == "not_calm" else reason), recorded
-            circle = Circle(self._hover_ned, cfg.primitive_s, cfg.circle_diameter_m, cfg.elevation_m)
             self.link.request_rate(motor_id, cfg.motor_hz)  # again (unacknowledged): a lost request loses a flight
             t0 = self.link.state.position.t_s
             base = self._altitude(self.link.state.position) if cfg.altitude_source == "distance_sensor" else hover_alt
+            if cfg.tuned_loop == "horizontal":  # out and back along the axis at the hover altitude, its error measured
+                line = OutAndBack(self._hover_ned, cfg.primitive_s, cfg.travel_m, cfg.axis)
+                i = AXES[cfg.axis]
+                self.streamer.set_target(lambda t: line.at(t - t0))
+                self._primitive_t0 = t0
+                reason = self._phase(samples, t0, cfg.primitive_s, lambda t: base, recorded,
+                                     track=lambda t, s: (line.reference_m(t), (s.x_m, s.y_m)[i]))
+                return reason, recorded
+            circle = Circle(self._hover_ned, cfg.primitive_s, cfg.circle_diameter_m, cfg.elevation_m)
             self.streamer.set_target(lambda t: circle.at(t - t0))
             self._primitive_t0 = t0
             reason = self._phase(samples, t0, cfg.primitive_s, lambda t: base + circle.altitude_ref_m(t) - hover_alt, recorded)

@@ -46,6 +46,10 @@ class StandInPlant:
         self._kz = (np.broadcast_to(np.asarray(kx, float), (self.vehicles,)).copy(),
                     np.broadcast_to(np.asarray(kv, float), (self.vehicles,)).copy())
 
+    def horizontal_from_reference(self) -> None:
+        """The horizontal acceleration is the reference's alone (no x-y gains), as sim.Plant's."""
+        self.XY_GAINS = (0.0, 0.0)
+
     @property
     def motor_command(self) -> np.ndarray:
         """Normalised motor commands (B, 4) in [0, 1]: the vertical thrust asked for, hover at HOVER_COMMAND."""

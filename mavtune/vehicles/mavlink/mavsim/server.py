@@ -16,8 +16,10 @@ message each way.
 
 Gain mapping: see `mavtune.vehicles.mavlink.mavsim.cascade` (ArduCopter's PSC_POSZ_P → PSC_VELZ_P → PSC_ACCZ_*
 cascade with its limits and filters; PX4's MPC_Z_P position loop feeding the MPC_Z_VEL_P/I/D_ACC velocity PID in
-acceleration units): every altitude gain of either autopilot acts on the flight. The diverge fault adds a growing
-altitude oscillation to the reference while the named parameter is above its threshold.
+acceleration units): every altitude gain of either autopilot acts on the flight. Horizontally both flavours fly their
+autopilot's own cascade with its gains (`mavtune.vehicles.mavlink.mavsim.horizontal`: PSC_POSXY_P →
+PSC_VELXY_P/_I/_D, MPC_XY_P → MPC_XY_VEL_P_ACC/_I_ACC), commanding the plant's horizontal acceleration. The
+diverge fault adds a growing altitude oscillation to the reference while the named parameter is above its threshold.
 """
 
 from __future__ import annotations
@@ -38,9 +40,10 @@ from pymavlink.dialects.v20 import common as mavlink
 from mavtune.errors import MavtuneError
 from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude, Px4Altitude
 from mavtune.vehicles.mavlink.mavsim.faults import Faults
+from mavtune.vehicles.mavlink.mavsim.horizontal import ArduCopterHorizontal, Px4Horizontal
 from mavtune.vehicles.mavlink.mavsim.plant import make_plant
 from mavtune.vehicles.mavlink.params import as_float32
-from mavtune.vehicles.mavlink.profiles import ARDUPILOT, PX4, Autopilot, AutopilotProfile
+from mavtune.vehicles.mavlink.profiles import ARDUPILOT, NEWER_ARDUPILOT_PREFIXES, PX4, Autopilot, AutopilotProfile
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +94,8 @@ def flavour_params(flavour: str) -> tuple[AutopilotProfile, dict[str, float]]:
         return PX4, {s.name: s.default for s in PX4.specs}
     if flavour in ("ardupilot", "ardupilot-4.7"):
         new = flavour == "ardupilot-4.7"
-        return ARDUPILOT, {s.name: s.default for s in ARDUPILOT.specs if s.name.startswith("PSC_D_") == new}
+        return ARDUPILOT, {s.name: s.default for s in ARDUPILOT.specs
+                           if s.name.startswith(NEWER_ARDUPILOT_PREFIXES) == new}
     raise MavtuneError(f"unknown autopilot {flavour!r} for mavsim; use {', '.join(FLAVOURS)}")
 
 
@@ -164,6 +168,7 @@ class SimVehicle:
         self._plant_args = (seed, noise_free)
         self._built: tuple[Any, str] | None = None
         self.cascade = ArduCopterAltitude() if self.profile.autopilot is Autopilot.ARDUPILOT else Px4Altitude()
+        self.horizontal = ArduCopterHorizontal() if self.profile.autopilot is Autopilot.ARDUPILOT else Px4Horizontal()
         self.mode = "POSCTL" if self.profile.autopilot is Autopilot.PX4 else "LOITER"
         self._hold_ned = self._ned_position()
         self._target: _Target | None = None
@@ -188,6 +193,7 @@ class SimVehicle:
         plant.reset(self._start_m)
         plant.step(self._start_m)  # the first step compiles
         plant.reset(self._start_m)
+        plant.horizontal_from_reference()  # the autopilot's horizontal cascade (self.horizontal) commands it
         self._built = (plant, kind)  # the serving loop adopts it (one thread touches the plant)
 
     def _adopt_plant(self) -> None:
@@ -212,10 +218,10 @@ class SimVehicle:
             self._diverge_since = None
         if self.plant is None:
             return
-        # the autopilot's cascade commands the vertical acceleration; the plant's own altitude PD is off
-        for name, value in self.params.items():
-            canonical, scale = self.profile.family(name)[0][0], dict(self.profile.family(name))[name]
-            self.cascade.gains[canonical] = value / scale
+        # the autopilot's cascades command the accelerations; the plant's own altitude PD (and x-y law) are off
+        canonical = {self.profile.family(n)[0][0]: v / dict(self.profile.family(n))[n] for n, v in self.params.items()}
+        self.cascade.gains.update(canonical)
+        self.horizontal.gains.update({n: v for n, v in canonical.items() if n in self.horizontal.gains})
         self.plant.set_gains(0.0, 0.0)
 
     def _reference(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -249,9 +255,11 @@ class SimVehicle:
         pos, vel, acc = pos * flip, vel * flip, acc * flip
         if self.airborne:
             p, v = self.plant.position_m[0], self.plant.velocity_mps[0]
-            acc = acc.copy()
+            pos, vel, acc = pos.copy(), vel.copy(), acc.copy()
+            # the autopilot's horizontal cascade commands the acceleration; the plant's own x-y law is off
+            acc[:2] = self.horizontal.step(DT_S, pos[:2], vel[:2], acc[:2], p[:2], v[:2])
             acc[2] = self.cascade.step(DT_S, pos[2], vel[2], acc[2], p[2], v[2])
-            pos, vel = pos.copy(), vel.copy()
+            pos[:2], vel[:2] = p[:2], v[:2]
             pos[2], vel[2] = p[2], v[2]
             self.plant.step(pos, vel, acc)
         self.t_s += DT_S
