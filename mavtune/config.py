@@ -40,7 +40,7 @@ PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`
 
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
-                   "refly", "answer", "edges")  # what [tuning] gives the engine's Settings
+                   "refly", "answer", "edges", "directions")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -76,10 +76,14 @@ class Tuning(_Section):
                             "(None: 4 rounds' worth)")
     stop_undecided: StrictBool = Field(False, description="adaptive: a comparison undecided at the cap stops the search")
     refly: StrictBool = Field(False, description="reuse: a point carried into the next comparison is flown again there")
-    answer: Literal["search", "model"] = Field("model", description="each line search's answer: the method's own "
-                                                "(search) or a local quadratic fit of all its flights (model)")
+    answer: Literal["search", "model", "valley"] = Field("model", description="each line search's answer: the "
+                                                          "method's own (search), a local quadratic fit of all its "
+                                                          "flights (model) or a fit with one curvature each side of "
+                                                          "the minimum (valley: asymmetric valleys)")
     edges: StrictBool = Field(True, description="a line search that ends against an edge of its range flies the "
                               "edge itself: an optimum on the edge can be answered, and is said with its evidence")
+    directions: StrictBool = Field(False, description="between passes over the gains, a line search along the "
+                                   "pass's net move (Powell's direction): follows a valley that runs across the gains")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":
