@@ -424,10 +424,8 @@ class Tuner:
         widths = [hi - lo for lo, hi in s.space.values()]
         flown: dict[tuple[float, ...], list[float]] = {}
         for rnd in self.rounds:
-            for a, f in zip(rnd.assignments, rnd.flights):
-                if f.measured:
-                    flown.setdefault(tuple(float(a[n]) for n in names), []).append(
-                        f.cost if math.isfinite(f.cost) else math.inf)
+            for a, cost in zip(*Strategy.measured(rnd.assignments, rnd.flights)):
+                flown.setdefault(tuple(float(a[n]) for n in names), []).append(cost)
         step = newton_step(flown, [self.gains[n] for n in names], widths)
         move = dict(zip(names, step)) if step is not None else {n: self.gains[n] - start[n] for n in names}
         if math.hypot(*(move[n] / w for n, w in zip(names, widths))) <= s.epsilon:

@@ -147,12 +147,6 @@ def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str
             "uncertainty": {}, "budget": budget, "cpu_s": time.process_time() - cpu}
 
 
-def _paper() -> dict[str, Any]:
-    from mavtune.config import PAPER_TUNING
-
-    return {k.removeprefix("tuning."): v for k, v in PAPER_TUNING.items()}
-
-
 def candidates() -> list[Method]:
     """The configurations the default is chosen from (the first is today's default; `--half select`). The paper's
     setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
@@ -162,9 +156,12 @@ def candidates() -> list[Method]:
         Method("default (config.Tuning())"),
         Method("valley answer", valley),
         Method("valley answer, directions", across),
+        Method("valley answer, not adaptive", {**valley, "adaptive": False}),
         Method("valley answer, directions, not adaptive", {**across, "adaptive": False}),
         Method("valley answer, directions, lean (confidence 0.8, cap 2)", {**across, "confidence": 0.8, "cap": 2}),
         Method("valley answer, directions, not adaptive, ε 0.25", {**across, "adaptive": False, "epsilon": 0.25}),
+        Method("valley answer, directions, not adaptive, split, 3 bootstraps",
+               {**across, "adaptive": False, "strategy": "split", "bootstraps": 3}),
     ]
 
 
