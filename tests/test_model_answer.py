@@ -25,10 +25,11 @@ finite_costs = st.one_of(st.floats(0.0, 1e6), st.floats(-1e3, 1e3))
 
 
 @given(st.sampled_from(sorted(METHODS)), st.floats(0.05, 0.45), st.booleans(),
-       st.lists(st.one_of(finite_costs, st.just(math.inf), st.just(math.nan)), min_size=1, max_size=40))
+       st.lists(st.one_of(finite_costs, st.just(math.inf), st.just(math.nan)), min_size=1, max_size=40),
+       st.sampled_from(["model", "valley"]))
 @settings(max_examples=150, deadline=None)
-def test_the_model_answer_lies_in_the_box_and_the_final_bracket_for_any_costs(method, epsilon, reuse, costs):
-    search = make_search(method, 0.0, 1.0, epsilon, reuse=reuse, answer="model")
+def test_the_model_answer_lies_in_the_box_and_the_final_bracket_for_any_costs(method, epsilon, reuse, costs, answer):
+    search = make_search(method, 0.0, 1.0, epsilon, reuse=reuse, answer=answer)
     draw = iter(costs * 200)
     run(search, lambda _: next(draw))
     lo, hi = search.bracket
