@@ -154,7 +154,8 @@ def _valley_fit(pts: list[tuple[float, float, int]], lo: float, hi: float, neigh
     """The vertex v in [lo, hi] of cost = c + a·(x − v)² left of v and c + b·(x − v)² right of it (a, b ≥ 0, not
     both 0) that fits the local points best (weighted least squares, v on a grid of VALLEY_GRID): a valley
     steeper on one side than the other (a wall of costly gains on one side, a slow rise on the other) pulls a
-    quadratic's vertex towards its shallow side; two curvatures do not. None when no fit curves upwards."""
+    quadratic's vertex towards its shallow side; two curvatures do not (at the price of more scatter under noise:
+    one more coefficient to fit). None when no fit curves upwards."""
     import numpy as np
 
     centre = 0.5 * (lo + hi)
@@ -188,25 +189,15 @@ def _valley_fit(pts: list[tuple[float, float, int]], lo: float, hi: float, neigh
 
 def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neighbours: int):
     """Weighted least squares of cost = c + b·(x − centre) + a·(x − centre)² over the `neighbours` points
-    (x, mean cost, flights) nearest `centre`; (vertex, design, weights, means relative to the largest,
+    (x, mean cost, flights) nearest `centre` (`_local`); (vertex, design, weights, means relative to the largest,
     coefficients, flights, weights' scale), or None when fewer than three points weigh anything or the fit is
     not convex."""
     import numpy as np  # here, not at import: `mavtune plan` rehearses searches without numpy
 
-    near = sorted(pts, key=lambda p: abs(p[0] - centre))[:max(3, neighbours)]
-    reach = max(abs(p[0] - centre) for p in near)
-    span = max(reach * 1.25, width)  # the farthest neighbour keeps some weight
-    x = np.array([p[0] for p in near]) - centre
-    y = np.array([p[1] for p in near])
-    y = y / np.max(np.abs(y))  # costs in units of the largest (> 0: a flat cost never gets here): the vertex is
-    # the same, and costs of any size neither under- nor overflow
-    n = np.array([p[2] for p in near], dtype=float)
-    scale = np.maximum(np.abs(y), 1e-6)  # relative noise: sd ∝ cost
-    w = n / scale**2 * (1.0 - np.minimum(np.abs(x) / span, 1.0) ** 3) ** 3  # flights / variance × tricube
-    k = float(w.max())
-    if np.count_nonzero(w > 0) < 3 or not 0 < k < math.inf:
+    local = _local(pts, centre, width, neighbours)
+    if local is None:
         return None
-    w = w / k  # well scaled for the solver; the unit variance is cv² / k (see _vertex_se)
+    x, y, n, w, k = local  # the weights are well scaled for the solver; the unit variance is cv² / k (_vertex_se)
     design = np.column_stack([np.ones_like(x), x, x * x])
     sw = np.sqrt(w)
     try:
