@@ -88,9 +88,9 @@ def tune(
     comparisons again until the kept point is right with probability `confidence` or each point has `cap`
     flights (None: 4 rounds' worth), `answer` is each line search's answer ("search" or "model": a local fit of
     all its flights), `edges` whether a line search ending against an edge of its range flies the edge (an optimum
-    there can be the answer), `directions` whether a line search along each pass's net move follows between passes
-    (Powell's direction: a valley across the gains), `on_round` sees every round as it ends, `draws` resampled searches give each gain's
-    interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
+    there can be the answer), `answer="valley"` a fit with one curvature each side of the minimum, `directions`
+    whether a line search across the gains follows every pass but the first (a valley across the gains), `on_round`
+    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
     `mavtune tune` refuses them. `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
     seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs
     again (another function is refused), unless `resume=True` (a cost noisy by design).

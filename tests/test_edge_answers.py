@@ -51,8 +51,8 @@ def test_an_edge_that_was_flown_and_cost_more_is_no_edge():
 
 
 @given(st.floats(0.05, 0.95), st.floats(0.0, 1.0), st.sampled_from(["upper", "lower"]),
-       st.sampled_from(sorted(METHODS)), st.sampled_from(["search", "model", "valley"]), st.booleans(), st.integers(0, 3),
-       st.floats(0.0, 0.3))
+       st.sampled_from(sorted(METHODS)), st.sampled_from(["search", "model", "valley"]), st.booleans(),
+       st.integers(0, 3), st.floats(0.0, 0.3))
 @settings(max_examples=60, deadline=None)
 def test_no_answer_beyond_a_diverged_flight(wall, optimum, side, method, answer, edges, seed, noise):
     """Gains past a random wall diverge (infinite cost): the answer stays on the side flown without failure, within

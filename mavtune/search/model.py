@@ -151,8 +151,8 @@ def _local(pts: list[tuple[float, float, int]], centre: float, width: float, nei
 
 
 def _valley_fit(pts: list[tuple[float, float, int]], lo: float, hi: float, neighbours: int) -> float | None:
-    """The vertex v in [lo, hi] of cost = c + a·(x − v)² left of v and c + b·(x − v)² right of it (a, b ≥ 0, not
-    both 0) that fits the local points best (weighted least squares, v on a grid of VALLEY_GRID): a valley
+    """The vertex v in [lo, hi] of cost = c + a·(x − v)² left of v and c + b·(x − v)² right of it (a, b ≥ 0,
+    not both 0) that fits the local points best (weighted least squares, v on a grid of VALLEY_GRID): a valley
     steeper on one side than the other (a wall of costly gains on one side, a slow rise on the other) pulls a
     quadratic's vertex towards its shallow side; two curvatures do not (at the price of more scatter under noise:
     one more coefficient to fit). None when no fit curves upwards."""
