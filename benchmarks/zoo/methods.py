@@ -154,6 +154,7 @@ def candidates() -> list[Method]:
     across = {"answer": "valley", "directions": True}
     return [
         Method("default (config.Tuning())"),
+        Method("model answer with directions", {"directions": True}),
         Method("valley answer", valley),
         Method("valley answer, directions", across),
         Method("valley answer, not adaptive", {**valley, "adaptive": False}),
