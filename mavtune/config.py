@@ -47,11 +47,14 @@ class Tuning(_Section):
     """What is tuned and how. The paper's search (EQL, shoe-lacing, 2 bootstraps, initial kd 0.2) with a coarser
     tolerance (ε 0.2), reuse, adaptive averaging (confidence 0.85, at most 6 flights a point per comparison) and the
     answer of each line search fitted to all its flights (`answer = "model"`); a line search ending against its
-    range's edge flies the edge (`edges`). Of the configurations tried on the plant zoo of benchmarks/quality.py
-    (selection half, even runs) it had the highest mean share of runs within 2 % of the optimum (27 %: 90-100 % on
-    the nominal simulator, far less on most other plants: benchmarks/results/quality.md); none met the zoo's flight
-    goals. This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options both take it
-    (`settings()`). `PAPER_TUNING` restores the paper's exact setting.
+    range's edge flies the edge (`edges`). Chosen on the plant zoo of benchmarks/quality.py (selection half, even
+    runs, 9 configurations: benchmarks/results/selection.md): 37 % of runs within 2 % of the optimum on mean over
+    the plants (100 % on the nominal simulator and Crazyflow, far less on most others), no fly-away answer, 100
+    flights on mean; the valley answer with line searches across the gains (`answer = "valley"`,
+    `directions = true`) scored 38 %, a tie, with a fly-away answer, more flights and 30 % on the nominal simulator,
+    and none met the zoo's flight goals without losing most of its quality. This is the one default: `mavtune tune`
+    with no flags and `mavtune.tune()` with no options both take it (`settings()`). `PAPER_TUNING` restores the
+    paper's exact setting.
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
