@@ -297,7 +297,8 @@ def _print_bank(console, bank) -> None:
 
     from mavtune.run import plus_minus
 
-    table = Table(title="gain bank", caption="intervals: each run's 90 % interval (see its result.json)")
+    table = Table(title="gain bank", caption="each run's gains ± its last line searches' standard error, and its "
+                  "90 % interval with all gains free (see its result.json)")
     table.add_column("mass, kg", justify="right")
     names = list(bank.entries[0].gains) if bank.entries else []
     params = list(dict.fromkeys(p for e in bank.entries for p in e.params))

@@ -21,15 +21,16 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
+from mavtune.search.interval import DRAWS, joint, plausible_region, resample, resolution
 from mavtune.search.joint import newton_step
-from mavtune.search.interval import DRAWS, joint, plausible_span, resample, resolution
 from mavtune.search.model import flown_span
 from mavtune.strategy import Strategy
 
-INTERVAL_NOTE = ("each gain's interval is from its last line search, flown with the other gains held (coordinate "
-                 "search), joined with every gain its flights cannot rule out and widened by its last move between "
-                 "bootstraps, towards an interval with the other gains free")
-DIRECTION = "direction"  # the `gain` of a round of a line search along a pass's net move (all gains at once)
+INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
+                 "value the run's flights cannot rule out with all gains free (a gain vector is ruled out only when "
+                 "its nearest flown point is), and reaches back to the previous answer and on, to the range's bound "
+                 "while the answer still moves by more than the search's tolerance between bootstraps")
+DIRECTION = "direction"  # the `gain` of a round of a line search across the gains (all gains at once)
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 # Bounds of every accepted setting, the same for the Python API and the CLI: each run plans and flies in bounded time.
 MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
@@ -129,12 +130,12 @@ class TuningResult:
             if math.isfinite(moved) and abs(moved) > epsilon * width:
                 out.append(f"{name} still moved {moved:+.3g} between its last two line searches, more than the "
                            f"search's tolerance {epsilon * width:.3g}: the coordinate search has not settled (its "
-                           "interval is widened by that move; another bootstrap would tell)")
+                           "interval reaches the range's bound in that direction; another bootstrap would tell)")
             ulo, uhi = u.get("lo", math.nan), u.get("hi", math.nan)
             if width > 0 and uhi - ulo > 0.5 * width:  # (False where either is unknown, or the range is a point)
                 out.append(f"{name}'s {u.get('level', 0.9):.0%} interval {ulo:.3g} – {uhi:.3g} spans "
                            f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more "
-                           "flights per point, or less noise)")
+                           "flights per point, less noise, or another bootstrap where the answer still moves)")
         for name, rec in last.items():
             if rec.beside_failure is not None:
                 out.append(f"{name} = {self.gains.get(name, rec.result):.4g} lies next to {rec.beside_failure:.4g}, "
@@ -354,6 +355,8 @@ class Tuner:
             return cached
         s, rule = self.settings, self.settings.strategy_rule
         last = {rec.gain: (i, rec) for i, rec in enumerate(self.searches)}
+        region = dict(zip(s.space, self._region() or [])) if self.draws and last else {}
+        start = s.start_gains()
         out = {}
         for name, (i, rec) in last.items():
             lo, hi = s.space[name]
@@ -361,12 +364,27 @@ class Tuner:
                                 lambda search: rule.assign(search, int(s.vehicles), speculate=False),
                                 rec.samples, self.pool, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
-            before = [r.result for r in self.searches[:i] if r.gain == name]
-            moved = rec.result - before[-1] if before else math.nan
-            plausible = plausible_span(rec.samples, self.pool, (lo, hi), interval.level) if self.draws else None
-            out[name] = joint(interval, plausible, moved, (lo, hi)).to_dict()
+            answers = [start[name], *(r.result for r in self.searches[:i + 1] if r.gain == name)]
+            moves = [b - a for a, b in zip(answers, answers[1:])]
+            out[name] = joint(interval, region.get(name), moves, s.epsilon * (hi - lo), (lo, hi)).to_dict()
         self._uncertainty = (len(self.searches), out)
         return out
+
+    def _region(self) -> list[tuple[float, float]] | None:
+        """Per gain the span no flight of the run rules out, every gain free (`plausible_region`): each flown gain
+        vector with its costs, a failed flight's as infinite, a lost one's left out."""
+        return plausible_region(self._flown(), self.pool, list(self.settings.space.values()))
+
+    def _flown(self) -> dict[tuple[float, ...], list[float]]:
+        """Every gain vector flown in the run (in the order of the space) with its flights' costs as the searches
+        count them (`Strategy.measured`: a failed flight's as infinite, a lost one's left out)."""
+        names = list(self.settings.space)
+        points: dict[tuple[float, ...], list[float]] = {}
+        for r in self.rounds:
+            flights = [f for f in r.flights if all(n in f.gains for n in names)]
+            for gains, cost in zip(*Strategy.measured([f.gains for f in flights], flights)):
+                points.setdefault(tuple(float(gains[n]) for n in names), []).append(cost)
+        return points
 
     def run(self) -> TuningResult:
         s = self.settings
@@ -422,11 +440,7 @@ class Tuner:
         s = self.settings
         names = list(s.space)
         widths = [hi - lo for lo, hi in s.space.values()]
-        flown: dict[tuple[float, ...], list[float]] = {}
-        for rnd in self.rounds:
-            for a, cost in zip(*Strategy.measured(rnd.assignments, rnd.flights)):
-                flown.setdefault(tuple(float(a[n]) for n in names), []).append(cost)
-        step = newton_step(flown, [self.gains[n] for n in names], widths)
+        step = newton_step(self._flown(), [self.gains[n] for n in names], widths)
         move = dict(zip(names, step)) if step is not None else {n: self.gains[n] - start[n] for n in names}
         if math.hypot(*(move[n] / w for n, w in zip(names, widths))) <= s.epsilon:
             return

@@ -74,7 +74,9 @@ def test_intervals_shrink_with_replicates(answer):
             for s in range(4)]
     assert all(math.isfinite(spread(r, "width")) for r in few + many)
     assert sum(spread(r, "se") for r in many) < 0.6 * sum(spread(r, "se") for r in few)
-    assert sum(spread(r, "width") for r in many) < 0.8 * sum(spread(r, "width") for r in few)
+    # the joint part (what no flight rules out, all gains free) is set by where the one bootstrap flew, which
+    # replicates do not change: the width shrinks less than the error
+    assert sum(spread(r, "width") for r in many) < 0.9 * sum(spread(r, "width") for r in few)
 
 
 def test_interval_holds_the_value_and_stays_in_the_range():
@@ -138,3 +140,70 @@ def test_an_unsettled_answer_and_a_wide_interval_are_cautioned():
     cautions = " ".join(result.cautions())
     assert "interval" in cautions and "of its range" in cautions
     assert result.to_dict()["cautions"] == result.cautions() and "held" in result.to_dict()["uncertainty_note"]
+
+
+def diagonal_valley(seed, cv=0.05):
+    """A narrow valley along kp = kd (optimum 0.7, 0.7): coordinate search from (0.2, 0.2) creeps along it by
+    steps that do not shrink, each line search ending near the gain held."""
+    draw = random.Random(seed)
+
+    def evaluate(assignments):
+        return [(40 * (g["kp"] - g["kd"]) ** 2 + (g["kp"] + g["kd"] - 1.4) ** 2 + 0.1) * (1 + cv * draw.gauss(0, 1))
+                for g in assignments]
+    return evaluate
+
+
+def test_the_joint_interval_covers_a_diagonal_valleys_optimum_that_the_held_one_misses():
+    from mavtune.search.interval import resample, resolution
+
+    result = mavtune.tune(diagonal_valley(5), vehicles=2, seed=5, initial={"kp": 0.2, "kd": 0.2},
+                          draws=40)
+    rec = {s.gain: s for s in result.searches}["kp"]
+    settings = mavtune.tuner.Settings(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, vehicles=2, seed=5)
+    held = resample(lambda pool: settings.search(0.0, 1.0, pool),
+                    lambda search: settings.strategy_rule.assign(search, 2, speculate=False), rec.samples,
+                    NoisePool.prior(result.noise["cv"], result.noise["dof"]), rec.result,
+                    resolution(rec.bracket, settings.answer), draws=40)
+    assert not held.lo <= 0.7 <= held.hi  # kd held near 0.25: kp's own flights place it near 0.25
+    assert all(result.uncertainty[g]["lo"] <= 0.7 <= result.uncertainty[g]["hi"] for g in ("kp", "kd"))
+
+
+def test_a_gain_vector_is_ruled_out_only_by_a_worse_nearest_flown_point():
+    from mavtune.search.interval import plausible_region
+
+    pool = NoisePool.prior(0.05, 100)
+    line = {(x, 0.2): [1.0 + 10 * (x - 0.2) ** 2] * 4 for x in (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)}  # kp flown, kd held
+    spans = plausible_region(line, pool, [(0.0, 1.0), (0.0, 1.0)])
+    assert spans[1] == (0.0, 1.0)  # kd never flown elsewhere: nothing rules any kd out
+    assert spans[0] == pytest.approx((0.125, 0.3), abs=0.03)  # kp: the best point's cell; worse ones' are out
+    failed = {**line, (0.2, 0.9): [math.inf]}
+    assert plausible_region(failed, pool, [(0.0, 1.0), (0.0, 1.0)])[1][1] < 0.9  # nearer a failure: ruled out
+    assert plausible_region({(0.5,): [1.0, 1.1]}, pool, [(0.0, 1.0)]) is None  # one point: nothing to compare
+
+
+def asymmetric_bowl(seed, kp0, kd0, cv=0.2):
+    """A noisy bowl, steeper below the optimum than above it, with coupled gains."""
+    draw = random.Random(seed)
+
+    def evaluate(assignments):
+        out = []
+        for g in assignments:
+            u, v = g["kp"] - kp0, g["kd"] - kd0
+            out.append((3 * u * u * (4 if u < 0 else 1) + 2 * v * v + 2 * u * v + 0.2) * (1 + cv * draw.gauss(0, 1)))
+        return out
+    return evaluate
+
+
+@pytest.mark.slow
+def test_the_interval_box_holds_its_level_on_a_noisy_asymmetric_cost():
+    """Seeded repeats: both gains' 90 % intervals hold the optimum in at least the count a true 90 % coverage
+    exceeds with probability 95 % (binomial), with the default settings."""
+    from scipy.stats import binom
+
+    runs, covered = 30, 0
+    for seed in range(runs):
+        where = random.Random(2000 + seed)
+        optimum = {"kp": where.uniform(0.05, 0.95), "kd": where.uniform(0.05, 0.95)}
+        result = mavtune.tune(asymmetric_bowl(seed, **{k + "0": v for k, v in optimum.items()}), seed=seed, draws=40)
+        covered += all(u["lo"] <= optimum[g] <= u["hi"] for g, u in result.uncertainty.items())
+    assert covered >= binom.ppf(0.05, runs, 0.9), f"{covered} of {runs}"

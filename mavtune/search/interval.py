@@ -7,6 +7,10 @@ it, each flight with fresh noise of the run's pooled size (sd = cv·|cost|), as 
 run's strategy gives, and keeps where it ends. The spread of those ends is the result's standard error; the
 interval is their central `level` quantiles, widened on each side by the answer's `resolution`: no search
 knows the minimiser better than the bracket it ended with.
+
+That interval holds with the other gains held at their answers. `joint` frees them: it adds every gain value the
+run's flights (all of them, every gain) cannot rule out (`plausible_region`) and the answer's own last move
+between bootstraps, so the interval holds whatever search flew them.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ DRAWS = 200
 MIN_DRAWS = 50  # long searches (small ε) stop drawing at this many once WORK_ROUNDS resampled rounds are spent
 WORK_ROUNDS = 8000
 MAX_ROUNDS = 1000  # a resampled search that has not ended by then is abandoned (cannot happen with a cap)
+GRID = 41  # points a gain of the grid `plausible_region` searches (fewer with more gains: GRID_POINTS in all)
+GRID_POINTS = 20_000
 
 
 @dataclass(frozen=True)
@@ -73,43 +79,76 @@ class _Curve:
         return float(np.interp(x, self.fx, self.fy))
 
 
-def plausible_span(samples: dict[float, list[float]], pool: NoisePool, bounds: tuple[float, float],
-                   level: float = LEVEL) -> tuple[float, float] | None:
-    """Where the minimiser may lie by the flights themselves: every flown point whose mean cost is not worse than
-    the best point's by more than the one-sided `level` quantile of their difference's error could be the
-    minimiser; the span of those points, reaching halfway to the next point flown beyond each end (the minimiser
-    may lie between), or to the range's bound (or a failed point) when none was flown beyond it. None when the
-    noise is unknown or fewer than two points were flown without failure."""
+def plausible_region(points: dict[tuple[float, ...], list[float]], pool: NoisePool,
+                     bounds: list[tuple[float, float]], level: float = LEVEL) -> list[tuple[float, float]] | None:
+    """Where the minimiser may lie by all the run's flights, every gain free: each flown point (a gain vector →
+    its costs; a failed flight's cost is infinite) whose mean cost is not worse than the best point's by more
+    than the two-sided `level` quantile of their difference's error could be the minimiser (two-sided: the best
+    of many noisy means lies low), and so could any gain vector whose nearest flown point (in shares of each
+    gain's range) could — flights rule out only what lies nearer to a worse point than to a plausible one, so
+    what a coordinate search never flew (a coupled optimum off its lines) stays in. Per gain, the span of that
+    region in its `bounds`, searched on a grid of the box; None when the noise is unknown or fewer than two
+    points were flown without failure."""
     from statistics import NormalDist
 
-    finite = sorted((x, point_stats(c, pool)) for x, c in samples.items() if c and all(map(math.isfinite, c)))
-    if len(finite) < 2 or any(not math.isfinite(s.se) for _, s in finite):
+    import numpy as np  # see _Curve._at
+    from scipy.spatial import cKDTree
+
+    stats = {x: point_stats(c, pool) for x, c in points.items() if c}
+    finite = {x: s for x, s in stats.items() if math.isfinite(s.mean)}
+    if len(finite) < 2 or any(not math.isfinite(s.se) for s in finite.values()):
         return None
-    z = NormalDist().inv_cdf(level)
-    best = min(finite, key=lambda p: p[1].mean)[1]
-    near = [i for i, (_, s) in enumerate(finite) if s.mean - best.mean <= z * math.hypot(s.se, best.se)]
-    xs = [x for x, _ in finite]
-    failed = [x for x, c in samples.items() if c and not all(map(math.isfinite, c))]
-    first, last = near[0], near[-1]
-    lo = 0.5 * (xs[first] + xs[first - 1]) if first > 0 else max([bounds[0], *(f for f in failed if f < xs[0])])
-    hi = 0.5 * (xs[last] + xs[last + 1]) if last + 1 < len(xs) else min([bounds[1], *(f for f in failed if f > xs[-1])])
-    return lo, hi
+    z = NormalDist().inv_cdf(0.5 + 0.5 * level)
+    best = min(finite.values(), key=lambda s: s.mean)
+    xs = list(stats)
+    ok = np.array([x in finite and finite[x].mean - best.mean <= z * math.hypot(finite[x].se, best.se) for x in xs])
+    lo, hi = np.array([b[0] for b in bounds], float), np.array([b[1] for b in bounds], float)
+    scale = np.where(hi > lo, hi - lo, 1.0)
+    per_gain = max(3, min(GRID, int(GRID_POINTS ** (1.0 / len(bounds)))))
+    axes = [np.linspace(0.0, 1.0, per_gain)] * len(bounds)
+    grid = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+    flown = (np.asarray(xs, float) - lo) / scale
+    grid = np.concatenate([grid, flown])  # the flown points themselves, wherever they lie between grid points
+    _, nearest = cKDTree(flown).query(grid)
+    region = grid[ok[nearest]] * scale + lo
+    return [(float(a), float(b)) for a, b in zip(region.min(axis=0), region.max(axis=0))]
 
 
-def joint(interval: Interval, plausible: tuple[float, float] | None, moved: float,
+def ahead(moves: list[float], tolerance: float) -> float:
+    """How much farther on a coordinate search's answer may still go, from its moves (start value → each line
+    search's result in turn): it approaches a coupled optimum step by step, each step a fraction ρ of the one
+    before (ρ: the product of the gains' coupling slopes), leaving |last|·ρ/(1 − ρ); ρ is the last two moves'
+    ratio when they go the same way, unbounded (inf) when ρ ≥ 1 or the last move between line searches is beyond
+    the search's `tolerance` (not settled), as far as the last move when nothing tells ρ, and nothing after the
+    first line search (its move from the start value is where the search went, not how it approaches)."""
+    if len(moves) < 2 or not math.isfinite(moves[-1]):
+        return 0.0
+    last = abs(moves[-1])
+    if last > tolerance:
+        return math.inf
+    if moves[-1] * moves[-2] > 0:
+        rho = last / abs(moves[-2])
+        return math.inf if rho >= 1.0 else last * rho / (1.0 - rho)
+    return last
+
+
+def joint(interval: Interval, region: tuple[float, float] | None, moves: list[float], tolerance: float,
           bounds: tuple[float, float]) -> Interval:
     """A coordinate search's interval beyond "with the other gains held": the resampled one, joined with the span
-    the flights cannot rule out (`plausible_span`), and stretched by the answer's last move between bootstraps to
-    both sides: back to the previous answer (flight noise moves an answer too) and as far on in the direction it
-    moved (coordinate search approaches a coupled optimum step by step, each step a fraction of the last: the
-    move bounds what is left when that fraction is at most a half)."""
+    no flight of the run rules out (`plausible_region`, every gain free), back to the previous answer (flight
+    noise moves an answer too) and on in the direction the answer moved by what it may still go (`ahead`; to the
+    range's bound when that is unbounded). `moves`: the answer's, from the start value to each line search's."""
+    moved = moves[-1] if len(moves) >= 2 else math.nan  # since the gain's previous line search
     if not math.isfinite(interval.lo):
         return replace(interval, moved=moved)
     lo, hi = interval.lo, interval.hi
-    if plausible is not None:
-        lo, hi = min(lo, plausible[0]), max(hi, plausible[1])
-    if math.isfinite(moved):  # back to the previous answer (noise may have moved it) and as far on (coupling)
+    if region is not None:
+        lo, hi = min(lo, region[0]), max(hi, region[1])
+    if math.isfinite(moved):
         lo, hi = min(lo, interval.value - abs(moved)), max(hi, interval.value + abs(moved))
+    if moves and moves[-1] != 0.0:
+        on = ahead(moves, tolerance)
+        lo, hi = (lo, max(hi, interval.value + on)) if moves[-1] > 0 else (min(lo, interval.value - on), hi)
     return replace(interval, lo=max(lo, bounds[0]), hi=min(hi, bounds[1]), moved=moved)
 
 

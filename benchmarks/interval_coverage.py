@@ -1,0 +1,132 @@
+"""Do the tuned gains' intervals hold their stated level? Coverage and width of the default's intervals per zoo
+plant, on the select half's runs (even runs: never the report half), scored against each plant's cached truth.
+
+    python benchmarks/interval_coverage.py [--runs 20] [--plants "sim heavy +30 %,..."] [--slow-runs 10]
+
+Run i is the zoo's run i (benchmarks/zoo/methods.py: the same vehicles as benchmarks/quality.py); the optimum is
+the truth's (benchmarks/.cache/zoo, built by benchmarks/quality.py). A run covers when every gain's interval
+holds the optimum (the box); width is the interval's mean share of each gain's range. The slow plants (mavsim,
+Crazyflow) fly fewer runs. Writes benchmarks/results/interval_coverage.md + interval_coverage.json.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("SCIPY_ARRAY_API", "1")  # Crazyflow needs it before scipy is imported
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from datetime import datetime, timezone  # noqa: E402
+from multiprocessing import get_context  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from quality import CACHE, RESULTS, _cpu_model, _git_commit, _init_worker  # noqa: E402
+from zoo.methods import Method, ZooFleet, tune_seed  # noqa: E402
+from zoo.plants import PLANTS  # noqa: E402
+from zoo.stats import wilson  # noqa: E402
+from zoo.truth import Truth  # noqa: E402
+
+SLOW = ("mavsim PX4", "mavsim ArduPilot", "crazyflow")
+DEFAULT = Method("default (config.Tuning())")
+
+
+def one_run(plant_name: str, run: int) -> dict[str, Any]:
+    """The default's run `run` on a plant: its answer, each gain's interval and the cautions."""
+    from mavtune.tuner import run_tuning
+
+    plant = PLANTS[plant_name]
+    settings = DEFAULT.settings(plant, run)
+    result = run_tuning(settings, ZooFleet(plant, settings.vehicles, tune_seed(run)))
+    return {"run": run, "x": [float(result.gains[g]) for g in plant.gains], "flights": result.flights,
+            "uncertainty": {g: {k: float(v) for k, v in u.items()} for g, u in result.uncertainty.items()},
+            "cautions": result.cautions(), "answer_space": {g: list(b) for g, b in settings.space.items()},
+            "flown": [[*(float(f.gains[g]) for g in plant.gains), float(f.cost)] for r in result.rounds
+                      for f in r.flights]}
+
+
+def score(plant_name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Coverage of the optimum by the box of intervals (with its 95 % Wilson interval) and the median width."""
+    plant = PLANTS[plant_name]
+    optimum = Truth(plant_name, CACHE).optimum
+    if optimum is None:
+        raise SystemExit(f"no cached truth for {plant_name!r} in {CACHE}: run benchmarks/quality.py first")
+    covered, widths, per_gain = [], [], {g: [] for g in plant.gains}
+    for r in rows:
+        u = r["uncertainty"]
+        hits = [u[g]["lo"] - 1e-9 <= v <= u[g]["hi"] + 1e-9 for g, v in zip(plant.gains, optimum)]
+        for g, h in zip(plant.gains, hits):
+            per_gain[g].append(h)
+        covered.append(all(hits))
+        widths.append(float(np.mean([u[g]["hi"] - u[g]["lo"] for g in plant.gains])))  # the zoo's box is [0, 1]
+    k, n = sum(covered), len(covered)
+    return {"runs": n, "coverage": k / n, "coverage_ci": wilson(k, n), "median_width": float(np.median(widths)),
+            "per_gain": {g: sum(h) / n for g, h in per_gain.items()}, "optimum": list(optimum),
+            "wide_cautions": sum(any("of its range" in c for c in r["cautions"]) for r in rows),
+            "moving_cautions": sum(any("still moved" in c for c in r["cautions"]) for r in rows)}
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=20, help="even runs per fast plant (0, 2, ...)")
+    ap.add_argument("--slow-runs", type=int, default=10, help="even runs per slow plant (mavsim, Crazyflow)")
+    ap.add_argument("--plants", default="", help="comma-separated plant names (default: the whole zoo)")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--save-runs", type=Path, default=None, help="also write every run's answer and intervals here")
+    args = ap.parse_args(argv)
+    plants = [p.strip() for p in args.plants.split(",") if p.strip()] or list(PLANTS)
+    unknown = [p for p in plants if p not in PLANTS]
+    if unknown:
+        raise SystemExit(f"--plants: unknown plant {unknown[0]!r}; known: {', '.join(PLANTS)}")
+    start, load0, wall = datetime.now(timezone.utc), os.getloadavg()[0], time.time()
+    table, all_rows = {}, {}
+    with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn"), initializer=_init_worker) as ex:
+        for p in plants:
+            runs = list(range(0, 2 * (args.slow_runs if p in SLOW else args.runs), 2))
+            all_rows[p] = list(ex.map(one_run, [p] * len(runs), runs))
+            table[p] = score(p, all_rows[p])
+            t = table[p]
+            print(f"{p}: coverage {t['coverage']:.0%} of {t['runs']}, median width {t['median_width']:.0%}",
+                  file=sys.stderr, flush=True)
+    doc = {"command": "python benchmarks/interval_coverage.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+           "commit": _git_commit(), "started": start.isoformat(timespec="seconds"), "wall_s": time.time() - wall,
+           "machine": {"cpu": _cpu_model(), "nproc": os.cpu_count(), "load_start": load0,
+                       "load_end": os.getloadavg()[0]}, "table": table}
+    if args.save_runs is not None:
+        args.save_runs.write_text(json.dumps(all_rows))
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "interval_coverage.json").write_text(json.dumps(doc, indent=1))
+    (args.out / "interval_coverage.md").write_text(markdown(doc))
+    return doc
+
+
+def markdown(doc: dict[str, Any]) -> str:
+    m = doc["machine"]
+    lines = ["# Do the 90 % intervals hold their level? Coverage per zoo plant (issue 20 item 5)", "",
+             f"Command: `{doc['command']}` at commit `{doc['commit']}`, {doc['started']}; machine: {m['cpu']}, "
+             f"{m['nproc']} cores shared with other jobs; load average {m['load_start']:.2f} at the start, "
+             f"{m['load_end']:.2f} at the end; wall {doc['wall_s']:.0f} s.", "",
+             "The default's (config.Tuning()) runs 0, 2, 4 … (the select half; the report half's odd runs are never "
+             "flown here). A run covers when every gain's 90 % interval holds the truth's optimum; width is the "
+             "intervals' mean share of their gains' ranges. Cautions: runs warned that an interval spans most of "
+             "its range / that an answer still moved between bootstraps.", "",
+             "| plant | runs | covers optimum [95 % CI] | per gain | median width | wide cautions | moving cautions |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for p, t in doc["table"].items():
+        lo, hi = t["coverage_ci"]
+        per = ", ".join(f"{g} {v:.0%}" for g, v in t["per_gain"].items())
+        lines.append(f"| {p} | {t['runs']} | {t['coverage']:.0%} [{lo:.0%}, {hi:.0%}] | {per} | "
+                     f"{t['median_width']:.0%} | {t['wide_cautions']} | {t['moving_cautions']} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    main()
