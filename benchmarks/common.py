@@ -1,8 +1,10 @@
-"""What every benchmark here shares: CPU time of this process, and writing a result as markdown + JSON."""
+"""What every benchmark here shares: CPU time of this process, the CPU model, and writing a result as markdown and
+JSON."""
 
 from __future__ import annotations
 
 import json
+import platform
 import resource
 from pathlib import Path
 
@@ -13,6 +15,17 @@ def cpu_s() -> float:
     """CPU seconds (user + system) of this process so far, all its threads."""
     r = resource.getrusage(resource.RUSAGE_SELF)
     return r.ru_utime + r.ru_stime
+
+
+def cpu_model() -> str:
+    """The CPU's model name as /proc/cpuinfo gives it (else the platform's machine type), for a result's machine."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 def write_results(name: str, lines: list[str], data: dict) -> None:

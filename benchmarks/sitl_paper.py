@@ -47,7 +47,7 @@ def main() -> None:
         sys.exit(SKIP_REASON)
     load_before = os.getloadavg()
     out = Path(tempfile.mkdtemp(prefix="mavtune-sitl-paper-"))
-    config = MavlinkConfig(param_timeout_s=0.5, heartbeat_wait_s=20.0)
+    config = MavlinkConfig(param_timeout_s=0.5, heartbeat_wait_s=20.0, cost="iae")  # the paper's cost
     started, cpu0 = time.monotonic(), cpu_s()
     with sitl_vehicles(2, speedup=args.speedup) as vehicles:
         hover_s = time.monotonic() - started

@@ -48,6 +48,7 @@ class Row:
 def tables() -> list[Table]:
     """Every table a config file (or a swarm agent's file) may hold, in the order a reader meets them."""
     from mavtune.config import FleetChoice, FlightPlan, Tuning
+    from mavtune.sim.balance import Balance
     from mavtune.sim.scenario import Noise, Scenario, Spread, Wind
     from mavtune.swarm.config import SwarmConfig
     from mavtune.vehicles.mavlink.config import GainParam, MavlinkConfig, SafetyConfig
@@ -57,6 +58,9 @@ def tables() -> list[Table]:
         Table("sim", Scenario, skip=("primitive", "primitive_s", "settle_s"),
               note="`primitive`, `primitive_s` and `settle_s` of a simulated flight are taken from `[flight]`."),
         Table("sim.wind", Wind), Table("sim.noise", Noise), Table("sim.spread", Spread),
+        Table("sim.balance", Balance, note="Used with `cost = \"balanced\"`; the same table as `[mavlink.balance]`, "
+              "except that the simulator's default `activity_weight_ms` is 0.001 (the defaults below are the "
+              "vehicles')."),
         Table("fleet", FleetChoice, note="Which vehicles fly: the built-in simulator, swarm agents over Zenoh, "
               "or PX4 / ArduPilot vehicles over MAVLink."),
         Table("swarm", SwarmConfig), Table("swarm.envelope", _Envelope,
@@ -64,6 +68,8 @@ def tables() -> list[Table]:
         Table("mavlink", MavlinkConfig), Table("mavlink.gains.NAME", GainParam,
                                                note="One table per tuned gain, e.g. `[mavlink.gains.kp]`."),
         Table("mavlink.safety", SafetyConfig),
+        Table("mavlink.balance", Balance, note="The balanced cost's weights on vehicles (`cost = \"balanced\"`, the "
+              "default); the same table as `[sim.balance]`."),
     ]
 
 

@@ -118,7 +118,8 @@ def plan_command(
 
 
 # A flag that only one kind of fleet uses: given with another kind it is an error, never silently dropped.
-FLEET_FLAGS = {"--payload": "sim", "--listen": "zenoh", "--mavlink": "mavlink", "--keep-tuned": "mavlink"}
+FLEET_FLAGS = {"--payload": "sim", "--listen": "zenoh", "--mavlink": "mavlink", "--keep-tuned": "mavlink",
+               "--gain-set": "mavlink"}
 
 
 @app.command("tune")
@@ -145,6 +146,9 @@ def tune_command(
                                            "the final gains on in the report."),
     keep_tuned: Optional[bool] = typer.Option(None, "--keep-tuned", help="mavlink: leave the tuned gains on the "
                                               "vehicles at the end (default: restore the originals)."),
+    gain_set: Optional[str] = typer.Option(None, "--gain-set", help="mavlink: the gains to tune, altitude (PSC_POSZ_P/"
+                                           "PSC_VELZ_P, MPC_Z_P/MPC_Z_VEL_P_ACC) | altitude-inner (and PSC_ACCZ_P/_I, "
+                                           "MPC_Z_VEL_D_ACC/_I_ACC)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No per-round lines or progress bar."),
 ) -> None:
     """Tune the gains with the default settings (those of mavtune.tune()) unless told otherwise."""
@@ -159,8 +163,9 @@ def tune_command(
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base,
                             flight__max_rounds=max_rounds, tuning__seed=seed, sim__payload_kg=payload,
                             fleet__kind=fleet, swarm__listen=listen, mavlink__urls=mavlink or None,
-                            mavlink__keep_tuned=keep_tuned, tuning__adaptive=adaptive)
-    given = {"--payload": payload, "--listen": listen, "--mavlink": mavlink, "--keep-tuned": keep_tuned}
+                            mavlink__keep_tuned=keep_tuned, tuning__adaptive=adaptive, mavlink__gain_set=gain_set)
+    given = {"--payload": payload, "--listen": listen, "--mavlink": mavlink, "--keep-tuned": keep_tuned,
+             "--gain-set": gain_set}
     for flag, value in given.items():
         if value is not None and FLEET_FLAGS[flag] != cfg.fleet.kind:
             raise MavtuneError(f"{flag} applies to --fleet {FLEET_FLAGS[flag]} only; this run's fleet is "

@@ -38,6 +38,13 @@ PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`
     "tuning.adaptive": False, "tuning.answer": "search", "tuning.initial": {"kd": 0.2}, "tuning.edges": False}
 
 
+GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
+                                         "horizontal": ("kp", "kd")}
+"""The named gain sets a MAVLink run selects by `[mavlink] gain_set` (or --gain-set), each with the gains it tunes in
+order (their parameters per autopilot: mavtune.vehicles.parammap): "altitude" is the paper's two altitude gains,
+"altitude-inner" adds the inner altitude loop (ka, ki), "horizontal" is the horizontal position loop's two gains
+(flown with the horizontal out-and-back)."""
+
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions")  # what [tuning] gives the engine's Settings
@@ -191,6 +198,8 @@ class Config(_Section):
             mark["scenario"] = self.scenario().model_dump(mode="json")  # payload, wind, noise, cost, ...
         if self.fleet.kind == "mavlink":
             mark["urls"] = list(self.mavlink.get("urls") or [])
+            mark["cost"] = {k: self.mavlink[k] for k in ("cost", "balance", "motors", "motor_pwm_us", "filter_hz")
+                            if k in self.mavlink}  # what a vehicle flight's cost means (the defaults: {})
         return mark
 
     def ignored(self) -> list[str]:
@@ -260,6 +269,31 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise MavtuneError(f"config file {path} is not valid TOML: {exc}") from None
 
 
+def _apply_gain_set(data: dict[str, Any]) -> None:
+    """`[mavlink] gain_set` names the gains a MAVLink run tunes: the tuning space becomes them (each over [0, 1])
+    unless [tuning] space is given, which must then name the same gains. One line for an unknown set, a space that
+    disagrees, or a set given beside its own [mavlink.gains] tables."""
+    mav, tuning = data.get("mavlink"), data.get("tuning")
+    if not isinstance(mav, dict) or mav.get("gain_set") is None:
+        return
+    name = mav["gain_set"]
+    if not isinstance(name, str) or name not in GAIN_SETS:
+        raise MavtuneError(f"config mavlink.gain_set: unknown gain set {name!r}; known: {', '.join(GAIN_SETS)}")
+    if mav.get("gains") is not None:
+        raise MavtuneError("config mavlink: give either gain_set or [mavlink.gains] tables, not both")
+    fleet = data.get("fleet") if isinstance(data.get("fleet"), dict) else {}
+    if fleet.get("kind") not in ("mavlink", "zenoh") or (tuning is not None and not isinstance(tuning, dict)):
+        return  # the [mavlink] table is not used (said as a warning), or [tuning] is malformed (said by validation)
+    names = GAIN_SETS[name]
+    space = (tuning or {}).get("space")
+    if space is None:
+        data["tuning"] = {**(tuning or {}), "space": {g: [0.0, 1.0] for g in names}}
+    elif not isinstance(space, dict) or set(space) != set(names):
+        given = ", ".join(space) if isinstance(space, dict) else repr(space)
+        raise MavtuneError(f"config tuning.space: gain set {name} tunes {', '.join(names)}, not {given}; leave "
+                           "tuning.space out to tune them over [0, 1]")
+
+
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None,
                 base: dict[str, Any] | None = None) -> Config:
     """Read a TOML file (or start from `base`, e.g. a run folder's config.json, or the defaults), then apply
@@ -282,6 +316,7 @@ def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None
         if given is not None and given != len(urls):
             raise MavtuneError(f"config tuning.vehicles is {given} but {len(urls)} MAVLink URLs are given")
         data["tuning"] = {**tuning, "vehicles": len(urls)}  # one vehicle per URL
+    _apply_gain_set(data)
     config = validated(Config, data)
     _plain_numbers(data, config.model_dump(), "config")
     config.settings()  # cross-field checks (initial inside its range, groups dividing the vehicles, …)

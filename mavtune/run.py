@@ -365,11 +365,14 @@ def run_summary(config: Config, plan: Plan, result: TuningResult | None, fleet: 
     summary: dict[str, Any] = {"status": status, "error": error, "gains": None, "rounds": 0, "flights": 0,
                                "report": None, "warnings": warnings}
     if result is not None:
+        from mavtune.report.points import flown_points
+
         by_status = Counter(f.status.value for r in result.rounds for f in r.flights)
         summary |= result.to_dict() | {
             "rounds_log": [r.to_dict() | {"replayed": r.replayed} for r in result.rounds],
             "flights_by_status": {s.value: by_status.get(s.value, 0) for s in Status},
             "flight_time_s": len(result.rounds) * plan.round_s,
+            "points": flown_points(result.rounds),  # each point's flights, cost, motor activity, peak error
         }
         if status != "finished":  # only a finished run has tuned gains; the rest is where the search stood
             summary["latest_gains"], summary["gains"] = summary["gains"], None

@@ -33,6 +33,7 @@ from mavtune.report import markdown as md
 from mavtune.report.searches import SearchView, as_float, flown_point, noise, search_views, uncertainty
 from mavtune.report import units as U
 from mavtune.report.figure_rules import many
+from mavtune.report.points import flown_points, points_section
 from mavtune.report.traces import has_traces, vehicle_order
 from mavtune.report.units import GainUnit, gain_units
 
@@ -245,12 +246,14 @@ def _timeline(rep: Report) -> list[str]:
         return parts + ["No round was flown.", ""]
     if not rep.figures:
         return []
-    from mavtune.report.timeline import plot_timeline
+    from mavtune.report.timeline import error_label, plot_timeline
 
-    plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG, units=rep.units)
+    tracked = tracked_quantity(rep.config)
+    plot_timeline(rep.rounds, list(rep.gains), rep.round_s, rep.out / TIMELINE_PNG, units=rep.units, tracked=tracked)
     whose = ("over the vehicles (median and 10–90 % band), the" if many(len(vehicle_order(rep.rounds)))
              else "each vehicle's")
-    what = (f"{whose} altitude reference (dashed) and measurement and tracking error |z − z_ref| (thin) with its "
+    what = (f"{whose} {tracked} reference (dashed) and measurement and tracking error {error_label(tracked)} (thin) "
+            "with its "
             "mean over each flight (bar), both scaled to the normal flights (a diverged or failed flight is "
             "clipped, marked ^ and counted); " if has_traces(rep.rounds)
             else "no altitude traces were recorded (e.g. a callable fleet); ")
@@ -278,6 +281,10 @@ def _rounds(rep: Report) -> list[str]:
     return ["## Rounds", "", _rounds_table(rep.rounds, rep.units), ""]
 
 
+def _points(rep: Report) -> list[str]:
+    return points_section(flown_points(rep.rounds), rep.units)
+
+
 def _fleet_events(rep: Report) -> list[str]:
     events = rep.summary.get("events") or []
     return ["## Fleet events", "", _events_table(events), ""] if events else []
@@ -289,7 +296,7 @@ def _tuned_params(rep: Report) -> list[str]:
 
 SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _line_searches, _tuned_params,
                                                   _plan_vs_actual, _tuning, _timeline, _cost_surface, _rounds,
-                                                  _fleet_events]
+                                                  _points, _fleet_events]
 
 
 def _read_json(path: Path) -> dict[str, Any]:
@@ -299,6 +306,20 @@ def _read_json(path: Path) -> dict[str, Any]:
     except (OSError, ValueError):  # missing, unreadable, not JSON
         return {}
     return data if isinstance(data, dict) else {}
+
+
+def tracked_quantity(config=None) -> str:
+    """What the flights' traces follow: "altitude", or for a MAVLink run of the horizontal loop the position
+    along its axis ("north position")."""
+    if getattr(getattr(config, "fleet", None), "kind", None) != "mavlink":
+        return "altitude"
+    from mavtune.vehicles.mavlink.config import load_mavlink_config
+
+    try:
+        mav = load_mavlink_config(dict(getattr(config, "mavlink", None) or {}))
+    except MavtuneError:
+        return "altitude"  # the run stopped at its own config error: nothing was flown
+    return f"{mav.axis} position" if mav.tuned_loop == "horizontal" else "altitude"
 
 
 def round_seconds(config=None) -> float:

@@ -52,14 +52,20 @@ def text(s: object) -> str:
 
 
 def plot_timeline(rounds: Sequence, gain_names: Sequence[str], round_s: float, path: Path,
-                  offset_m: float = VEHICLE_OFFSET_M, units: Mapping[str, GainUnit] | None = None) -> Path:
+                  offset_m: float = VEHICLE_OFFSET_M, units: Mapping[str, GainUnit] | None = None,
+                  tracked: str = "altitude") -> Path:
     """Draw the timeline of `rounds` (`timeline_figure`) into `path` (PNG). Returns `path`."""
-    fig = timeline_figure(rounds, gain_names, round_s, offset_m, units)
+    fig = timeline_figure(rounds, gain_names, round_s, offset_m, units, tracked)
     try:
         fig.savefig(path, dpi=90)
     finally:
         plt.close(fig)
     return path
+
+
+def error_label(tracked: str) -> str:
+    """The tracking error's symbol: |z − z_ref| for the altitude, |error along the axis| for a horizontal loop."""
+    return "|z − z_ref|" if tracked == "altitude" else f"|{tracked} error|"
 
 
 @dataclass
@@ -102,10 +108,12 @@ def _flights(rounds: Sequence, vehicles: list[str], round_s: float) -> list[_Fli
 
 
 def timeline_figure(rounds: Sequence, gain_names: Sequence[str], round_s: float,
-                    offset_m: float = VEHICLE_OFFSET_M, units: Mapping[str, GainUnit] | None = None):
-    """The timeline of `rounds` (Round objects) as a Figure, one panel per row: altitude and tracking error (when
-    a flight has a trace), one per gain (in the autopilot's units where `units` has the gain), cost; works for any
-    number of gains and vehicles: more than MANY_VEHICLES are drawn as median and band."""
+                    offset_m: float = VEHICLE_OFFSET_M, units: Mapping[str, GainUnit] | None = None,
+                    tracked: str = "altitude"):
+    """The timeline of `rounds` (Round objects) as a Figure, one panel per row: altitude (or what else the traces
+    follow, `tracked`: the horizontal loop's position along its axis) and tracking error (when a flight has a
+    trace), one per gain (in the autopilot's units where `units` has the gain), cost; works for any number of
+    gains and vehicles: more than MANY_VEHICLES are drawn as median and band."""
     vehicles = vehicle_order(rounds)
     summarise = many(len(vehicles))
     units = dict(units or {})
@@ -124,11 +132,11 @@ def timeline_figure(rounds: Sequence, gain_names: Sequence[str], round_s: float,
     clipped = 0
     if flights:
         if summarise:
-            _altitude_band(axes["altitude"], flights, len(rounds))
-            clipped = _error_band(axes["error"], flights, len(rounds), round_s)
+            _altitude_band(axes["altitude"], flights, len(rounds), tracked)
+            clipped = _error_band(axes["error"], flights, len(rounds), round_s, tracked)
         else:
-            _altitude(axes["altitude"], flights, len(vehicles), offset_m, colours)
-            clipped = _error(axes["error"], flights, round_s, colours)
+            _altitude(axes["altitude"], flights, len(vehicles), offset_m, colours, tracked)
+            clipped = _error(axes["error"], flights, round_s, colours, tracked)
     for g in gain_names:
         _gain(axes[f"gain:{g}"], rounds, vehicles, g, round_s, colours, units.get(g), summarise)
     _cost(axes["cost"], rounds, vehicles, round_s, colours, summarise)
@@ -179,7 +187,7 @@ def _joined(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate([np.append(p, np.nan) for p in parts]) if parts else np.array([])
 
 
-def _altitude(ax, flights: list[_Flight], vehicles: int, offset_m: float, colours) -> None:
+def _altitude(ax, flights: list[_Flight], vehicles: int, offset_m: float, colours, tracked: str) -> None:
     """Each vehicle's altitude reference (dashed) and filtered measurement over the run, lowered by j·offset_m;
     the scale holds the references and the normal flights (a diverged flight leaves the panel)."""
     for j in range(vehicles):
@@ -191,8 +199,8 @@ def _altitude(ax, flights: list[_Flight], vehicles: int, offset_m: float, colour
         ax.plot(t, _joined([f.z for f in mine]) - j * offset_m, color=colours(j % 10), lw=0.9)
     _altitude_scale(ax, [np.concatenate([f.ref, f.z] if f.normal else [f.ref]) - f.j * offset_m for f in flights])
     note = f"; vehicle j lowered by j × {offset_m:g} m" if vehicles > 1 else ""
-    ax.set_ylabel("altitude, m")
-    ax.set_title("altitude: reference (dashed) and filtered measurement (solid)" + note + _clipped_note(flights),
+    ax.set_ylabel(f"{tracked}, m")
+    ax.set_title(f"{tracked}: reference (dashed) and filtered measurement (solid)" + note + _clipped_note(flights),
                  fontsize=9, loc="left", pad=12)
 
 
@@ -230,7 +238,7 @@ def _by_round(flights: list[_Flight], n_rounds: int) -> list[list[_Flight]]:
     return out
 
 
-def _altitude_band(ax, flights: list[_Flight], n_rounds: int) -> None:
+def _altitude_band(ax, flights: list[_Flight], n_rounds: int, tracked: str) -> None:
     """A large fleet's altitude: the median reference (dashed), the median measurement and its 10–90 % band."""
     ts, refs, los, mids, his = [], [], [], [], []
     for mine in _by_round(flights, n_rounds):
@@ -245,12 +253,12 @@ def _altitude_band(ax, flights: list[_Flight], n_rounds: int) -> None:
     ax.plot(t, _joined(mids), color=SUMMARY, lw=0.9)
     ax.plot(t, _joined(refs), color="0.35", lw=0.8, ls="--")
     _altitude_scale(ax, [np.concatenate([f.ref, f.z] if f.normal else [f.ref]) for f in flights])
-    ax.set_ylabel("altitude, m")
-    ax.set_title(f"altitude: median reference (dashed), median measurement and the {BAND_TEXT} band of the vehicles"
+    ax.set_ylabel(f"{tracked}, m")
+    ax.set_title(f"{tracked}: median reference (dashed), median measurement and the {BAND_TEXT} band of the vehicles"
                  + _clipped_note(flights), fontsize=9, loc="left", pad=12)
 
 
-def _error(ax, flights: list[_Flight], round_s: float, colours) -> int:
+def _error(ax, flights: list[_Flight], round_s: float, colours, tracked: str) -> int:
     """Each vehicle's tracking error |z − z_ref| (thin) and its mean over each flight (a bar across the round), on a
     scale set by the normal flights; the flights above it are clipped, marked at the top and counted (returned)."""
     for j in sorted({f.j for f in flights}):
@@ -261,13 +269,13 @@ def _error(ax, flights: list[_Flight], round_s: float, colours) -> int:
         ax.plot([x for x0, _ in bars for x in (x0, x0 + round_s, np.nan)],
                 [y for _, m in bars for y in (m, m, np.nan)], color=colours(j % 10), lw=2.2, solid_capstyle="butt")
     clipped = _error_scale(ax, flights, round_s)
-    ax.set_ylabel("|z − z_ref|, m")
+    ax.set_ylabel(error_label(tracked) + ", m")
     ax.set_title("tracking error of each flight (thin) and its mean over the flight (bar); scale set by the normal "
                  "flights" + _above_note(clipped), fontsize=9, loc="left")
     return clipped
 
 
-def _error_band(ax, flights: list[_Flight], n_rounds: int, round_s: float) -> int:
+def _error_band(ax, flights: list[_Flight], n_rounds: int, round_s: float, tracked: str) -> int:
     """A large fleet's tracking error: the median over the vehicles (thin) with its 10–90 % band, and per round
     the median of the flights' mean errors (bar); clipped flights marked and counted as in `_error`."""
     ts, los, mids, his, bars = [], [], [], [], []
@@ -286,7 +294,7 @@ def _error_band(ax, flights: list[_Flight], n_rounds: int, round_s: float) -> in
     ax.plot([x for x0, _ in bars for x in (x0, x0 + round_s, np.nan)],
             [y for _, m in bars for y in (m, m, np.nan)], color="black", lw=2.0, solid_capstyle="butt")
     clipped = _error_scale(ax, flights, round_s)
-    ax.set_ylabel("|z − z_ref|, m")
+    ax.set_ylabel(error_label(tracked) + ", m")
     ax.set_title(f"tracking error: median over the vehicles (thin) with its {BAND_TEXT} band, median of the flights' "
                  "means (bar); scale set by the normal flights" + _above_note(clipped), fontsize=9, loc="left")
     return clipped

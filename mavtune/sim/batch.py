@@ -10,7 +10,7 @@ import numpy as np
 
 from mavtune.sim import airframe as af
 from mavtune.sim import kernel as K
-from mavtune.sim.cost import lowpass_alpha
+from mavtune.sim.cost import Measures, lowpass_alpha
 from mavtune.sim.scenario import COST_NAMES, Scenario
 from mavtune.sim.simd import float64_lanes
 from mavtune.sim.tracker import DT_S, flight_reference
@@ -70,6 +70,10 @@ def constants(scenario: Scenario) -> np.ndarray:
     cp[K.C_EFFORT_W] = scenario.effort_weight
     cp[K.C_DELAY] = int(round(scenario.latency_s / DT_S))
     cp[K.C_E_HALF] = math.exp(-0.5 * DT_S / af.MOTOR_TAU_S)
+    cp[K.C_OSC_ALPHA] = lowpass_alpha(scenario.balance.oscillation_hz, DT_S)
+    cp[K.C_U_SCALE] = 1.0 / ((af.RPM_MAX - af.RPM_MIN) * 6 * DT_S)
+    cp[K.C_ACT_W] = scenario.balance.activity_weight_ms
+    cp[K.C_OSC_W] = scenario.balance.oscillation_weight
     cp.setflags(write=False)
     return cp
 
@@ -110,7 +114,8 @@ def seed_array(seeds) -> np.ndarray:
 
 @dataclass
 class BatchResult:
-    """Outcome of B flights: costs (B, 4) in COST_NAMES order, status codes (K.OK or K.FAIL_*), failure times,
+    """Outcome of B flights: costs (B, K.NCOST): the costs in COST_NAMES order, then the measures of the balanced
+    cost (motor activity, oscillation, peak error: `measures`), status codes (K.OK or K.FAIL_*), failure times,
     traces (B, n_trace) of the low-passed altitude measurement the controller acted on (delayed, noisy), their times and the reference altitude at those times."""
 
     costs: np.ndarray
@@ -119,10 +124,17 @@ class BatchResult:
     traces: np.ndarray
     trace_t_s: np.ndarray
     trace_z_ref_m: np.ndarray
+    steps: int = 0  # samples of the primitive the costs sum
 
     def cost(self, name: str) -> np.ndarray:
-        """The (B,) costs by name (iae, ise, itae, effort)."""
+        """The (B,) costs by name (iae, ise, itae, effort, balanced)."""
         return self.costs[:, COST_NAMES.index(name)]
+
+    def measures(self, i: int) -> Measures:
+        """Flight i's measures (IAE, oscillation, motor activity, peak error) over the primitive."""
+        c = self.costs[i]
+        return Measures(float(c[K.COST_IAE]), float(c[K.M_OSCILLATION]), float(c[K.M_ACTIVITY]),
+                        float(c[K.M_PEAK]), self.steps)
 
 
 def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0,
@@ -152,4 +164,4 @@ def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0,
     t_trace = np.arange(n_trace) * every * DT_S
     z_ref = ref[::every, 2].copy() if every else np.empty(0)
     return BatchResult(costs=costs, status=status, t_fail_s=t_fail, traces=traces[:, :n_trace], trace_t_s=t_trace,
-                       trace_z_ref_m=z_ref)
+                       trace_z_ref_m=z_ref, steps=max(n - settle_steps(scenario), 1))

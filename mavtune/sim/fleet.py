@@ -50,7 +50,8 @@ class SimFleet:
             code = int(res.status[i])
             costs = {name: float(res.cost(name)[i]) for name in COST_NAMES}
             info = {"seed": seeds[i], "round_id": int(round_id), "kx_z": float(kx[i]), "kv_z": float(kv[i]),
-                    "costs": costs, "cost_name": self.scenario.cost}
+                    "costs": costs, "cost_name": self.scenario.cost,
+                    "measures": res.measures(i).to_dict()}
             if code != K.OK:
                 info["failure"] = batch.FAILURE_NAMES.get(code, str(code))
                 info["t_fail_s"] = float(res.t_fail_s[i])

@@ -28,6 +28,9 @@ The cost is the controller's own altitude error: at step k the SO(3) law acts on
 is what the gains act on, and what a real vehicle can log, so it is what the paper's cost sums: |e| after the
 first-order low-pass (cutoff `filter_hz`, started at 0), over the primitive. Equivalently the measurement and the
 reference each go through the low-pass started at the first reference altitude, as `cost.iae` computes it.
+The balanced cost's measures are accumulated alongside (`cost.measures` defines them): the error's part above the
+oscillation cutoff, the collective rotor command's steps (motor activity) and the peak |error|; they leave the
+other costs' arithmetic untouched (the same bits as before they were added).
 
 Randomness is a splitmix64 stream per vehicle: the vehicle spread is drawn from the vehicle seed, everything else
 (wind, gusts, sensor noise) from (vehicle seed, round id), so a vehicle's flight does not depend on the batch (nor
@@ -59,7 +62,10 @@ FAST = {"nsz"}
  C_KZ_ROTOR, C_KD_ROTOR, C_KH_ROTOR,  # rotor axial inflow, in-plane drag (N / (rpm m/s)), translational lift
  C_JPX, C_JPY, C_JPZ,  # the plant's inertia, payload included (C_JX.. are the controller's nominal model)
  C_PAYLOAD_NEW,  # the payload mass the estimator does not know yet at the start, kg
- NCP) = range(47)
+ C_OSC_ALPHA,  # low-pass gain at the balanced cost's oscillation cutoff: the error minus its slow part rings
+ C_U_SCALE,  # 1 / ((rpm_max - rpm_min) 6 dt): a step of the rotors' summed commands as collective activity, 1/s
+ C_ACT_W, C_OSC_W,  # the balanced cost's weights (m s per 1/s of activity at each step; oscillation)
+ NCP) = range(51)
 
 # ---- one vehicle's state, a column of X (NX, lanes): the struct of arrays that a lane loop vectorises over --------
 # rigid body: position, velocity (world), quaternion, body rates, rotor rpm
@@ -75,7 +81,10 @@ V_MASS, V_KF, V_KXZ, V_KVZ, V_WX, V_WY = range(A_RPMCMD + 6, A_RPMCMD + 12)
 Z_N = V_WY + 1  # this step's 7 standard normals (gusts x, y, z, position error x, y; lidar, vz)
 # a flight's accumulators: low-passed measurement, IAE, ISE, ITAE, effort, hover thrust, status, failure step
 F_ZF, F_IAE, F_ISE, F_ITAE, F_EFF, F_MG, F_ST, F_KF = range(Z_N + 7, Z_N + 15)
-E_EST = F_KF + 1  # this step's estimate (x, y, z, vx, vy, vz), before it joins the latency buffer
+# ... of the balanced cost: the error's slow part, oscillation, motor activity, peak error, last rotor commands
+F_SLOW, F_OSC, F_ACT, F_PEAK = range(F_KF + 1, F_KF + 5)
+F_U = F_PEAK + 1
+E_EST = F_U + 6  # this step's estimate (x, y, z, vx, vy, vz), before it joins the latency buffer
 NX = E_EST + 6
 # the feedback latency: a ring buffer L (6 MAX_DELAY, lanes) of the last MAX_DELAY estimates (x, y, z, vx, vy, vz),
 # an array of its own: its rows move with the step, and a row offset unknown at compile time into X would cost the
@@ -86,7 +95,9 @@ NL = 6 * MAX_DELAY
 # ---- outputs ----------------------------------------------------------------------------------------------------
 SLOW_EVERY = 5  # gusts and the horizontal position error are updated every 5 steps (20 Hz)
 OK, FAIL_NONFINITE, FAIL_GROUND, FAIL_TILT = 0, 1, 2, 3
-COST_IAE, COST_ISE, COST_ITAE, COST_EFFORT, NCOST = range(5)
+COST_IAE, COST_ISE, COST_ITAE, COST_EFFORT, COST_BALANCED = range(5)
+# measures written after the costs: motor activity (1/s), oscillation (m per sample, summed), peak error (m)
+M_ACTIVITY, M_OSCILLATION, M_PEAK, NCOST = range(5, 9)
 
 
 
@@ -577,6 +588,8 @@ def fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
     n = ref.shape[0]
     dt = cp[C_DT]
     alpha = cp[C_LP_ALPHA]
+    beta = cp[C_OSC_ALPHA]
+    uscale = cp[C_U_SCALE]
     X = np.zeros((NX, LANES))
     L = np.empty((NL, LANES))
     RS = np.empty(LANES, dtype=np.uint64)
@@ -589,6 +602,8 @@ def fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
         X[F_MG, v] = X[V_MASS, v] * cp[C_KF] / X[V_KF, v] * cp[C_G]
         X[F_ST, v] = OK
         X[F_KF, v] = n
+        for i in range(6):
+            X[F_U + i, v] = X[A_RPMCMD + i, v]
     rf = ref[0, 2]
     for k in range(n):
         _draw_normals(RS, X, k, w)
@@ -612,6 +627,18 @@ def fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
             X[F_ISE, v] += on * e * e if ok else 0.0
             X[F_ITAE, v] += on * tk * e if ok else 0.0
             X[F_EFF, v] += on * abs(X[A_FCMD, v] - X[F_MG, v]) / X[F_MG, v] if ok else 0.0
+            # balanced cost: the error's part above the oscillation cutoff, the rotor commands' steps, the peak
+            d = zf - rf
+            slow = X[F_SLOW, v] + beta * (d - X[F_SLOW, v])
+            X[F_SLOW, v] = slow if ok else X[F_SLOW, v]
+            X[F_OSC, v] += on * abs(d - slow) if ok else 0.0
+            du = 0.0  # the collective's step: the rotors' mean command (their differential is the attitude's)
+            for i in range(6):
+                du += X[A_RPMCMD + i, v] - X[F_U + i, v]
+                X[F_U + i, v] = X[A_RPMCMD + i, v]
+            X[F_ACT, v] += on * abs(du) * uscale if ok else 0.0
+            peak = X[F_PEAK, v]
+            X[F_PEAK, v] = e if ok and on * e > peak else peak
             fails = ok and code != OK
             X[F_ST, v] = code if fails else X[F_ST, v]
             X[F_KF, v] = k if fails else X[F_KF, v]
@@ -627,6 +654,7 @@ def fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
     for v in range(nv):
         i = lo + v
         iae, ise, itae, eff = X[F_IAE, v], X[F_ISE, v], X[F_ITAE, v], X[F_EFF, v]
+        osc, act, peak = X[F_OSC, v], X[F_ACT, v], X[F_PEAK, v]
         st = int(X[F_ST, v])
         kf = int(X[F_KF, v])
         if st != OK:
@@ -638,6 +666,7 @@ def fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
                 ise += ef * ef
                 itae += t * ef
                 eff += 1.0
+            peak = max(peak, ef)
             if trace_every > 0:
                 for j in range(kf // trace_every + 1, traces.shape[1]):
                     traces[i, j] = np.nan
@@ -645,6 +674,11 @@ def fly_chunk(lo, hi, seeds, round_ids, kxz, kvz, ref, n_settle, cp, mix, alloc,
         costs[i, COST_ISE] = ise
         costs[i, COST_ITAE] = itae
         costs[i, COST_EFFORT] = iae + cp[C_EFFORT_W] * eff
+        steps = max(n - n_settle, 1)
+        costs[i, COST_BALANCED] = iae + cp[C_OSC_W] * osc + cp[C_ACT_W] * act
+        costs[i, M_ACTIVITY] = act / steps
+        costs[i, M_OSCILLATION] = osc
+        costs[i, M_PEAK] = peak
         status[i] = st
         t_fail[i] = kf * dt
 

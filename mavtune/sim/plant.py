@@ -5,11 +5,17 @@ from __future__ import annotations
 import numpy as np
 
 from mavtune.errors import MavtuneError
+from mavtune.sim import airframe as af
 from mavtune.sim import batch
 from mavtune.sim import kernel as K
 from mavtune.sim.gains import MRS_DEFAULT_KV, MRS_DEFAULT_KX
 from mavtune.sim.scenario import Scenario
 from mavtune.sim.tracker import DT_S
+
+
+def motor_fraction(rpm) -> np.ndarray:
+    """Rotor speed commands (rpm) as normalised motor commands in [0, 1] (the kernel's activity uses the same)."""
+    return (np.asarray(rpm, dtype=float) - af.RPM_MIN) / (af.RPM_MAX - af.RPM_MIN)
 
 
 class Plant:
@@ -59,6 +65,13 @@ class Plant:
         self._kv[:] = kv
         self._X[K.V_KXZ] = kx
         self._X[K.V_KVZ] = kv
+
+    def horizontal_from_reference(self) -> None:
+        """Turn the controller's own horizontal law off (its x-y position and velocity gains and both horizontal
+        integrators): the horizontal acceleration is then the reference's alone, for an outside cascade (mavsim's
+        autopilot) that commands it. For every vehicle of this plant; vertical control is unchanged."""
+        for c in (K.C_KX_XY, K.C_KV_XY, K.C_KIW, K.C_KIB):
+            self._cp[c] = 0.0
 
     def step(self, ref_pos_m, ref_vel_mps=None, ref_acc_mps2=None) -> None:
         """Advance 0.01 s towards the reference ((3,) or (B, 3) each; velocity/acceleration default to 0)."""
@@ -118,6 +131,12 @@ class Plant:
     def failed(self) -> np.ndarray:
         """(B,) bool: the vehicle diverged (non-finite, ground, tilt > 90 deg) and is frozen."""
         return self._status != K.OK
+
+    @property
+    def motor_command(self) -> np.ndarray:
+        """The controller's rotor commands (B, 6) normalised to [0, 1] between the rotors' least and greatest speed:
+        the motor outputs an autopilot reports, and what the balanced cost's motor activity measures."""
+        return motor_fraction(self._X[K.A_RPMCMD:K.A_RPMCMD + 6].T)
 
     @property
     def rotor_rpm(self) -> np.ndarray:

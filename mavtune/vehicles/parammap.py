@@ -113,3 +113,36 @@ class ParamMap(BaseModel):
                     f"in the config's mavlink.gains.{edge.gain} table{reach}")
         return replace(edge, param=b.param, param_value=b.value(edge.value), param_bound=bound, hint=hint,
                        at_limit=at_limit)
+
+
+# ---- named gain sets a MAVLink run selects by `[mavlink] gain_set` (the names it tunes: config.GAIN_SETS) ----------
+# Each gain: (parameter in ArduCopter ≤ 4.6 / PX4 names and units, min, max); 4.7's PSC_D_* names are found by
+# probing.
+# "altitude" is the built-in default map (mavtune.vehicles.mavlink.config.DEFAULT_GAINS). "altitude-inner" adds the
+# inner altitude loop: ki, the integrator that carries the hover thrust (ArduCopter PSC_ACCZ_I on the acceleration
+# error, PX4 MPC_Z_VEL_I_ACC on the climb-rate error), and ka, the innermost damping (ArduCopter PSC_ACCZ_P on the
+# acceleration error, PX4 MPC_Z_VEL_D_ACC on the measured vertical acceleration). Ranges lie within the documented
+# limits: ArduCopter's full parameter list (ardupilot.org/copter/docs/parameters.html, AC_PosControl @Range:
+# PSC_ACCZ_P 0.2–1.5, PSC_ACCZ_I 0–3) and PX4's parameter reference (docs.px4.io parameter_reference,
+# mc_pos_control @min/@max: MPC_Z_VEL_I_ACC 0.2–3, MPC_Z_VEL_D_ACC 0–2). PSC_ACCZ_I starts at 0.2 rather than 0,
+# as PX4's MPC_Z_VEL_I_ACC does: without an integrator a wrong hover throttle is a steady altitude error.
+INNER_ALTITUDE_GAINS: dict[str, dict[str, tuple[str, float, float]]] = {
+    "ardupilot": {"kp": ("PSC_POSZ_P", 1.0, 3.0), "kd": ("PSC_VELZ_P", 1.0, 8.0),
+                  "ka": ("PSC_ACCZ_P", 0.2, 1.5), "ki": ("PSC_ACCZ_I", 0.2, 3.0)},
+    "px4": {"kp": ("MPC_Z_P", 0.1, 1.5), "kd": ("MPC_Z_VEL_P_ACC", 2.0, 15.0),
+            "ka": ("MPC_Z_VEL_D_ACC", 0.0, 2.0), "ki": ("MPC_Z_VEL_I_ACC", 0.2, 3.0)},
+}
+# "horizontal": the horizontal position loop, flown with the out-and-back primitive (MavlinkConfig.loop): kp the
+# position gain (ArduCopter PSC_POSXY_P, AC_PosControl @Range 0.5–2; PX4 MPC_XY_P, mc_pos_control @min/@max 0–2,
+# here from 0.2: 0 leaves no position feedback), kd the velocity gain (PSC_VELXY_P @Range 0.1–6, here from 0.5: below
+# it the velocity loop is left to PSC_VELXY_I; MPC_XY_VEL_P_ACC 1.2–5). Later Copter's PSC_NE_* names are found by
+# probing.
+HORIZONTAL_GAINS: dict[str, dict[str, tuple[str, float, float]]] = {
+    "ardupilot": {"kp": ("PSC_POSXY_P", 0.5, 2.0), "kd": ("PSC_VELXY_P", 0.5, 6.0)},
+    "px4": {"kp": ("MPC_XY_P", 0.2, 2.0), "kd": ("MPC_XY_VEL_P_ACC", 1.2, 5.0)},
+}
+GAIN_SET_BINDINGS: dict[str, dict[str, dict[str, tuple[str, float, float]]]] = {
+    "altitude-inner": INNER_ALTITUDE_GAINS,
+    "horizontal": HORIZONTAL_GAINS,
+}
+"""{gain set: {autopilot: {gain: (parameter, min, max)}}} beyond the default "altitude" set."""

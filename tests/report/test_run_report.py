@@ -70,6 +70,14 @@ def test_simfleet_run_report_has_timeline_plan_and_tuning(tmp_path):
     assert len(_table_rows(text, "## Rounds")) == 56
     assert (tmp_path / "tuning.png").stat().st_size > 20000
     assert text.count("**Bootstrap ") == 4 and "could not be written" not in text
+    # every point flown with its flights' motor activity and peak error, as result.json's `points` gives them
+    points = json.loads((tmp_path / "result.json").read_text())["points"]
+    rows = _table_rows(text, "## Points flown")
+    assert len(rows) == len(points) and sum(p["flights"] for p in points) == 112
+    for row, p in zip(rows, points):
+        assert int(row[2]) == p["flights"] and float(row[4]) == pytest.approx(p["activity_per_s"], rel=6e-3)
+        assert float(row[5]) == pytest.approx(p["peak_error_m"], rel=6e-3) and p["peak_error_m"] > 0
+    assert "## Points flown" not in write_run_report(tmp_path / "callable", mavtune.tune(_quadratic)).read_text()
 
 
 def test_surface_in_run_folder_gets_final_gains(tmp_path):

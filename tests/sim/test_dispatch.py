@@ -4,6 +4,7 @@ import numpy as np
 from hypothesis import given, settings, strategies as st
 
 from mavtune.sim import batch
+from mavtune.sim import kernel as K
 from mavtune.sim.gains import to_physical
 from mavtune.sim.scenario import Scenario
 
@@ -31,4 +32,4 @@ def test_automatic_dispatch_matches_both_sides_of_the_threshold():
 
 
 def test_empty_batch_flies_nothing():
-    assert _fly(0, None).costs.shape == (0, 4)
+    assert _fly(0, None).costs.shape == (0, K.NCOST)

@@ -28,6 +28,13 @@ from sitl_harness import claim_instance, read_params_on, release_instance
 REPO = Path(__file__).resolve().parents[2]
 HOVER_M = 5.0  # MIS_TAKEOFF_ALT for the hover, m above home
 INSTANCES = range(10)
+SIM_EKF2 = {"EKF2_ACC_NOISE": "1.0", "EKF2_HGT_REF": "0", "EKF2_GPS_CTRL": "5", "EKF2_BARO_NOISE": "0.1"}
+"""EKF2 told SIH's own sensors, as a lab sets it in simulation. SIH's accelerometer is far noisier (about 1 m/s² sd
+vertically, HIGHRES_IMU) than the 0.35 m/s² EKF2 assumes by default: the estimator then trusts the integrated
+acceleration too much and its vertical velocity drifts against its own height (up to ±0.2 m/s over a flight), which
+the position loop turns into a steady offset of bias / MPC_Z_P that changes from flight to flight. Height comes
+from the barometer (SIH's: white noise, no drift), told its noise, and not from SIH's far noisier GNSS height
+(benchmarks/px4_noise.py measures each)."""
 SKIP_REASON = "PX4 SITL not found: set MAVTUNE_PX4 to a PX4 SITL (SIH) folder with bin/px4 (or put it in ../shared/px4sitl/)"
 
 
@@ -134,7 +141,8 @@ def hold_hover(master: mavutil.mavfile, altitude_m: float = HOVER_M, timeout_s: 
 
 @contextmanager
 def px4_vehicles(count: int = 1, hover: bool = True, env: dict[str, str] | None = None):
-    """Start `count` PX4 SIH quadrotors, each in a fresh working folder and its own instance; yield [Px4].
+    """Start `count` PX4 SIH quadrotors, each in a fresh working folder and its own instance, with SIM_EKF2 (`env`:
+    more PX4_PARAM_<NAME> settings, which win); yield [Px4].
     Each is brought into a Hold hover over its GCS link (`pilot`, open until the end).
     Every process is killed by pid on the way out."""
     if px4_root() is None:
@@ -149,7 +157,8 @@ def px4_vehicles(count: int = 1, hover: bool = True, env: dict[str, str] | None 
             stack.callback(shutil.rmtree, folder, True)
             proc = subprocess.Popen([str(copy / "bin" / "px4"), "-d", "-i", str(n), str(copy / "etc")], cwd=folder,
                                     env={**os.environ, "PX4_SIM_MODEL": "sihsim_quadx",
-                                         "PX4_PARAM_SDLOG_BACKEND": "0", **(env or {})},
+                                         "PX4_PARAM_SDLOG_BACKEND": "0",
+                                         **{f"PX4_PARAM_{k}": v for k, v in SIM_EKF2.items()}, **(env or {})},
                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             px4 = Px4(proc, n, folder)
             stack.callback(px4.kill)

@@ -120,33 +120,60 @@ def _connect_tcp(url: str, timeout_s: float) -> mavutil.mavfile:
             time.sleep(0.1)
 
 
-def guided_hover(master: mavutil.mavfile, altitude_m: float = HOVER_M, timeout_s: float = 150.0) -> None:
-    """What a pilot does before tuning: GUIDED, arm (retried until pre-arm checks pass), take off (retried until
-    it climbs; ArduCopter disarms again when a takeoff does not follow soon), wait until near the altitude."""
+def guided_hover(master: mavutil.mavfile, altitude_m: float = HOVER_M, timeout_s: float = 300.0) -> None:
+    """What a pilot does before tuning: GUIDED, arm once ArduCopter's pre-arm checks pass (SYS_STATUS's PREARM_CHECK
+    health bit), take off the moment the HEARTBEAT says armed, wait until near the altitude.
+
+    The takeoff must follow the arming at once: ArduCopter disarms a landed vehicle after DISARM_DELAY (10 s of
+    simulated time, 1 s wall at ×10), so a takeoff sent on a fixed wall-clock retry after the arming lost that race
+    again and again and the vehicle stayed on the ground, armed and disarmed in turn. Every step is retried until
+    `timeout_s` (wall; generous, for a loaded machine); the error names what was last seen (mode, arming, pre-arm
+    state, the autopilot's last messages)."""
     deadline = time.monotonic() + timeout_s
-    if master.wait_heartbeat(timeout=20) is None:
+    if master.wait_heartbeat(timeout=min(60.0, timeout_s)) is None:
         raise RuntimeError("SITL sent no heartbeat")
     master.mav.request_data_stream_send(master.target_system, master.target_component,
                                         mavlink.MAV_DATA_STREAM_ALL, 10, 1)
     guided = master.mode_mapping()["GUIDED"]
-    alt_m, next_try = 0.0, 0.0
+    prearm_bit = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    alt_m, mode, armed, prearm_ok, texts = 0.0, None, False, None, []
+    next_arm = next_takeoff = 0.0
     while time.monotonic() < deadline:
-        msg = master.recv_match(type=["HEARTBEAT", "GLOBAL_POSITION_INT"], blocking=True, timeout=0.2)
-        if msg is not None and msg.get_type() == "GLOBAL_POSITION_INT":
+        msg = master.recv_match(type=["HEARTBEAT", "GLOBAL_POSITION_INT", "SYS_STATUS", "STATUSTEXT"],
+                                blocking=True, timeout=0.2)
+        kind = msg.get_type() if msg is not None else None
+        if kind == "GLOBAL_POSITION_INT":
             alt_m = msg.relative_alt / 1000.0
             if alt_m > altitude_m - 0.3:
                 return
-        if time.monotonic() < next_try:
-            continue
-        next_try = time.monotonic() + 1.0
-        if not master.motors_armed():
+        elif kind == "HEARTBEAT" and msg.get_srcSystem() == master.target_system \
+                and master.probably_vehicle_heartbeat(msg):
+            mode, was_armed = msg.custom_mode, armed
+            armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+            if armed and not was_armed:
+                next_takeoff = 0.0  # take off now, before ArduCopter's disarm delay runs out
+        elif kind == "SYS_STATUS" and msg.onboard_control_sensors_present & prearm_bit:
+            prearm_ok = bool(msg.onboard_control_sensors_health & prearm_bit)
+        elif kind == "STATUSTEXT":
+            texts = (texts + [msg.text])[-3:]
+        now = time.monotonic()
+        if mode is not None and mode != guided and now >= next_arm:
+            next_arm = now + 1.0
             master.set_mode(guided)
+        if not armed and prearm_ok is not False and mode == guided and now >= next_arm:
+            next_arm = now + 1.0
             master.mav.command_long_send(master.target_system, master.target_component,
                                          mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        elif alt_m < 0.5:
+        elif not armed and now >= next_arm:
+            next_arm = now + 1.0
+        if armed and mode == guided and alt_m < 0.5 and now >= next_takeoff:
+            next_takeoff = now + 0.5
             master.mav.command_long_send(master.target_system, master.target_component, mavlink.MAV_CMD_NAV_TAKEOFF,
                                          0, 0, 0, 0, 0, 0, 0, altitude_m)
-    raise RuntimeError(f"SITL did not reach the hover altitude (at {alt_m:.1f} m, armed {master.motors_armed()})")
+    raise RuntimeError(f"SITL did not reach the hover altitude {altitude_m:g} m within {timeout_s:g} s (at "
+                       f"{alt_m:.1f} m, mode {mode}, armed {int(armed)}, pre-arm checks "
+                       f"{ {None: 'not reported', True: 'passed', False: 'failing'}[prearm_ok]}; last messages: "
+                       f"{texts})")
 
 
 @contextmanager

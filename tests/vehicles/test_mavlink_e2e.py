@@ -42,6 +42,24 @@ def test_tune_one_px4_vehicle_end_to_end(tmp_path):
     with Journal(tmp_path / "journal.sqlite") as j:
         assert len(j.rounds()) == summary["rounds"]
         assert j.get("original_params") == {url: PX4_ORIGINALS}
+    _assert_balanced(summary)
+
+
+def _assert_balanced(summary: dict) -> None:
+    """Every flight was costed by the balanced cost from the motor outputs mavsim sent (ACTUATOR_OUTPUT_STATUS as
+    PX4, SERVO_OUTPUT_RAW as ArduPilot), and result.json gives each point's motor activity and peak error."""
+    from mavtune.sim.cost import Balance, Measures
+
+    flights = [f for r in summary["rounds_log"] for f in r["flights"] if f["status"] == "ok"]
+    assert flights
+    for f in flights:
+        m = f["info"]["measures"]
+        assert f["info"]["cost_name"] == "balanced" and m["activity_per_s"] > 0 and m["peak_error_m"] > 0
+        assert f["cost"] == pytest.approx(Measures(**m).balanced(Balance()), rel=1e-9)
+        assert f["cost"] > m["iae"] + m["oscillation"]  # the motor activity counted
+    points = summary["points"]
+    assert sum(p["flights"] for p in points) == summary["flights_by_status"]["ok"] + summary["flights_by_status"]["failed"]
+    assert all(p["activity_per_s"] > 0 and p["peak_error_m"] > 0 for p in points)
 
 
 def test_tune_two_vehicles_px4_and_ardupilot_47_concurrently(tmp_path):
@@ -54,6 +72,7 @@ def test_tune_two_vehicles_px4_and_ardupilot_47_concurrently(tmp_path):
     for rnd in summary["rounds_log"]:
         assert [f["vehicle"] for f in rnd["flights"]] == [a, b]  # avg: both fly every round
         assert all(f["status"] == "ok" for f in rnd["flights"])
+    _assert_balanced(summary)
 
 
 def test_vehicle_for_the_swarm_agent_sets_gains_flies_and_restores():

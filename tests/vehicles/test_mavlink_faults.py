@@ -76,3 +76,23 @@ def test_diverging_gain_is_aborted_as_failed_and_avoided(tmp_path):
     assert summary["gains"]["kp"] < 0.643
     assert summary["restored"] is True
     assert len(_journal_rounds(tmp_path)) == summary["rounds"]
+
+
+def test_an_autopilot_without_motor_outputs_leaves_a_balanced_run_with_the_reason_and_flies_on_iae():
+    """The balanced cost needs the motor outputs: a flight without them is lost (never costed on tracking alone)
+    and a vehicle that never sent any leaves the run saying how to tune without them; `cost = "iae"` flies it."""
+    from mavtune.fleet import Status
+    from mavtune.vehicles.mavlink import MavlinkVehicle
+
+    gains = {"kp": 0.5, "kd": 0.5}
+    with mavsim("--fault", "no-motor-outputs", autopilot="ardupilot") as url:
+        with MavlinkVehicle(url, fast_config()) as vehicle:
+            flight = vehicle.fly(gains, 0)
+            assert flight.status is Status.LOST and flight.info["reason"] == "no_motor_output"
+            assert "SERVO_OUTPUT_RAW" in vehicle.released and 'cost = "iae"' in vehicle.released
+            assert vehicle.fly(gains, 1).info["reason"] == "not_ready"  # out of the run
+        with MavlinkVehicle(url, fast_config(cost="iae")) as vehicle:
+            flight = vehicle.fly(gains, 2)
+        assert flight.status is Status.OK and flight.cost == flight.info["measures"]["iae"] > 0
+        assert flight.info["measures"]["activity_per_s"] is None
+        assert read_params(url, ["PSC_POSZ_P", "PSC_VELZ_P"]) == {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}

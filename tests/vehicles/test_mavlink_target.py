@@ -148,3 +148,40 @@ def test_one_sender_with_a_reordered_packet_now_and_then_is_never_taken_for_two(
     for k, n in enumerate(order):  # 1000 messages over 10 s
         watch.add((start + n) % 256, k * 0.01)
     assert not watch.interleaved(10.0)
+
+
+@given(start=st.integers(0, 255), every=st.integers(10, 40))
+def test_one_fast_sender_often_reordering_is_never_taken_for_two(start, every):
+    """PX4 asked for 50 Hz streams sends a few hundred messages a second, some leaving out of order: one pair in
+    `every` swapped is up to 20 small steps back a second, far more than SMALL_LIMIT in WINDOW_S but a small share."""
+    order = list(range(3000))
+    for i in range(0, 2999, every):
+        order[i], order[i + 1] = order[i + 1], order[i]
+    watch = SeqWatch()
+    for k, n in enumerate(order):  # 3000 messages over 10 s
+        watch.add((start + n) % 256, k / 300)
+    assert not watch.interleaved(10.0)
+
+
+def test_messages_of_system_0_are_not_taken_for_two_senders(caplog):
+    """MAVLink's broadcast id 0 is no vehicle's (PX4 SITL sends a stream as 0/0 that interleaves with another's): two
+    interleaved 0/0 counters neither warn nor count as a sender, while the same on system 1 does."""
+    from mavtune.vehicles.mavlink.link import MavlinkLink
+
+    link = MavlinkLink(f"udpin:127.0.0.1:{free_udp_port()}")
+    try:
+        for system in (0, 1):
+            senders = [mavlink.MAVLink(None, srcSystem=system, srcComponent=0) for _ in range(2)]
+            for sender in senders[1:]:
+                sender.seq = 100
+            for i in range(40):
+                sender = senders[i % 2]
+                msg = sender.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0)
+                msg.pack(sender)
+                sender.seq = (sender.seq + 1) % 256
+                link._watch(system, 0, msg)
+        assert (0, 0) not in link._seq
+        assert link._seq[(1, 0)].interleaved(time.monotonic())
+        assert "answer as 1/0" in caplog.text and "answer as 0/0" not in caplog.text
+    finally:
+        link.close()

@@ -11,7 +11,7 @@ from mavtune.errors import MavtuneError
 from mavtune.vehicles.mavlink.config import GainParam, MavlinkConfig, load_mavlink_config
 from mavtune.vehicles.mavlink.link import parse_url
 from mavtune.vehicles.mavlink.mavsim.faults import parse_faults
-from mavtune.vehicles.mavlink.primitive import Circle, altitude_cost
+from mavtune.vehicles.mavlink.primitive import Circle, altitude_cost, flight_measures, motor_channels
 from mavtune.vehicles.mavlink.profiles import ARDUPILOT, PX4, Autopilot
 from mavtune.vehicles.mavlink.safety import resolve_gain
 from mavtune.sim.cost import iae
@@ -104,6 +104,48 @@ def test_cost_is_the_simulators_iae_and_independent_of_telemetry_rate():
     assert fast > 0 and math.isinf(iae([1.0, math.nan], [1.0, 1.0]))
 
 
+def test_flight_measures_take_the_motor_outputs_on_their_own_clock_and_rate():
+    """Motor outputs at 50 Hz (another rate than the altitude's) interpolated onto the 100 Hz grid: a collective
+    ramp of 0.2 per second is 0.2 /s of activity; none, or one sample, leaves the activity unknown (NaN) and the
+    balanced cost infinite (the vehicle loses such a flight rather than cost it on tracking alone)."""
+    from mavtune.sim.cost import Balance
+
+    t = np.arange(0, 4.0, 0.02)
+    ref = 5 + 0.5 * (1 - np.cos(2 * np.pi * t / 4))
+    tm = np.arange(-0.05, 4.05, 0.02)
+    u = np.stack([0.4 + 0.2 * tm, 0.4 + 0.2 * tm, 0.4 + 0.2 * tm, 0.4 + 0.2 * tm], axis=1)
+    m = flight_measures(t, ref, ref - 0.01, tm, u)
+    assert m.activity_per_s == pytest.approx(0.2, rel=1e-6) and m.iae == pytest.approx(altitude_cost(t, ref, ref - 0.01))
+    assert m.balanced(Balance()) == pytest.approx(m.iae + m.oscillation + 0.05 * 0.2 * m.steps, rel=1e-6)
+    for tm_, u_ in (((), ()), (tm[:1], u[:1])):
+        lone = flight_measures(t, ref, ref, tm_, u_)
+        assert math.isnan(lone.activity_per_s) and math.isinf(lone.balanced(Balance()))
+    assert [motor_channels(ty) for ty in (2, 13, 14, 99)] == [4, 6, 8, 4]  # quad, hexa, octo, another type
+
+
+def test_servo_output_raw_time_is_unwrapped_against_the_position_clock():
+    """SERVO_OUTPUT_RAW's 32-bit microseconds wrap every 71.6 min; the link puts them on the position samples'
+    time since boot. Outputs 9-16 (MAVLink 2 only) read as 0 from a MAVLink 1 message."""
+    from types import SimpleNamespace
+
+    from mavtune.vehicles.mavlink.link import MavlinkLink, PositionSample
+
+    link = MavlinkLink.__new__(MavlinkLink)
+    import threading
+
+    link._cond, link._motor_listeners, link.motor_samples = threading.Condition(), [], 0
+    got = []
+    link._motor_listeners.append(got.append)
+    boot_s = 5000.0  # past one wrap
+    link.state = SimpleNamespace(position=PositionSample(boot_s, 0, 0, -5, 0, 0.0))
+    msg = SimpleNamespace(get_type=lambda: "SERVO_OUTPUT_RAW", port=0,
+                          time_usec=int((boot_s + 0.02) * 1e6) % 2**32,
+                          **{f"servo{i}_raw": 1500 for i in range(1, 9)})
+    link._motor(msg)
+    assert got[0].t_s == pytest.approx(boot_s + 0.02, abs=1e-6) and got[0].values[:8] == (1500.0,) * 8
+    assert got[0].values[8:] == (0.0,) * 8 and link.motor_samples == 1
+
+
 def test_fault_flags():
     f = parse_faults(["mode-change:2", "heartbeat-gap:3:1.5", "param-drop:MPC_Z_P:3", "diverge:MPC_Z_P:1.2"])
     assert f.mode_change == 2 and f.heartbeat_gap == (3, 1.5)
@@ -171,3 +213,14 @@ def test_urls_need_a_valid_port():
     for bad in ("udpin:127.0.0.1:abc", "udpin:127.0.0.1:70000", "tcp::5760"):
         with pytest.raises(MavtuneError, match="port"):
             parse_url(bad)
+
+
+def test_cost_settings_are_validated_with_a_line_naming_the_field():
+    """`cost` is balanced by default (iae opts out); a bad weight or PWM range is one line naming the field."""
+    assert MavlinkConfig().cost == "balanced" and load_mavlink_config({"cost": "iae"}).cost == "iae"
+    assert load_mavlink_config({"balance": {"activity_weight_ms": 0.2}}).balance.activity_weight_ms == 0.2
+    for bad, field in (({"cost": "ise"}, "mavlink.cost"), ({"balance": {"activity_weight_ms": -1}},
+                                                            "mavlink.balance.activity_weight_ms"),
+                       ({"motor_pwm_us": [2000, 1000]}, "motor_pwm_us")):
+        with pytest.raises(MavtuneError, match=field.replace(".", r"\.")):
+            load_mavlink_config(bad)

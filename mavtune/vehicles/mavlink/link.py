@@ -86,6 +86,20 @@ def parse_url(url: str) -> tuple[str, int]:
     return url, 57600
 
 
+MOTOR_MESSAGES = ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS")
+"""The autopilot's motor outputs: ArduPilot sends SERVO_OUTPUT_RAW (PWM µs), PX4 both (ACTUATOR_OUTPUT_STATUS,
+the mixer's outputs, is taken from PX4)."""
+UINT32_US_S = 2**32 / 1e6  # SERVO_OUTPUT_RAW's time_usec is 32 bits: it wraps every 71.6 min of vehicle time
+
+
+@dataclass
+class MotorSample:
+    """One motor output message: vehicle time since boot and every output channel's raw value (PWM µs)."""
+
+    t_s: float
+    values: tuple[float, ...]
+
+
 @dataclass
 class PositionSample:
     """One LOCAL_POSITION_NED (or DISTANCE_SENSOR) reading: vehicle time and position, NED metres."""
@@ -96,6 +110,8 @@ class PositionSample:
     z_m: float  # NED down (altitude is −z)
     vz_mps: float
     wall_s: float
+    vx_mps: float = 0.0  # NED north speed (the horizontal loop's calm test)
+    vy_mps: float = 0.0  # NED east speed
 
 
 class SeqWatch:
@@ -107,12 +123,15 @@ class SeqWatch:
     WINDOW_S = 10.0
     LIMIT = 3  # steps back within WINDOW_S that mean two senders (a burst of 129+ lost messages looks like one)
     SMALL_LIMIT = 20  # repeats or steps back by fewer than BACK_MIN within WINDOW_S: two senders whose counters
-    # run in step (started together, sending alike), which a reordered packet now and then never adds up to
+    # run in step (started together, sending alike) …
+    SMALL_SHARE = 0.2  # … when they are also this share of all its messages (two in step: about half), which one
+    # fast sender whose packets now and then leave out of order (PX4 at 50 Hz streams) never reaches
 
     def __init__(self) -> None:
         self.last: int | None = None
         self.backs: deque[float] = deque()
         self.small: deque[float] = deque()
+        self.seen: deque[float] = deque()  # every message's time within WINDOW_S
         self.flagged = False  # interleaved when last looked at (said once per episode)
 
     def add(self, seq: int, now_s: float) -> None:
@@ -124,17 +143,20 @@ class SeqWatch:
             elif step == 0 or step > 256 - self.BACK_MIN:
                 self.small.append(now_s)
         self.last = seq
-        for times in (self.backs, self.small):
+        self.seen.append(now_s)
+        for times in (self.backs, self.small, self.seen):
             while times and now_s - times[0] > self.WINDOW_S:
                 times.popleft()
 
     def interleaved(self, now_s: float) -> bool:
         """True when two senders seem to share this (system, component): LIMIT steps back, or SMALL_LIMIT small
-        ones, within WINDOW_S of now_s (it clears again after WINDOW_S without them, so bursts of lost messages
+        ones that are SMALL_SHARE of its messages, within WINDOW_S of now_s (it clears again after WINDOW_S without them, so bursts of lost messages
         only pause a vehicle)."""
         def within(times: deque[float]) -> int:
             return sum(now_s - t <= self.WINDOW_S for t in times)
-        return within(self.backs) >= self.LIMIT or within(self.small) >= self.SMALL_LIMIT
+        small = within(self.small)
+        return (within(self.backs) >= self.LIMIT
+                or small >= max(self.SMALL_LIMIT, self.SMALL_SHARE * within(self.seen)))
 
 
 @dataclass(frozen=True)
@@ -213,6 +235,9 @@ class MavlinkLink:
         self._cond = threading.Condition()
         self._send_lock = threading.Lock()
         self._listeners: list[Callable[[PositionSample], None]] = []
+        self._motor_listeners: list[Callable[[MotorSample], None]] = []
+        self.motor_message = "SERVO_OUTPUT_RAW"  # which of MOTOR_MESSAGES is taken (the vehicle sets it)
+        self.motor_samples = 0  # how many were received
         self._closed = threading.Event()
         self._thread = threading.Thread(target=self._read_loop, name=f"mavlink-read {url}", daemon=True)
         self._thread.start()
@@ -272,7 +297,7 @@ class MavlinkLink:
             return  # only the autopilot says where the vehicle is, what it holds and what it did
         if mtype == "LOCAL_POSITION_NED":
             sample = PositionSample(
-                msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z, msg.vz, time.monotonic()
+                msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z, msg.vz, time.monotonic(), msg.vx, msg.vy
             )
             with self._cond:
                 st.position = sample
@@ -280,6 +305,8 @@ class MavlinkLink:
                 self._cond.notify_all()
             for fn in listeners:
                 fn(sample)
+        elif mtype == self.motor_message:
+            self._motor(msg)
         elif mtype == "DISTANCE_SENSOR":
             if msg.orientation != DOWNWARD:
                 self._ignore(f"DISTANCE_SENSOR {msg.id} with orientation {msg.orientation} (not looking down)")
@@ -316,8 +343,32 @@ class MavlinkLink:
                     self._timesync[msg.ts1] = time.monotonic_ns() - msg.ts1
                     self._cond.notify_all()
 
+    def _motor(self, msg) -> None:
+        """A motor output message to the motor listeners, on the position's clock (SERVO_OUTPUT_RAW's 32-bit
+        microseconds unwrapped against the last position sample's time since boot)."""
+        if msg.get_type() == "SERVO_OUTPUT_RAW":
+            if msg.port != 0:
+                return  # servos 17-32: no motor of a multicopter
+            t_s = msg.time_usec / 1e6
+            pos = self.state.position
+            if pos is not None:
+                t_s += round((pos.t_s - t_s) / UINT32_US_S) * UINT32_US_S
+            values = tuple(float(getattr(msg, f"servo{i}_raw", 0)) for i in range(1, 17))  # 9-16: MAVLink 2 only
+        else:
+            t_s, values = msg.time_usec / 1e6, tuple(float(v) for v in msg.actuator[:max(0, msg.active)])
+        sample = MotorSample(t_s, values)
+        with self._cond:
+            self.motor_samples += 1
+            listeners = list(self._motor_listeners)
+        for fn in listeners:
+            fn(sample)
+
     def _watch(self, src: int, comp: int, msg) -> None:
-        """Follow every sender's sequence numbers and AUTOPILOT_VERSION ids: two autopilots answering as one."""
+        """Follow every sender's sequence numbers and AUTOPILOT_VERSION ids: two autopilots answering as one.
+        System 0 is MAVLink's broadcast address, no vehicle's id (PX4 SITL sends a stream as 0/0 whose counter
+        interleaves with another's): not followed."""
+        if src == 0:
+            return
         key = (src, comp)
         watch = self._seq.get(key)
         if watch is None:
@@ -458,6 +509,17 @@ class MavlinkLink:
         with self._cond:
             if fn in self._listeners:
                 self._listeners.remove(fn)
+
+    def add_motor_listener(self, fn: Callable[[MotorSample], None]) -> None:
+        """Call fn(sample) from the reader thread for every motor output message (`motor_message`)."""
+        with self._cond:
+            self._motor_listeners.append(fn)
+
+    def remove_motor_listener(self, fn: Callable[[MotorSample], None]) -> None:
+        """Stop calling fn."""
+        with self._cond:
+            if fn in self._motor_listeners:
+                self._motor_listeners.remove(fn)
 
     # ---- sending -------------------------------------------------------------------------------------------
     def send(self, fn: Callable[[object], None]) -> None:

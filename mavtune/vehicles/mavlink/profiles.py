@@ -1,4 +1,5 @@
-"""What differs between autopilots: MAVLink ids, flight modes, and the names, units and limits of altitude gains."""
+"""What differs between autopilots: MAVLink ids, flight modes, and the names, units, limits and loop (altitude or
+horizontal) of position-controller gains."""
 
 from __future__ import annotations
 
@@ -78,12 +79,17 @@ PX4 = AutopilotProfile(
     hold_mode="LOITER",  # AUTO.LOITER (Hold)
     allowed_modes=("POSCTL", "LOITER", "OFFBOARD"),
     stream_before_switch=True,
-    families=tuple(((n, 1.0),) for n in ("MPC_Z_P", "MPC_Z_VEL_P_ACC", "MPC_Z_VEL_I_ACC", "MPC_Z_VEL_D_ACC")),
+    families=tuple(((n, 1.0),) for n in ("MPC_Z_P", "MPC_Z_VEL_P_ACC", "MPC_Z_VEL_I_ACC", "MPC_Z_VEL_D_ACC",
+                                         "MPC_XY_P", "MPC_XY_VEL_P_ACC", "MPC_XY_VEL_I_ACC")),
     specs=(
         ParamSpec("MPC_Z_P", 1.0, 0.1, 1.5),
         ParamSpec("MPC_Z_VEL_P_ACC", 4.0, 2.0, 15.0),
         ParamSpec("MPC_Z_VEL_I_ACC", 2.0, 0.2, 3.0),
         ParamSpec("MPC_Z_VEL_D_ACC", 0.0, 0.0, 2.0),
+        # horizontal: @min/@max of mc_pos_control's MPC_XY_P, MPC_XY_VEL_P_ACC, MPC_XY_VEL_I_ACC
+        ParamSpec("MPC_XY_P", 0.95, 0.0, 2.0),
+        ParamSpec("MPC_XY_VEL_P_ACC", 1.8, 1.2, 5.0),
+        ParamSpec("MPC_XY_VEL_I_ACC", 0.4, 0.0, 60.0),
     ),
 )
 
@@ -107,6 +113,10 @@ ARDUPILOT = AutopilotProfile(
         (("PSC_ACCZ_P", 1.0), ("PSC_D_ACC_P", 0.1)),
         (("PSC_ACCZ_I", 1.0), ("PSC_D_ACC_I", 0.1)),
         (("PSC_ACCZ_D", 1.0), ("PSC_D_ACC_D", 0.1)),
+        (("PSC_POSXY_P", 1.0), ("PSC_NE_POS_P", 1.0)),
+        (("PSC_VELXY_P", 1.0), ("PSC_NE_VEL_P", 1.0)),
+        (("PSC_VELXY_I", 1.0), ("PSC_NE_VEL_I", 1.0)),
+        (("PSC_VELXY_D", 1.0), ("PSC_NE_VEL_D", 1.0)),
     ),
     specs=(
         ParamSpec("PSC_POSZ_P", 1.0, 1.0, 3.0),
@@ -123,10 +133,34 @@ ARDUPILOT = AutopilotProfile(
         ParamSpec("PSC_D_ACC_P", 0.05, 0.02, 0.15),
         ParamSpec("PSC_D_ACC_I", 0.1, 0.0, 0.3),
         ParamSpec("PSC_D_ACC_D", 0.0, 0.0, 0.04),
+        # horizontal (AC_PosControl @Range: _POSXY_P 0.5–2, _VELXY_P 0.1–6, _VELXY_I 0.02–1 kept from 0 as the
+        # vertical one, _VELXY_D 0–1); later Copter renames them PSC_NE_POS_* / PSC_NE_VEL_*, same units
+        ParamSpec("PSC_POSXY_P", 1.0, 0.5, 2.0),
+        ParamSpec("PSC_VELXY_P", 2.0, 0.1, 6.0),
+        ParamSpec("PSC_VELXY_I", 1.0, 0.0, 1.0),
+        ParamSpec("PSC_VELXY_D", 0.5, 0.0, 1.0),
+        ParamSpec("PSC_NE_POS_P", 1.0, 0.5, 2.0),
+        ParamSpec("PSC_NE_VEL_P", 2.0, 0.1, 6.0),
+        ParamSpec("PSC_NE_VEL_I", 1.0, 0.0, 1.0),
+        ParamSpec("PSC_NE_VEL_D", 0.5, 0.0, 1.0),
     ),
 )
 
 PROFILES = {Autopilot.PX4: PX4, Autopilot.ARDUPILOT: ARDUPILOT}
+
+HORIZONTAL_PREFIXES = ("MPC_XY_", "PSC_POSXY_", "PSC_VELXY_", "PSC_NE_")
+ALTITUDE_PREFIXES = ("MPC_Z_", "PSC_POSZ_", "PSC_VELZ_", "PSC_ACCZ_", "PSC_D_")
+NEWER_ARDUPILOT_PREFIXES = ("PSC_D_", "PSC_NE_")
+"""Copter's later names (PSC_D_* for the up axis, PSC_NE_* for north-east) of the PSC_*Z_* / PSC_*XY_* gains."""
+
+
+def param_loop(name: str) -> str | None:
+    """The position-controller loop a gain parameter belongs to: "altitude", "horizontal", or None (not known)."""
+    if name.startswith(HORIZONTAL_PREFIXES):
+        return "horizontal"
+    if name.startswith(ALTITUDE_PREFIXES):
+        return "altitude"
+    return None
 
 
 def profile_for(autopilot: Autopilot | str) -> AutopilotProfile:

@@ -17,7 +17,7 @@ from mavtune.vehicles.parammap import GainBinding
 # Abort reasons. Those caused by the gains make the flight FAILED; the others say nothing about the gains
 # (the pilot or the link intervened) and make it LOST, so the tuner flies the point again. "not_settled": the
 # new gains did not hold a calm hover within calm_timeout_s; "not_calm": the safe gains did not, before the change.
-GAIN_FAULTS = frozenset({"altitude_error", "non_finite", "not_settled"})
+GAIN_FAULTS = frozenset({"altitude_error", "horizontal_error", "non_finite", "not_settled"})
 ABORT_REASONS = GAIN_FAULTS | {"heartbeat_lost", "position_lost", "mode_change", "disarmed", "interrupted", "not_calm"}
 
 
@@ -59,8 +59,10 @@ def abort_reason(
     heartbeat_age_s: float,
     profile: AutopilotProfile,
     safety: SafetyConfig,
+    horizontal_error_m: float = 0.0,
 ) -> str | None:
-    """Why the running primitive must stop now (one of ABORT_REASONS), or None."""
+    """Why the running primitive must stop now (one of ABORT_REASONS), or None; `horizontal_error_m` is the error
+    along the horizontal loop's axis (0 when the altitude loop is tuned)."""
     if heartbeat_age_s > safety.heartbeat_timeout_s:
         return "heartbeat_lost"
     if st.mode != profile.flight_mode:
@@ -71,6 +73,10 @@ def abort_reason(
         return "non_finite"
     if abs(altitude_m - altitude_ref_m) > safety.max_altitude_error_m:
         return "altitude_error"
+    if not math.isfinite(horizontal_error_m):
+        return "non_finite"
+    if abs(horizontal_error_m) > safety.max_horizontal_error_m:
+        return "horizontal_error"
     return None
 
 

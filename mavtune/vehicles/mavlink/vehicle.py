@@ -14,10 +14,10 @@ from pymavlink.dialects.v20 import common as mavlink
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.vehicles.mavlink.config import MavlinkConfig
-from mavtune.vehicles.mavlink.link import MavlinkLink, PositionSample, split_target
+from mavtune.vehicles.mavlink.link import MavlinkLink, MotorSample, PositionSample, split_target
 from mavtune.vehicles.mavlink.originals import OriginalsRecord, OriginalsStore, vehicle_key
 from mavtune.vehicles.mavlink.params import ParamClient, ParamNotConfirmed, as_float32
-from mavtune.vehicles.mavlink.primitive import Circle, Setpoint, altitude_cost
+from mavtune.vehicles.mavlink.primitive import AXES, Circle, OutAndBack, Setpoint, flight_measures, motor_channels
 from mavtune.vehicles.mavlink.profiles import profile_from_heartbeat
 from mavtune.vehicles.mavlink.safety import (
     GAIN_FAULTS,
@@ -36,6 +36,8 @@ TRACE_HZ = 10.0  # decimation of the trace kept in each Flight
 CALM_HOLD_S = 0.5  # vehicle seconds the hover must stay calm before new gains / the primitive
 CLOCK_RESET_S = 5.0  # a position sample this much older than the phase start means time_boot_ms restarted
 POSITION_HZ = 50.0  # LOCAL_POSITION_NED rate asked of the autopilot (the cost is computed on a 100 Hz grid)
+MOTOR_MESSAGE_IDS = {"SERVO_OUTPUT_RAW": mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,
+                     "ACTUATOR_OUTPUT_STATUS": mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS}
 LINK_DELAY_WARN_S = 0.010
 """One-way link delay above which the cost is distorted: autopilots apply setpoints on arrival, so the vehicle
 follows the circle late by the delay and the cost grows with it — at 25 ms each way the ranking of kp 0.125 vs
@@ -102,6 +104,10 @@ class MavlinkVehicle:
                 f"{self.url}: config says autopilot {cfg.autopilot}, the vehicle reports {self.profile.autopilot.value}"
             )
         require_mode_known(self.profile, list(allowed_modes(self.profile, cfg.safety)))
+        # the motor outputs: PX4's mixer outputs, ArduPilot's servo outputs (it refuses ACTUATOR_OUTPUT_STATUS)
+        self.link.motor_message = "ACTUATOR_OUTPUT_STATUS" if self.profile.autopilot.value == "px4" \
+            else "SERVO_OUTPUT_RAW"
+        self.motors = cfg.motors or motor_channels(st.mav_type)
         self.params = ParamClient(self.link, cfg.param_timeout_s, cfg.param_retries)
         gain_map = cfg.gain_map(self.profile.autopilot)
         names = sorted({n for c in gain_map.values() for n, _ in self.profile.family(c.param)})
@@ -134,6 +140,8 @@ class MavlinkVehicle:
             self._save_record(restored=True)
         self.last_safe_params = dict(self.original_params)
         self.streamer = SetpointStreamer(self.link, cfg.setpoint_hz)
+        self._motor_record: list[MotorSample] = []  # motor outputs received during the last primitive
+        self._primitive_t0 = 0.0  # vehicle time the last primitive started
         self.link_delay_s: float | None = None
 
     def _prepare_flight(self) -> None:
@@ -324,10 +332,11 @@ class MavlinkVehicle:
         return t is None or sample.t_s - t > self.config.safety.position_timeout_s
 
     def _phase(self, samples: "queue.Queue[PositionSample]", t0: float, duration_s: float, ref, record,
-               calm=None, check_error: bool = True, hold_s: float = CALM_HOLD_S) -> str | None:
+               calm=None, check_error: bool = True, hold_s: float = CALM_HOLD_S, track=None) -> str | None:
         """Follow the streamed target for duration_s of vehicle time from t0, checking every sample for an abort;
         with `calm` (a sample → bool), go on after duration_s until calm(sample) has held for hold_s, up to
-        config.calm_timeout_s after it."""
+        config.calm_timeout_s after it. `track` ((t, sample) → (reference, position) along the horizontal loop's
+        axis) records that axis instead of the altitude and aborts on its error too."""
         safety = self.config.safety
         last_wall = time.monotonic()
         calm_since: float | None = None
@@ -351,9 +360,12 @@ class MavlinkVehicle:
                 return "position_lost"
             t = s.t_s - t0
             z, z_ref = self._altitude(s), ref(t)
+            along = track(t, s) if track is not None else None
             reason = abort_reason(z, z_ref if check_error else z, self.link.state, self.link.heartbeat_age_s(),
-                                  self.profile, safety)
-            if record is not None and math.isfinite(z):
+                                  self.profile, safety, along[1] - along[0] if along is not None else 0.0)
+            if record is not None and along is not None:
+                record.append((t, *along))
+            elif record is not None and math.isfinite(z):
                 record.append((t, z_ref, z))
             if reason:
                 return reason
@@ -370,9 +382,19 @@ class MavlinkVehicle:
         self._abort_request = reason
 
     def _calm(self, hover_alt_m: float):
-        """The calm test around the hover altitude: small altitude error and small vertical speed."""
+        """The calm test around the hover altitude: small altitude error and small vertical speed; for the
+        horizontal loop also a small offset from the hover point and a small speed along its axis."""
         cfg = self.config
-        return lambda s: abs(-s.z_m - hover_alt_m) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps
+
+        def calm(s: PositionSample) -> bool:
+            if not (abs(-s.z_m - hover_alt_m) < cfg.calm_tolerance_m and abs(s.vz_mps) < cfg.calm_speed_mps):
+                return False
+            if cfg.tuned_loop != "horizontal":
+                return True
+            i = AXES[cfg.axis]
+            return abs((s.x_m, s.y_m)[i] - self._hover_ned[i]) < cfg.calm_horizontal_m and \
+                abs((s.vx_mps, s.vy_mps)[i]) < cfg.calm_speed_mps
+        return calm
 
     def _recover(self) -> str | None:
         """Before new gains: hover with the current (safe) gains until calm. After an aborted primitive, hover
@@ -391,10 +413,15 @@ class MavlinkVehicle:
             self.link.remove_position_listener(samples.put)
 
     def _fly_primitive(self) -> tuple[str | None, list[tuple[float, float, float]]]:
-        """Settle, then fly the circle; (abort reason or None, samples (t_s, z_ref_m, z_m))."""
+        """Settle, then fly the loop's primitive; (abort reason or None, samples (t_s, reference_m, position_m):
+        altitude up, or the position along the horizontal axis)."""
         cfg = self.config
         samples: queue.Queue[PositionSample] = queue.Queue()
         self.link.add_position_listener(samples.put)
+        self.link.add_motor_listener(self._motor_record.append)
+        self._motor_record.clear()
+        motor_id = MOTOR_MESSAGE_IDS[self.link.motor_message]
+        self.link.request_rate(motor_id, cfg.motor_hz)  # for the primitive only: a radio link has little to spare
         recorded: list[tuple[float, float, float]] = []
         try:
             start = self.link.state.position
@@ -403,14 +430,28 @@ class MavlinkVehicle:
             reason = self._phase(samples, start.t_s, cfg.settle_s, lambda t: base, None, self._calm(hover_alt))
             if reason:  # the new gains do not hold a calm hover: their fault, not the weather's
                 return ("not_settled" if reason == "not_calm" else reason), recorded
-            circle = Circle(self._hover_ned, cfg.primitive_s, cfg.circle_diameter_m, cfg.elevation_m)
+            self.link.request_rate(motor_id, cfg.motor_hz)  # again (unacknowledged): a lost request loses a flight
             t0 = self.link.state.position.t_s
             base = self._altitude(self.link.state.position) if cfg.altitude_source == "distance_sensor" else hover_alt
+            if cfg.tuned_loop == "horizontal":  # out and back along the axis at the hover altitude, its error measured
+                line = OutAndBack(self._hover_ned, cfg.primitive_s, cfg.travel_m, cfg.axis)
+                i = AXES[cfg.axis]
+                self.streamer.set_target(lambda t: line.at(t - t0))
+                self._primitive_t0 = t0
+                reason = self._phase(samples, t0, cfg.primitive_s, lambda t: base, recorded,
+                                     track=lambda t, s: (line.reference_m(t), (s.x_m, s.y_m)[i]))
+                return reason, recorded
+            circle = Circle(self._hover_ned, cfg.primitive_s, cfg.circle_diameter_m, cfg.elevation_m)
             self.streamer.set_target(lambda t: circle.at(t - t0))
+            self._primitive_t0 = t0
             reason = self._phase(samples, t0, cfg.primitive_s, lambda t: base + circle.altitude_ref_m(t) - hover_alt, recorded)
             return reason, recorded
         finally:
             self.link.remove_position_listener(samples.put)
+            self.link.remove_motor_listener(self._motor_record.append)
+            self.link.send(lambda m: m.command_long_send(  # back to the autopilot's own rate
+                self.link.target_system, self.link.target_component, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                motor_id, 0, 0, 0, 0, 0, 0))
             self._hold()
 
     def fly(self, gains: Gains, round_id: int) -> Flight:
@@ -462,8 +503,15 @@ class MavlinkVehicle:
         info["samples"] = len(recorded)
         info["wall_s"] = round(time.monotonic() - started, 3)
         trace = _trace(recorded)
+        measured = self._measures(recorded)
+        info["measures"] = measured.to_dict()
+        info["cost_name"] = self.config.cost
         if reason is None:
-            cost = altitude_cost(*zip(*recorded), filter_hz=self.config.filter_hz) if len(recorded) >= 2 else math.inf
+            cost = measured.iae if self.config.cost == "iae" else measured.balanced(self.config.balance)
+            if self.config.cost == "balanced" and not math.isfinite(measured.activity_per_s) \
+                    and math.isfinite(measured.iae):
+                self.last_safe_params = dict(values)  # flown without an abort: safe, only not costed
+                return self._no_motor_output(lost, round_id)
             if math.isfinite(cost):
                 self.last_safe_params = dict(values)
                 return Flight(self.name, gains, cost, Status.OK, trace, info)
@@ -491,9 +539,31 @@ class MavlinkVehicle:
                 self._released = f"safe gains could not be restored after {reason}"
         if reason in GAIN_FAULTS:
             if len(recorded) >= 2:
-                info["partial_cost"] = altitude_cost(*zip(*recorded), filter_hz=self.config.filter_hz)
+                info["partial_cost"] = measured.iae
             return Flight(self.name, gains, math.inf, Status.FAILED, trace, info)
         return Flight(self.name, gains, math.nan, Status.LOST, trace, info)
+
+    def _measures(self, recorded: list[tuple[float, float, float]]):
+        """The measures of the last primitive: altitude samples (t_s from its start, z_ref_m, z_m) and the motor
+        outputs received meanwhile, on the simulator's 100 Hz grid."""
+        lo, hi = self.config.motor_pwm_us
+        t0, end = self._primitive_t0, self._primitive_t0 + self.config.primitive_s
+        motors = [(m.t_s - t0, m.values[:self.motors]) for m in list(self._motor_record)
+                  if t0 - 0.1 <= m.t_s <= end + 0.1 and len(m.values) >= self.motors]
+        u = [[(v - lo) / (hi - lo) for v in values] for _, values in motors]
+        t_m = [t for t, _ in motors]
+        return flight_measures(*(zip(*recorded) if recorded else ((), (), ())), t_m, u,
+                               filter_hz=self.config.filter_hz, oscillation_hz=self.config.balance.oscillation_hz)
+
+    def _no_motor_output(self, lost, round_id: int) -> Flight:
+        """A primitive flown without motor outputs cannot be costed by the balanced cost: the flight is lost, and
+        a vehicle that never sent any leaves the run (it would be lost in every round)."""
+        what = self.link.motor_message
+        if self.link.motor_samples == 0:
+            self._released = (f"no {what} received: the balanced cost needs the motor outputs; set [mavlink] "
+                              "cost = \"iae\" to tune on tracking alone")
+            log.error("%s: %s", self.name, self._released)
+        return lost("no_motor_output", f"no {what} during the primitive of round {round_id}")
 
     def _pilot_took_over(self) -> bool:
         """The pilot switched modes: stop commanding and give back the original gains (the vehicle is out of the

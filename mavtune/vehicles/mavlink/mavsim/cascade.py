@@ -95,3 +95,51 @@ class ArduCopterAltitude:
                        + g["PSC_ACCZ_D"] * (self._acc_err - self._acc_err_prev) / dt_s)
         throttle = min(max(self.hover_throttle + 0.001 * thousandths, 0.0), 1.0)
         return GRAVITY_MPS2 * (throttle / self.hover_throttle - 1.0)
+
+
+@dataclass
+class Px4Altitude:
+    """PX4's vertical position and velocity control (mc_pos_control's PositionControl, up axis) as mavsim flies it for
+    the PX4 flavour: MPC_Z_P turns the altitude error into a climb rate, plus the setpoint's, clamped to
+    MPC_Z_VEL_MAX_UP / _DN (3 / 1.5 m/s); the velocity PID in acceleration units — MPC_Z_VEL_P_ACC on the climb-rate
+    error, MPC_Z_VEL_I_ACC integrating it (limited to ±g), MPC_Z_VEL_D_ACC on the measured vertical acceleration
+    (the derivative of the velocity, low-passed at MPC_VELD_LP 5 Hz) — plus the setpoint's acceleration. The
+    integrator stops while the thrust is saturated in the direction it would push (PX4's anti-windup). Hover thrust
+    is taken as known (PX4 estimates it), so the asked acceleration is that of the airframe. `gains` holds PX4's
+    parameter names and units."""
+
+    gains: dict[str, float] = field(default_factory=lambda: {
+        "MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0, "MPC_Z_VEL_I_ACC": 2.0, "MPC_Z_VEL_D_ACC": 0.0})
+    speed_up_mps: float = 3.0  # MPC_Z_VEL_MAX_UP
+    speed_down_mps: float = 1.5  # MPC_Z_VEL_MAX_DN
+    accel_filter_hz: float = 5.0  # MPC_VELD_LP
+    hover_thrust: float = 0.5  # MPC_THR_HOVER
+    thrust_min: float = 0.12  # MPC_THR_MIN
+    thrust_max: float = 1.0  # MPC_THR_MAX
+
+    def __post_init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the integrator and the acceleration filter (a fresh takeoff)."""
+        self._vel_int = self._vel_dot = 0.0
+        self._vz_prev: float | None = None
+
+    def step(self, dt_s: float, z_target_m: float, vz_ff_mps: float, az_ff_mps2: float, z_m: float,
+             vz_mps: float) -> float:
+        """One controller step; returns the vertical acceleration asked of the airframe, m/s² (up, without g)."""
+        g = self.gains
+        raw = 0.0 if self._vz_prev is None else (vz_mps - self._vz_prev) / dt_s
+        self._vz_prev = vz_mps
+        self._vel_dot = _lowpass(self._vel_dot, raw, self.accel_filter_hz, dt_s)
+        vel_sp = g["MPC_Z_P"] * (z_target_m - z_m) + vz_ff_mps
+        vel_sp = min(max(vel_sp, -self.speed_down_mps), self.speed_up_mps)
+        err = vel_sp - vz_mps
+        acc = az_ff_mps2 + g["MPC_Z_VEL_P_ACC"] * err + self._vel_int - g["MPC_Z_VEL_D_ACC"] * self._vel_dot
+        lo = GRAVITY_MPS2 * (self.thrust_min / self.hover_thrust - 1.0)
+        hi = GRAVITY_MPS2 * (self.thrust_max / self.hover_thrust - 1.0)
+        out = min(max(acc, lo), hi)
+        if not ((acc >= hi and err > 0) or (acc <= lo and err < 0)):  # anti-windup: not while saturated that way
+            self._vel_int += g["MPC_Z_VEL_I_ACC"] * err * dt_s
+            self._vel_int = min(max(self._vel_int, -GRAVITY_MPS2), GRAVITY_MPS2)
+        return out

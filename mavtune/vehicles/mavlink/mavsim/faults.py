@@ -11,7 +11,8 @@ FAULT_HELP = (
     "heartbeat-gap:N[:SECONDS] (link silent for SECONDS wall time, default 1, during primitive N), "
     "mode-change:N (pilot switches mode during primitive N), "
     "param-drop:NAME:K (the K-th PARAM_SET changing NAME, and its retries, are never answered), "
-    "diverge:NAME:VALUE (the altitude loop is unstable while NAME > VALUE)"
+    "diverge:NAME:VALUE (the altitude loop is unstable while NAME > VALUE), "
+    "no-motor-outputs (neither SERVO_OUTPUT_RAW nor ACTUATOR_OUTPUT_STATUS is ever sent)"
 )
 
 
@@ -24,6 +25,7 @@ class Faults:
     param_drop: dict[str, int] = field(default_factory=dict)  # name → which value-changing PARAM_SET to drop
     diverge: dict[str, float] = field(default_factory=dict)  # name → threshold
     at_s: float = 0.5  # how far into the primitive (vehicle time) a timed fault strikes
+    no_motor_outputs: bool = False  # an autopilot that reports no motor outputs
 
 
 def parse_faults(specs: list[str] | None) -> Faults:
@@ -43,6 +45,8 @@ def parse_faults(specs: list[str] | None) -> Faults:
                 faults.param_drop[args[0]] = int(args[1])
             elif kind == "diverge" and len(args) == 2:
                 faults.diverge[args[0]] = float(args[1])
+            elif kind == "no-motor-outputs" and not args:
+                faults.no_motor_outputs = True
             else:
                 raise ValueError
         except ValueError:

@@ -22,6 +22,7 @@ class StandInPlant:
     THRUST_LAG_S = 0.03  # F550 motor time constant
     MAX_ACC_UP_MPS2 = 1.67 * GRAVITY_MPS2  # thrust/weight 2.67
     XY_GAINS = (6.0, 4.0)  # MRS horizontal kp, kv (1/s², 1/s)
+    HOVER_COMMAND = 1.0 / 2.67  # thrust/weight 2.67: motors linear in thrust
 
     def __init__(self, vehicles: int = 1, scenario=None, seed: int = 0):
         self.vehicles = vehicles
@@ -44,6 +45,16 @@ class StandInPlant:
         """Physical altitude gains: kx in 1/s², kv in 1/s (scalars or (B,))."""
         self._kz = (np.broadcast_to(np.asarray(kx, float), (self.vehicles,)).copy(),
                     np.broadcast_to(np.asarray(kv, float), (self.vehicles,)).copy())
+
+    def horizontal_from_reference(self) -> None:
+        """The horizontal acceleration is the reference's alone (no x-y gains), as sim.Plant's."""
+        self.XY_GAINS = (0.0, 0.0)
+
+    @property
+    def motor_command(self) -> np.ndarray:
+        """Normalised motor commands (B, 4) in [0, 1]: the vertical thrust asked for, hover at HOVER_COMMAND."""
+        u = self.HOVER_COMMAND * (1.0 + self._acc[:, 2] / GRAVITY_MPS2)
+        return np.repeat(np.clip(u, 0.0, 1.0)[:, None], 4, axis=1)
 
     def step(self, ref_pos_m, ref_vel_mps, ref_acc_mps2) -> None:
         """Advance 0.01 s tracking the reference (z up)."""

@@ -7,15 +7,19 @@ plant is compiled in the background meanwhile), the PARAM_* protocol with the au
 (ArduPilot stores any PARAM_SET, negative or of another type, and echoes it; PX4 drops a PARAM_SET whose type is
 not the parameter's), MAV_CMD_DO_SET_MODE / SET_MODE, arming and takeoff, SET_MESSAGE_INTERVAL,
 REQUEST_MESSAGE and AUTOPILOT_VERSION, and streams LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE,
-DISTANCE_SENSOR, SYS_STATUS, EXTENDED_SYS_STATE and HOME_POSITION. It follows SET_POSITION_TARGET_LOCAL_NED in
+DISTANCE_SENSOR, SYS_STATUS, EXTENDED_SYS_STATE, HOME_POSITION and the motor outputs: SERVO_OUTPUT_RAW (both; PWM
+1000–2000 µs from the plant's rotor commands, channels past the motors 0 on ArduPilot, 900 on PX4, as SITL sends
+them) and, PX4 only, ACTUATOR_OUTPUT_STATUS. It follows SET_POSITION_TARGET_LOCAL_NED in
 OFFBOARD (PX4) or GUIDED (ArduPilot) from the moment it arrives (ArduPilot advances the target by its velocity,
 PX4 holds it); entering GUIDED holds the current position until a new target comes. `link_delay_s` delays every
 message each way.
 
 Gain mapping: see `mavtune.vehicles.mavlink.mavsim.cascade` (ArduCopter's PSC_POSZ_P → PSC_VELZ_P → PSC_ACCZ_*
-cascade with its limits and filters) and, for PX4, the P position loop feeding a P velocity loop in acceleration
-units: k_x(z) = MPC_Z_P · MPC_Z_VEL_P_ACC [1/s²], k_v(z) = MPC_Z_VEL_P_ACC [1/s]. The diverge fault adds a growing
-altitude oscillation to the reference while the named parameter is above its threshold.
+cascade with its limits and filters; PX4's MPC_Z_P position loop feeding the MPC_Z_VEL_P/I/D_ACC velocity PID in
+acceleration units): every altitude gain of either autopilot acts on the flight. Horizontally both flavours fly their
+autopilot's own cascade with its gains (`mavtune.vehicles.mavlink.mavsim.horizontal`: PSC_POSXY_P →
+PSC_VELXY_P/_I/_D, MPC_XY_P → MPC_XY_VEL_P_ACC/_I_ACC), commanding the plant's horizontal acceleration. The
+diverge fault adds a growing altitude oscillation to the reference while the named parameter is above its threshold.
 """
 
 from __future__ import annotations
@@ -34,11 +38,12 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavtune.errors import MavtuneError
-from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude
+from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude, Px4Altitude
 from mavtune.vehicles.mavlink.mavsim.faults import Faults
+from mavtune.vehicles.mavlink.mavsim.horizontal import ArduCopterHorizontal, Px4Horizontal
 from mavtune.vehicles.mavlink.mavsim.plant import make_plant
 from mavtune.vehicles.mavlink.params import as_float32
-from mavtune.vehicles.mavlink.profiles import ARDUPILOT, PX4, Autopilot, AutopilotProfile
+from mavtune.vehicles.mavlink.profiles import ARDUPILOT, NEWER_ARDUPILOT_PREFIXES, PX4, Autopilot, AutopilotProfile
 
 log = logging.getLogger(__name__)
 
@@ -53,15 +58,17 @@ STREAM_HZ = {  # default rates (vehicle time); SET_MESSAGE_INTERVAL changes them
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.2,
+    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
+    mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.0,  # PX4 only, when asked (ArduPilot refuses it)
 }
+PWM_US = (1000.0, 2000.0)  # motor output at command 0 and 1 (MOT_PWM_MIN/MAX, PWM_MAIN_MIN/MAX)
+UNUSED_OUTPUT_US = {Autopilot.PX4: 900.0, Autopilot.ARDUPILOT: 0.0}  # what the autopilots send on other outputs
 HOME = (-35.363262, 149.165237, 584.0)  # lat, lon (deg), altitude AMSL (m): ArduPilot SITL's default home
 EARTH_RADIUS_M = 6378137.0
 OFFBOARD_LOSS_S = 1.0  # PX4 COM_OF_LOSS_T: OFFBOARD without setpoints for this long falls back to Hold
 GUIDED_TIMEOUT_S = 3.0  # ArduCopter GUIDED: a velocity/acceleration target older than this is stopped
 FLAVOURS = ("px4", "ardupilot", "ardupilot-4.7")
 VERSIONS = {"px4": (1, 15, 0), "ardupilot": (4, 6, 0), "ardupilot-4.7": (4, 7, 0)}
-POS_P_NAMES = ("MPC_Z_P", "PSC_POSZ_P", "PSC_D_POS_P")
-VEL_P_NAMES = ("MPC_Z_VEL_P_ACC", "PSC_VELZ_P", "PSC_D_VEL_P")
 IGNORE_POS = 0b111
 IGNORE_VEL = 0b111 << 3
 IGNORE_ACC = 0b111 << 6
@@ -87,7 +94,8 @@ def flavour_params(flavour: str) -> tuple[AutopilotProfile, dict[str, float]]:
         return PX4, {s.name: s.default for s in PX4.specs}
     if flavour in ("ardupilot", "ardupilot-4.7"):
         new = flavour == "ardupilot-4.7"
-        return ARDUPILOT, {s.name: s.default for s in ARDUPILOT.specs if s.name.startswith("PSC_D_") == new}
+        return ARDUPILOT, {s.name: s.default for s in ARDUPILOT.specs
+                           if s.name.startswith(NEWER_ARDUPILOT_PREFIXES) == new}
     raise MavtuneError(f"unknown autopilot {flavour!r} for mavsim; use {', '.join(FLAVOURS)}")
 
 
@@ -143,6 +151,11 @@ class SimVehicle:
         self.offboard_loss_s = offboard_loss_s  # PX4's COM_OF_LOSS_T
         self.faults = faults or Faults()
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=system_id, source_component=1)
+        if self.profile.autopilot is Autopilot.PX4:  # PX4 speaks MAVLink 2 from its first message (as its SITL
+            # does; ACTUATOR_OUTPUT_STATUS has no MAVLink 1 form), the ground switches to it on the first byte
+            self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=system_id, srcComponent=1)
+            self.conn.mav.robust_parsing = True
+            self.conn.WIRE_PROTOCOL_VERSION, self.conn.first_byte = "2.0", False
         self._send_lock = threading.Lock()
         self.system_id = system_id
         self.uid = int.from_bytes(os.urandom(8), "little") | 1  # AUTOPILOT_VERSION uid: a new board each start
@@ -154,7 +167,8 @@ class SimVehicle:
         self.plant_kind = "starting"
         self._plant_args = (seed, noise_free)
         self._built: tuple[Any, str] | None = None
-        self.cascade = ArduCopterAltitude() if self.profile.autopilot is Autopilot.ARDUPILOT else None
+        self.cascade = ArduCopterAltitude() if self.profile.autopilot is Autopilot.ARDUPILOT else Px4Altitude()
+        self.horizontal = ArduCopterHorizontal() if self.profile.autopilot is Autopilot.ARDUPILOT else Px4Horizontal()
         self.mode = "POSCTL" if self.profile.autopilot is Autopilot.PX4 else "LOITER"
         self._hold_ned = self._ned_position()
         self._target: _Target | None = None
@@ -179,6 +193,7 @@ class SimVehicle:
         plant.reset(self._start_m)
         plant.step(self._start_m)  # the first step compiles
         plant.reset(self._start_m)
+        plant.horizontal_from_reference()  # the autopilot's horizontal cascade (self.horizontal) commands it
         self._built = (plant, kind)  # the serving loop adopts it (one thread touches the plant)
 
     def _adopt_plant(self) -> None:
@@ -203,15 +218,11 @@ class SimVehicle:
             self._diverge_since = None
         if self.plant is None:
             return
-        if self.cascade is not None:  # ArduCopter: the cascade commands the acceleration; the plant's PD is off
-            for name, value in self.params.items():
-                canonical, scale = self.profile.family(name)[0][0], dict(self.profile.family(name))[name]
-                self.cascade.gains[canonical] = value / scale
-            self.plant.set_gains(0.0, 0.0)
-            return
-        pos_p = next(self.params[n] for n in POS_P_NAMES if n in self.params)
-        vel_p = next(self.params[n] for n in VEL_P_NAMES if n in self.params)
-        self.plant.set_gains(max(pos_p, 0.0) * max(vel_p, 0.0), max(vel_p, 0.0))  # the plant takes no negative gain
+        # the autopilot's cascades command the accelerations; the plant's own altitude PD (and x-y law) are off
+        canonical = {self.profile.family(n)[0][0]: v / dict(self.profile.family(n))[n] for n, v in self.params.items()}
+        self.cascade.gains.update(canonical)
+        self.horizontal.gains.update({n: v for n, v in canonical.items() if n in self.horizontal.gains})
+        self.plant.set_gains(0.0, 0.0)
 
     def _reference(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The NED reference the autopilot tracks now, by mode."""
@@ -243,12 +254,13 @@ class SimVehicle:
         flip = np.array([1.0, -1.0, -1.0])  # NED → the plant's z-up frame (a proper rotation)
         pos, vel, acc = pos * flip, vel * flip, acc * flip
         if self.airborne:
-            if self.cascade is not None:
-                p, v = self.plant.position_m[0], self.plant.velocity_mps[0]
-                acc = acc.copy()
-                acc[2] = self.cascade.step(DT_S, pos[2], vel[2], acc[2], p[2], v[2])
-                pos, vel = pos.copy(), vel.copy()
-                pos[2], vel[2] = p[2], v[2]
+            p, v = self.plant.position_m[0], self.plant.velocity_mps[0]
+            pos, vel, acc = pos.copy(), vel.copy(), acc.copy()
+            # the autopilot's horizontal cascade commands the acceleration; the plant's own x-y law is off
+            acc[:2] = self.horizontal.step(DT_S, pos[:2], vel[:2], acc[:2], p[:2], v[:2])
+            acc[2] = self.cascade.step(DT_S, pos[2], vel[2], acc[2], p[2], v[2])
+            pos[:2], vel[:2] = p[:2], v[:2]
+            pos[2], vel[2] = p[2], v[2]
             self.plant.step(pos, vel, acc)
         self.t_s += DT_S
         for when, action in list(self._timed):
@@ -322,11 +334,26 @@ class SimVehicle:
             lat, lon = _latlon(np.zeros(3))
             self._send("home_position", lat, lon, int(HOME[2] * 1000), 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
                        0.0, 0.0, 0.0)
+        elif msg_id in (mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS) \
+                and not self.faults.no_motor_outputs:
+            pwm = self._motor_outputs_us()
+            if msg_id == mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW:
+                # outputs 1-8 (9-16 are MAVLink 2 extensions; the ArduPilot flavour speaks MAVLink 1)
+                self._send("servo_output_raw", int(self.t_s * 1e6) % 2**32, 0, *(int(round(v)) for v in pwm[:8]))
+            else:
+                self._send("actuator_output_status", int(self.t_s * 1e6), 16, [*pwm[:16], *([0.0] * 16)])
         elif msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             major, minor, patch = self.version
             sw = (major << 24) | (minor << 16) | (patch << 8) | mavlink.FIRMWARE_VERSION_TYPE_OFFICIAL
             self._send("autopilot_version", CAPABILITIES, sw, 0, 0, 0, b"mavsim\0\0", bytes(8), bytes(8), 0, 0,
                        self.uid)
+
+    def _motor_outputs_us(self) -> list[float]:
+        """The 16 main outputs, µs: the plant's motor commands on the first channels (idle before take-off)."""
+        lo, hi = PWM_US
+        u = self.plant.motor_command[0] if self.plant is not None and self.armed else np.zeros(0)
+        outputs = [lo + (hi - lo) * float(min(max(x, 0.0), 1.0)) for x in u]
+        return outputs + [UNUSED_OUTPUT_US[self.profile.autopilot]] * (16 - len(outputs))
 
     def _periodic(self) -> None:
         now = time.monotonic()
@@ -441,6 +468,8 @@ class SimVehicle:
         """MAV_CMD_SET_MESSAGE_INTERVAL: interval in µs, 0 the default rate, −1 off."""
         if msg_id not in STREAM_HZ or not math.isfinite(interval_us):
             return mavlink.MAV_RESULT_DENIED
+        if msg_id == mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS and self.profile.autopilot is not Autopilot.PX4:
+            return mavlink.MAV_RESULT_DENIED  # as ArduCopter SITL answers
         if interval_us == 0:
             self._rates[msg_id] = STREAM_HZ[msg_id]
         elif interval_us < 0:

@@ -1,0 +1,66 @@
+"""Every point flown in a run with what its flights measured: cost, motor activity and peak altitude error.
+
+A flight's `info["measures"]` (`mavtune.sim.cost.Measures.to_dict`: the simulator's and the MAVLink vehicles'
+flights carry it) gives its motor activity (mean |du/dt| of the normalised motor commands, 1/s) and its peak
+|altitude error| (m, low-passed as the cost). result.json's `points` and the report's "Points flown" table are
+this list.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+from mavtune.fleet import Status
+from mavtune.report import markdown as md
+from mavtune.report import units as U
+from mavtune.report.searches import as_float
+
+
+def flown_points(rounds: Sequence) -> list[dict[str, Any]]:
+    """One entry per gain vector flown, in the order first flown: its flights measured (ok or failed), their mean
+    cost, mean motor activity (1/s; None where no flight reported one) and largest peak error (m)."""
+    points: dict[tuple, dict[str, Any]] = {}
+    for rnd in rounds:
+        for f in rnd.flights:
+            if f.status is Status.LOST:
+                continue
+            key = tuple(sorted((k, round(float(v), 12)) for k, v in (f.gains or {}).items()))
+            p = points.setdefault(key, {"gains": dict(f.gains), "flights": 0, "costs": [], "activity": [],
+                                        "peak": []})
+            p["flights"] += 1
+            p["costs"].append(as_float(f.cost))
+            m = (f.info or {}).get("measures") or {}
+            for name, into in (("activity_per_s", "activity"), ("peak_error_m", "peak")):
+                if m.get(name) is not None and math.isfinite(as_float(m[name])):
+                    p[into].append(as_float(m[name]))
+    out = []
+    for p in points.values():
+        costs = [c for c in p["costs"] if not math.isnan(c)]
+        out.append({"gains": p["gains"], "flights": p["flights"],
+                    "mean_cost": _json(math.fsum(costs) / len(costs)) if costs else None,
+                    "activity_per_s": math.fsum(p["activity"]) / len(p["activity"]) if p["activity"] else None,
+                    "peak_error_m": max(p["peak"]) if p["peak"] else None})
+    return out
+
+
+def _json(x: float) -> float | str:
+    """A JSON number, or its repr for inf (a failed flight's cost)."""
+    return x if math.isfinite(x) else repr(x)
+
+
+def points_section(points: list[dict[str, Any]], units: dict[str, U.GainUnit] | None = None) -> list[str]:
+    """The report's table of the points flown (nothing when no flight measured motor activity or peak error)."""
+    if not any(p.get("activity_per_s") is not None or p.get("peak_error_m") is not None for p in points):
+        return []
+    units = units or {}
+    names = list(points[0]["gains"])
+    rows = [[*(U.num(g, p["gains"].get(g, math.nan), units, 5) for g in names), p["flights"],
+             md.num(None if p["mean_cost"] is None else as_float(p["mean_cost"]), 5),
+             md.num(p["activity_per_s"], 3), md.num(p["peak_error_m"], 3)] for p in points]
+    header = [U.label(g, units) for g in names] + ["flights", "mean cost", "motor activity (1/s)",
+                                                    "peak altitude error (m)"]
+    return ["## Points flown", "",
+            "Motor activity: mean |dū/dt| of the collective motor command (normalised to [0, 1]), averaged over the point's "
+            "flights; peak error: the largest |altitude error| (low-passed as the cost) of its flights.", "",
+            md.table(header, rows, ["r"] * len(header)), ""]
