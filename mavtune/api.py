@@ -72,6 +72,7 @@ def tune(
     cap: int | None = DEFAULT,
     answer: str = DEFAULT,
     edges: bool = DEFAULT,
+    directions: bool = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
     max_rounds: int = MAX_ROUNDS,
@@ -87,8 +88,9 @@ def tune(
     comparisons again until the kept point is right with probability `confidence` or each point has `cap`
     flights (None: 4 rounds' worth), `answer` is each line search's answer ("search" or "model": a local fit of
     all its flights), `edges` whether a line search ending against an edge of its range flies the edge (an optimum
-    there can be the answer), `on_round` sees every round as it ends, `draws` resampled searches give each gain's
-    interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
+    there can be the answer), `answer="valley"` a fit with one curvature each side of the minimum, `directions`
+    whether a line search across the gains follows every pass but the first (a valley across the gains), `on_round`
+    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
     `mavtune tune` refuses them. `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
     seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs
     again (another function is refused), unless `resume=True` (a cost noisy by design).
@@ -109,7 +111,7 @@ def tune(
         vehicles if vehicles is not None else fleet.size, space=space, method=method, epsilon=epsilon,
         bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial=initial, replicates=replicates, points=points,
         max_bootstraps=max_bootstraps, seed=seed if seed is not None else DEFAULT, adaptive=adaptive,
-        confidence=confidence, cap=cap, answer=answer, edges=edges)
+        confidence=confidence, cap=cap, answer=answer, edges=edges, directions=directions)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")

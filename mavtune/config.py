@@ -47,18 +47,21 @@ order (their parameters per autopilot: mavtune.vehicles.parammap): "altitude" is
 
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
-                   "refly", "answer", "edges")  # what [tuning] gives the engine's Settings
+                   "refly", "answer", "edges", "directions")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
     """What is tuned and how. The paper's search (EQL, shoe-lacing, 2 bootstraps, initial kd 0.2) with a coarser
     tolerance (ε 0.2), reuse, adaptive averaging (confidence 0.85, at most 6 flights a point per comparison) and the
     answer of each line search fitted to all its flights (`answer = "model"`); a line search ending against its
-    range's edge flies the edge (`edges`). Of the configurations tried on the plant zoo of benchmarks/quality.py
-    (selection half, even runs) it had the highest mean share of runs within 2 % of the optimum (27 %: 90-100 % on
-    the nominal simulator, far less on most other plants: benchmarks/results/quality.md); none met the zoo's flight
-    goals. This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options both take it
-    (`settings()`). `PAPER_TUNING` restores the paper's exact setting.
+    range's edge flies the edge (`edges`). Chosen on the plant zoo of benchmarks/quality.py (selection half, even
+    runs, 9 configurations: benchmarks/results/selection.md): 37 % of runs within 2 % of the optimum on mean over
+    the plants (100 % on the nominal simulator and Crazyflow, far less on most others), no fly-away answer, 100
+    flights on mean; the valley answer with line searches across the gains (`answer = "valley"`,
+    `directions = true`) scored 38 %, a tie, with a fly-away answer, more flights and 30 % on the nominal simulator,
+    and none met the zoo's flight goals without losing most of its quality. This is the one default: `mavtune tune`
+    with no flags and `mavtune.tune()` with no options both take it (`settings()`). `PAPER_TUNING` restores the
+    paper's exact setting.
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
@@ -83,10 +86,14 @@ class Tuning(_Section):
                             "(None: 4 rounds' worth)")
     stop_undecided: StrictBool = Field(False, description="adaptive: a comparison undecided at the cap stops the search")
     refly: StrictBool = Field(False, description="reuse: a point carried into the next comparison is flown again there")
-    answer: Literal["search", "model"] = Field("model", description="each line search's answer: the method's own "
-                                                "(search) or a local quadratic fit of all its flights (model)")
+    answer: Literal["search", "model", "valley"] = Field("model", description="each line search's answer: the "
+                                                          "method's own (search), a local quadratic fit of all its "
+                                                          "flights (model) or a fit with one curvature each side of "
+                                                          "the minimum (valley: asymmetric valleys)")
     edges: StrictBool = Field(True, description="a line search that ends against an edge of its range flies the "
                               "edge itself: an optimum on the edge can be answered, and is said with its evidence")
+    directions: StrictBool = Field(False, description="between passes over the gains, a line search along the "
+                                   "pass's net move (Powell's direction): follows a valley that runs across the gains")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":

@@ -208,7 +208,8 @@ def _adaptive_rounds(settings: Settings, lo: float, hi: float, work: Work) -> tu
 
 def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.0, battery_s: float = 600.0,
               work_limit: int | None = None) -> Plan:
-    """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps; refused
+    """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps (and the
+    line searches across the gains between passes, `directions`: each the same search over its segment); refused
     (MavtuneError) when the rehearsals would take more than `work_limit` steps (default `PLAN_WORK`)."""
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
     # every gain's line search has the same shape relative to its range: rehearse one, count it per gain
@@ -217,7 +218,7 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
     work = Work(settings, work_limit)
     work.check_before(settings.search(lo, hi), 2 * EXPECTED_PROBES + 4 if settings.adaptive_rule is not None
                       else MINIMISER_PROBES + NOISE_PROBES)
-    searches = len(settings.space) * bootstraps
+    searches = len(settings.space) * bootstraps + settings.direction_searches(bootstraps)
     clear = None
     if settings.adaptive_rule is not None:
         mean, per_search_max, mean_clear = _adaptive_rounds(settings, lo, hi, work)

@@ -160,16 +160,19 @@ class RoundView:
 def round_line(rnd: Round) -> str:
     """One round for the console (rounds from 0): the gain's bracket, each vehicle's point and cost, the mean."""
     lo, hi = rnd.bracket
-    points = [a[rnd.gain] for a in rnd.assignments]
+    one_gain = all(rnd.gain in a for a in rnd.assignments)  # else a line search along a direction: all gains move
+    points = [a[rnd.gain] if one_gain else tuple(a.values()) for a in rnd.assignments]
+    shown = [f"{p:.4g}" if one_gain else "(" + ", ".join(f"{v:.4g}" for v in p) + ")" for p in points]
     measured = [f.cost for f in rnd.flights if f.measured and math.isfinite(f.cost)]
     mean = f"mean {sum(measured) / len(measured):.4g}" if measured else "no cost measured"
     if len(rnd.flights) <= MANY_VEHICLES:
-        each = (f"{rnd.gain} per vehicle {' '.join(f'{p:.4g}' for p in points)}  cost per vehicle "
+        each = (f"{rnd.gain} per vehicle {' '.join(shown)}  cost per vehicle "
                 f"{' '.join(_cost_text(f.cost, f.status) for f in rnd.flights)}")
     else:
         lost = sum(f.status is Status.LOST for f in rnd.flights)
         failed = sum(f.status is Status.FAILED for f in rnd.flights)
-        each = (f"{counted(len(set(points)), 'point')} of {rnd.gain} in [{min(points):.4g}, {max(points):.4g}] on "
+        span = f" in [{min(points):.4g}, {max(points):.4g}]" if one_gain else ""
+        each = (f"{counted(len(set(points)), 'point')} of {rnd.gain}{span} on "
                 f"{counted(len(rnd.flights), 'vehicle')}" + (f", [yellow]{lost} lost[/]" if lost else "")
                 + (f", [red]{failed} failed[/]" if failed else ""))
     tag = " (journal)" if rnd.replayed else ""

@@ -18,10 +18,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from mavtune.errors import MavtuneError
-from mavtune.fleet import Fleet, Flight, Gains, Status
+from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
 from mavtune.search.interval import DRAWS, joint, plausible_region, resample, resolution
+from mavtune.search.joint import newton_step
 from mavtune.search.model import flown_span
 from mavtune.strategy import Strategy
 
@@ -29,6 +30,7 @@ INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, 
                  "value the run's flights cannot rule out with all gains free (a gain vector is ruled out only when "
                  "its nearest flown point is), and reaches back to the previous answer and on, to the range's bound "
                  "while the answer still moves by more than the search's tolerance between bootstraps")
+DIRECTION = "direction"  # the `gain` of a round of a line search across the gains (all gains at once)
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 # Bounds of every accepted setting, the same for the Python API and the CLI: each run plans and flies in bounded time.
 MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
@@ -197,6 +199,7 @@ class Settings:
     stop_undecided: bool = False
     answer: str = "search"
     edges: bool = False
+    directions: bool = False
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -251,7 +254,12 @@ class Settings:
         """The rounds a run of these settings takes at the least: every line search's budget of evaluations,
         as many a round as the strategy has slots, per gain and bootstrap (one, for the paper's stop rule)."""
         rounds = math.ceil(self.search(0.0, 1.0, edges=False).budget() / self.strategy_rule.slots(int(self.vehicles)))
-        return rounds * len(self.space) * (self.bootstraps or 1)
+        return rounds * len(self.space) * (self.bootstraps or 1)  # (a line search across the gains may be skipped)
+
+    def direction_searches(self, bootstraps: int) -> int:
+        """Line searches across the gains a run of `bootstraps` passes may fly (`directions`: one after every pass
+        but the first; none for one gain)."""
+        return max(0, bootstraps - 1) if self.directions and len(self.space) > 1 else 0
 
     def start_gains(self) -> Gains:
         """The gains before tuning: the given initial values, mid-range for the rest."""
@@ -275,7 +283,8 @@ class Settings:
                                                                   "cap": self.adaptive_rule.cap,
                                                                   "stop": self.adaptive_rule.stop},
             "answer": self.answer if self.answer != "search" else None,
-        } | ({"edges": True} if self.edges else {})  # absent when off: journals from before edges still resume
+        } | ({"edges": True} if self.edges else {}) | (  # absent when off: journals from before still resume
+            {"directions": True} if self.directions else {})
 
 
 class StageDone(Exception):
@@ -314,6 +323,7 @@ class Tuner:
         self.pool = NoisePool()  # the run's flight-to-flight noise, pooled over every line search
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[int, dict[str, dict[str, float]]] = (-1, {})
+        self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
 
     def snapshot(self) -> TuningResult:
         """The run so far: final once `run()` has returned; else with the search under way as it stands after
@@ -363,14 +373,18 @@ class Tuner:
     def _region(self) -> list[tuple[float, float]] | None:
         """Per gain the span no flight of the run rules out, every gain free (`plausible_region`): each flown gain
         vector with its costs, a failed flight's as infinite, a lost one's left out."""
+        return plausible_region(self._flown(), self.pool, list(self.settings.space.values()))
+
+    def _flown(self) -> dict[tuple[float, ...], list[float]]:
+        """Every gain vector flown in the run (in the order of the space) with its flights' costs as the searches
+        count them (`Strategy.measured`: a failed flight's as infinite, a lost one's left out)."""
         names = list(self.settings.space)
         points: dict[tuple[float, ...], list[float]] = {}
         for r in self.rounds:
-            for f in r.flights:
-                if f.measured and all(n in f.gains for n in names):
-                    cost = math.inf if f.status == Status.FAILED else f.cost
-                    points.setdefault(tuple(float(f.gains[n]) for n in names), []).append(cost)
-        return plausible_region(points, self.pool, list(self.settings.space.values()))
+            flights = [f for f in r.flights if all(n in f.gains for n in names)]
+            for gains, cost in zip(*Strategy.measured([f.gains for f in flights], flights)):
+                points.setdefault(tuple(float(gains[n]) for n in names), []).append(cost)
+        return points
 
     def run(self) -> TuningResult:
         s = self.settings
@@ -378,6 +392,7 @@ class Tuner:
         limit = s.bootstraps if s.bootstraps is not None else s.max_bootstraps
         for self.bootstrap in range(1, limit + 1):
             undecided = []
+            start = dict(self.gains)
             for name, (lo, hi) in s.space.items():
                 search = s.search(lo, hi, self.pool)
                 held = {n: v for n, v in self.gains.items() if n != name}
@@ -390,6 +405,8 @@ class Tuner:
                     undecided.append(f"{name}: {search.stop_reason}")
                 self.searches.append(self._record(self.bootstrap, name, held, search, self.gains[name]))
                 self._active = None
+            if s.direction_searches(self.bootstrap) > s.direction_searches(self.bootstrap - 1):
+                self._direction(start)
             self.stop_reason = f"ran {limit} bootstraps"
             if undecided:
                 self.stop_reason = f"bootstrap {self.bootstrap}: " + "; ".join(undecided)
@@ -413,15 +430,57 @@ class Tuner:
         return all(abs(self.gains[n] - earlier[n]) <= s.epsilon * (hi - lo) * (1 + 1e-9)
                    for n, (lo, hi) in s.space.items())
 
-    def _round(self, search, bootstrap: int, name: str, gains: Gains) -> None:
-        """Plan, fly (or replay) and account one round of the current line search."""
+    def _direction(self, start: Gains) -> None:
+        """A line search across the gains, after every pass but the first: along the step to the minimum of a
+        local quadratic fitted to every flight of the run (`joint.newton_step`: it sees a valley's direction in
+        the cross terms), else along the pass's net move (Powell's direction, from `start` to the gains now);
+        through the gains now, over the whole segment of that line inside the box, flown as any line search. Its
+        answer is a point of the line (the gains now lie on it: it can only keep or better them). Skipped when
+        the step is shorter than the tolerance ε of the ranges (nothing to follow)."""
+        s = self.settings
+        names = list(s.space)
+        widths = [hi - lo for lo, hi in s.space.values()]
+        step = newton_step(self._flown(), [self.gains[n] for n in names], widths)
+        move = dict(zip(names, step)) if step is not None else {n: self.gains[n] - start[n] for n in names}
+        if math.hypot(*(move[n] / w for n, w in zip(names, widths))) <= s.epsilon:
+            return
+        t_lo, t_hi = -math.inf, math.inf
+        for n, (lo, hi) in s.space.items():
+            d = move[n]
+            if d:
+                a, b = (lo - self.gains[n]) / d, (hi - self.gains[n]) / d
+                t_lo, t_hi = max(t_lo, min(a, b)), min(t_hi, max(a, b))
+        if not t_hi - t_lo > 0:
+            return
+        origin = dict(self.gains)
+        name = DIRECTION
+        search = s.search(t_lo, t_hi, self.pool)
+        self.directions.append(search)
+        self._active = (self.bootstrap, name, origin, search)
+
+        def place(t: float) -> Gains:
+            out = {}
+            for n, (lo, hi) in s.space.items():  # the segment's ends lie on the box: rounding kept inside it
+                out[n] = min(max(origin[n] + t * move[n], lo), hi)
+            return out
+
+        while not search.done:
+            self._round(search, self.bootstrap, name, self.gains, place)
+        if search.history or search.stop_reason is None:
+            self.gains = place(search.result)
+        self._active = None
+
+    def _round(self, search, bootstrap: int, name: str, gains: Gains,
+               place: Callable[[float], Gains] | None = None) -> None:
+        """Plan, fly (or replay) and account one round of the current line search (`place`: the gains a point of
+        the search flies; by default `name` set to it, the other gains as in `gains`)."""
         index = len(self.rounds)
         record = self.recorded.get(index)
         vehicles = len(record.flights) if record is not None else self.fleet.size
         if vehicles < 1:
             raise MavtuneError(f"no vehicle is available to fly round {index}")
         points = self.settings.strategy_rule.assign(search, vehicles)
-        assignments = [{**gains, name: p} for p in points]
+        assignments = [place(p) if place is not None else {**gains, name: p} for p in points]
         bracket = search.bracket
         if record is not None:
             self._check_replay(record, assignments)

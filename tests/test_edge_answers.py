@@ -30,7 +30,7 @@ def falling_in_kp(assignments):
 
 
 @pytest.mark.parametrize("method", sorted(METHODS))
-@pytest.mark.parametrize("answer", ["search", "model"])
+@pytest.mark.parametrize("answer", ["search", "model", "valley"])
 def test_the_answer_reaches_an_edge_optimum_of_a_noise_free_cost(method, answer):
     result = mavtune.tune(falling_in_kp, space=SPACE, method=method, answer=answer, vehicles=2, draws=0)
     assert result.gains["kp"] == 1.0  # the edge itself, flown
@@ -51,8 +51,8 @@ def test_an_edge_that_was_flown_and_cost_more_is_no_edge():
 
 
 @given(st.floats(0.05, 0.95), st.floats(0.0, 1.0), st.sampled_from(["upper", "lower"]),
-       st.sampled_from(sorted(METHODS)), st.sampled_from(["search", "model"]), st.booleans(), st.integers(0, 3),
-       st.floats(0.0, 0.3))
+       st.sampled_from(sorted(METHODS)), st.sampled_from(["search", "model", "valley"]), st.booleans(),
+       st.integers(0, 3), st.floats(0.0, 0.3))
 @settings(max_examples=60, deadline=None)
 def test_no_answer_beyond_a_diverged_flight(wall, optimum, side, method, answer, edges, seed, noise):
     """Gains past a random wall diverge (infinite cost): the answer stays on the side flown without failure, within
@@ -83,7 +83,7 @@ def test_no_answer_beyond_a_diverged_flight(wall, optimum, side, method, answer,
         assert search.beside_failure is not None  # said, never silent
 
 
-@pytest.mark.parametrize("answer", ["search", "model"])
+@pytest.mark.parametrize("answer", ["search", "model", "valley"])
 def test_parameters_in_files_lie_within_what_was_flown(tmp_path, answer):
     """Without flying the edge, a fit whose vertex lies beyond the last point flown once answered the range's
     unflown edge (a mavsim run wrote MPC_Z_VEL_P_ACC = 15 though no flight flew above kd 0.9): every parameter in

@@ -38,10 +38,11 @@ def test_batteries_count_whole_rounds_per_pack():
 @given(st.sampled_from(["eql", "fibonacci", "golden", "dichotomy", "nsection"]),
        st.sampled_from(["avg", "split", "groups"]), st.integers(1, 4), st.booleans(),
        st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.05, 0.45), st.integers(0, 3), st.booleans(),
-       st.sampled_from(["search", "model"]), st.floats(0.6, 0.95), st.integers(1, 8), st.booleans())
+       st.sampled_from(["search", "model", "valley"]), st.floats(0.6, 0.95), st.integers(1, 8), st.booleans(),
+       st.booleans())
 @settings(max_examples=40, deadline=None)
 def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsilon, noise_seed, adaptive, answer,
-                                   confidence, cap, edges):
+                                   confidence, cap, edges, directions):
     vehicles = 2 * half
     import random
 
@@ -51,7 +52,8 @@ def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsi
         return [((g["kp"] - kp0) ** 2 + (g["kd"] - kd0) ** 2 + 0.01) * (1 + 0.2 * draw.random()) for g in assignments]
 
     kwargs = dict(space=SPACE, method=method, epsilon=epsilon, strategy=strategy, vehicles=vehicles, reuse=reuse,
-                  adaptive=adaptive, answer=answer, confidence=confidence, cap=cap if adaptive else None, edges=edges)
+                  adaptive=adaptive, answer=answer, confidence=confidence, cap=cap if adaptive else None, edges=edges,
+                  directions=directions)
     plan = make_plan(Settings(**kwargs, bootstraps=2))
     result = mavtune.tune(evaluate, bootstraps=2, draws=0, **kwargs)  # no interval: only the rounds count here
     if adaptive:  # the worst case is stated before take-off and bounds every run

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 
 import pytest
+
+import mavtune
 from hypothesis import given, strategies as st
 
 from mavtune.errors import MavtuneError
@@ -55,6 +57,26 @@ def test_measured_keeps_every_measured_flight_and_the_search_averages_them():
     flights[3] = Flight("d", {}, math.inf, Status.FAILED)
     told, costs = Strategy.measured(points, flights)
     assert told == [0.125, 0.125, 0.875] and costs == [1.0, 3.0, math.inf]
+    flights[3] = Flight("d", {}, 50.0, Status.FAILED)  # the simulator's diverged flight: a finite penalty
+    assert Strategy.measured(points, flights)[1] == [1.0, 3.0, math.inf]  # still a wall, the worst
+
+
+def test_a_diverged_flight_at_a_finite_penalty_is_a_wall_for_the_answer():
+    """A gain whose flight diverged is never the answer, even when the fleet reports a finite (penalty) cost below
+    the others: the comparisons rank it worst and the answer stays on the safe side of it."""
+    class Fleet:
+        size = 2
+
+        def fly(self, assignments, round_id):
+            return [Flight(f"v{j}", a, 0.5, Status.FAILED) if a["kp"] < 0.25 else
+                    Flight(f"v{j}", a, 1.0 + (a["kp"] - 0.2) ** 2) for j, a in enumerate(assignments)]
+
+        def close(self):
+            pass
+
+    result = mavtune.tune(Fleet(), space={"kp": (0.0, 1.0)}, draws=0, adaptive=False)
+    failed = [a["kp"] for r in result.rounds for a, f in zip(r.assignments, r.flights) if f.status is Status.FAILED]
+    assert failed and result.gains["kp"] > max(failed)
 
 
 @pytest.mark.parametrize("name, vehicles, r, message", [

@@ -209,3 +209,36 @@ def test_result_dict_carries_uncertainty_and_every_comparison():
         for c in search["comparisons"]:
             assert set(c) == {"bracket", "points", "means", "se", "n", "best", "p_correct"}
             assert len(c["points"]) == len(c["means"]) == len(c["se"]) == len(c["n"]) and 0 <= c["p_correct"] <= 1
+
+
+def valley(slope=0.8, kp0=0.85, kd0=0.75):
+    """A noise-free narrow valley across the gains (kd − kd0 ≈ slope·(kp − kp0)), minimum at (kp0, kd0)."""
+    def evaluate(assignments):
+        return [1.0 + 40 * ((g["kd"] - kd0) - slope * (g["kp"] - kp0)) ** 2 + 0.5 * (g["kp"] - kp0) ** 2
+                for g in assignments]
+    return evaluate
+
+
+def test_a_line_search_along_each_pass_follows_a_valley_across_the_gains():
+    """Coordinate searches crawl along a diagonal valley; Powell's direction (a line search along the second
+    pass's net move) reaches far closer to its minimum, and its answer is a point of the line it flew."""
+    options = dict(vehicles=2, adaptive=False, answer="search", draws=0, bootstraps=2)
+    without = mavtune.tune(valley(), **options)
+    with_dir = mavtune.tune(valley(), directions=True, **options)
+    cost = lambda g: valley()([g])[0]  # noqa: E731
+    assert cost(with_dir.gains) < 1.0 + 0.3 * (cost(without.gains) - 1.0)
+    along = [r for r in with_dir.rounds if r.gain == "direction"]
+    assert along and all(r.bootstrap == 2 for r in along)
+    flown = [(a["kp"], a["kd"]) for r in along for a in r.assignments]
+    (x0, y0), (x1, y1) = flown[0], flown[-1]
+    kp, kd = with_dir.gains["kp"], with_dir.gains["kd"]
+    assert abs((x1 - x0) * (kd - y0) - (y1 - y0) * (kp - x0)) < 1e-9  # on the line flown
+    assert min(x for x, _ in flown) - 1e-12 <= kp <= max(x for x, _ in flown) + 1e-12  # within its span flown
+    assert with_dir.settings["directions"] is True and "directions" not in without.settings
+
+
+def test_no_direction_when_the_pass_did_not_move():
+    """A pass that moved less than the tolerance has no direction to follow: no extra line search."""
+    result = mavtune.tune(bowl(0.5, 0.2), vehicles=2, adaptive=False, draws=0, directions=True, epsilon=0.2,
+                          initial={"kd": 0.2})
+    assert all(r.gain != "direction" for r in result.rounds)

@@ -463,7 +463,8 @@ def _rounds_table(rounds: list, units: dict[str, GainUnit] | None = None) -> str
             flown = [_points_flown(r, units)]
         else:
             by = {f.vehicle: f for f in r.flights}
-            flown = [U.num(r.gain, by[v].gains.get(r.gain, math.nan), units, 5) if v in by else "—"
+            flown = [("—" if v not in by else U.num(r.gain, by[v].gains[r.gain], units, 5) if r.gain in by[v].gains
+                      else ", ".join(U.num(g, x, units, 4) for g, x in by[v].gains.items()))  # across the gains: all
                      for v in vehicles] + \
                     [md.num(by[v].cost, 5) if v in by and by[v].status is not Status.LOST else "—" for v in vehicles]
         bracket = f"[{U.num(r.gain, r.bracket[0], units, 5)}, {U.num(r.gain, r.bracket[1], units, 5)}]"

@@ -11,6 +11,7 @@ from mavtune.report import units as U
 from mavtune.report.figure_rules import MANY_VEHICLES, OUTLIER_FACTOR
 from mavtune.report.searches import Comparison, SearchView, as_float
 from mavtune.report.units import GainUnit
+from mavtune.tuner import DIRECTION
 
 
 def gains_table(final: dict[str, float], uncertainty: dict[str, dict[str, float]],
@@ -134,6 +135,11 @@ def tuning_section(views: Sequence[SearchView], figure: str | None, figure_note:
                "on other costs (without reuse: the latest flights only; a failed flight counts as infinite), "
                "'compared' shows them."), ""]
     for v in views:
+        if v.gain == DIRECTION:  # every gain moves along one line: its flights are in the rounds' table
+            parts += [f"**Bootstrap {v.bootstrap} · {v.gain}**: a line search across the gains (all of them moving "
+                      "along one line, towards the minimum of a fit of every flight so far); its rounds and gains "
+                      "are in the table of rounds.", ""]
+            continue
         head = f"**Bootstrap {v.bootstrap} · {v.gain}**" + (
             f" ({units[v.gain].param})" if v.gain in units else "") + (
             f" → {U.num(v.gain, v.result, units)}" if v.finished else " (not finished)")

@@ -232,8 +232,8 @@ class LineSearch(ABC):
         own = state[3] if state[0] == "e" and state[4] else self._result(state[1])  # an edge that won is flown
         samples = self.samples()
         found = Vertex(own, math.nan, False)
-        if self.answer == "model":
-            found = local_vertex(samples, self.bracket, own, self.pool.cv)
+        if self.answer != "search":
+            found = local_vertex(samples, self.bracket, own, self.pool.cv, valley=self.answer == "valley")
         span = flown_span(samples)
         if span is None:
             return found

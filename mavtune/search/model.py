@@ -22,7 +22,8 @@ from typing import Mapping, Sequence
 
 
 NEIGHBOURS = 7  # measured points the local fit spans (a quadratic has 3 parameters: 4 spare for the noise)
-ANSWERS = ("search", "model")
+ANSWERS = ("search", "model", "valley")
+VALLEY_GRID = 257  # vertices tried across the bracket by the valley fit (1/256 of the final bracket apart)
 
 
 @dataclass(frozen=True)
@@ -36,11 +37,12 @@ class Vertex:
 
 
 def local_vertex(samples: Mapping[float, Sequence[float]], bracket: tuple[float, float], fallback: float,
-                 cv: float = math.nan, neighbours: int = NEIGHBOURS) -> Vertex:
-    """The minimiser of a weighted local quadratic through `samples` (point → flight costs), inside `bracket`.
+                 cv: float = math.nan, neighbours: int = NEIGHBOURS, valley: bool = False) -> Vertex:
+    """The minimiser of a weighted local quadratic through `samples` (point → flight costs), inside `bracket`;
+    with `valley`, of two half-parabolas meeting at it (`_valley_fit`: one curvature each side).
 
     `fallback` is the search's own answer, returned when no convex fit exists; `cv` the run's pooled relative
-    noise for the vertex's standard error (NaN: from the fit's residuals alone).
+    noise for the vertex's standard error (NaN: from the fit's residuals alone; NaN for the valley fit).
     """
     pts = sorted((float(x), math.fsum(c) / len(c), len(c)) for x, c in samples.items()
                  if c and all(math.isfinite(v) for v in c))
@@ -51,6 +53,9 @@ def local_vertex(samples: Mapping[float, Sequence[float]], bracket: tuple[float,
     fallback = min(max(fallback, lo), hi)
     if len(pts) < 3 or not hi > lo or len({m for _, m, _ in pts}) == 1:  # a flat cost (the plan's) has no vertex
         return Vertex(fallback, math.nan, False)
+    if valley:
+        vertex = _valley_fit(pts, lo, hi, neighbours)
+        return Vertex(fallback, math.nan, False) if vertex is None else Vertex(vertex, math.nan, True)
     fit = _fit(pts, 0.5 * (lo + hi), hi - lo, neighbours)
     if fit is None:
         return Vertex(fallback, math.nan, False)
@@ -123,11 +128,10 @@ def _vertex_se(design: np.ndarray, w: np.ndarray, y: np.ndarray, beta: np.ndarra
     return math.sqrt(var) if var >= 0 else math.nan
 
 
-def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neighbours: int):
-    """Weighted least squares of cost = c + b·(x − centre) + a·(x − centre)² over the `neighbours` points
-    (x, mean cost, flights) nearest `centre`; (vertex, design, weights, means relative to the largest,
-    coefficients, flights, weights' scale), or None when fewer than three points weigh anything or the fit is
-    not convex."""
+def _local(pts: list[tuple[float, float, int]], centre: float, width: float, neighbours: int):
+    """The `neighbours` points (x, mean cost, flights) nearest `centre` as arrays x − centre, cost in units of the
+    largest, flights, and weights (flights / variance × tricube in the distance), with the weights' scale; None
+    when fewer than three weigh anything."""
     import numpy as np  # here, not at import: `mavtune plan` rehearses searches without numpy
 
     near = sorted(pts, key=lambda p: abs(p[0] - centre))[:max(3, neighbours)]
@@ -143,7 +147,57 @@ def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neigh
     k = float(w.max())
     if np.count_nonzero(w > 0) < 3 or not 0 < k < math.inf:
         return None
-    w = w / k  # well scaled for the solver; the unit variance is cv² / k (see _vertex_se)
+    return x, y, n, w / k, k
+
+
+def _valley_fit(pts: list[tuple[float, float, int]], lo: float, hi: float, neighbours: int) -> float | None:
+    """The vertex v in [lo, hi] of cost = c + a·(x − v)² left of v and c + b·(x − v)² right of it (a, b ≥ 0,
+    not both 0) that fits the local points best (weighted least squares, v on a grid of VALLEY_GRID): a valley
+    steeper on one side than the other (a wall of costly gains on one side, a slow rise on the other) pulls a
+    quadratic's vertex towards its shallow side; two curvatures do not (at the price of more scatter under noise:
+    one more coefficient to fit). None when no fit curves upwards."""
+    import numpy as np
+
+    centre = 0.5 * (lo + hi)
+    local = _local(pts, centre, hi - lo, neighbours)
+    if local is None:
+        return None
+    x, y, _, w, _ = local
+    v = np.linspace(lo, hi, VALLEY_GRID)[:, None] - centre
+    left = np.where(x < v, (x - v) ** 2, 0.0)
+    right = np.where(x >= v, (x - v) ** 2, 0.0)
+    ones = np.ones_like(left)
+    best = (math.inf, None)
+    for columns in ((ones, left, right), (ones, left), (ones, right)):  # both sides, or one side flat
+        a = np.stack(columns, axis=2) * np.sqrt(w)[None, :, None]  # (grid, points, columns)
+        rhs = y * np.sqrt(w)
+        gram = np.einsum("gpi,gpj->gij", a, a)
+        gram += np.eye(len(columns))[None] * 1e-12 * np.trace(gram, axis1=1, axis2=2)[:, None, None]
+        try:
+            beta = np.linalg.solve(gram, np.einsum("gpi,p->gi", a, rhs)[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            continue
+        residual = np.sum((np.einsum("gpi,gi->gp", a, beta) - rhs) ** 2, axis=1)
+        curv = beta[:, 1:]
+        ok = np.all(curv >= 0, axis=1) & np.any(curv > 0, axis=1) & np.isfinite(residual)
+        if np.any(ok):
+            i = int(np.argmin(np.where(ok, residual, np.inf)))
+            if residual[i] < best[0]:
+                best = (float(residual[i]), float(v[i, 0] + centre))
+    return best[1]
+
+
+def _fit(pts: list[tuple[float, float, int]], centre: float, width: float, neighbours: int):
+    """Weighted least squares of cost = c + b·(x − centre) + a·(x − centre)² over the `neighbours` points
+    (x, mean cost, flights) nearest `centre` (`_local`); (vertex, design, weights, means relative to the largest,
+    coefficients, flights, weights' scale), or None when fewer than three points weigh anything or the fit is
+    not convex."""
+    import numpy as np  # here, not at import: `mavtune plan` rehearses searches without numpy
+
+    local = _local(pts, centre, width, neighbours)
+    if local is None:
+        return None
+    x, y, n, w, k = local  # the weights are well scaled for the solver; the unit variance is cv² / k (_vertex_se)
     design = np.column_stack([np.ones_like(x), x, x * x])
     sw = np.sqrt(w)
     try:
