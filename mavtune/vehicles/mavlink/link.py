@@ -144,19 +144,21 @@ class SeqWatch:
                 self.small.append(now_s)
         self.last = seq
         self.seen.append(now_s)
+        self._forget(now_s)
+
+    def _forget(self, now_s: float) -> None:
+        """Drop the times more than WINDOW_S before now_s (each once: the reader calls this for every message)."""
         for times in (self.backs, self.small, self.seen):
             while times and now_s - times[0] > self.WINDOW_S:
                 times.popleft()
 
     def interleaved(self, now_s: float) -> bool:
         """True when two senders seem to share this (system, component): LIMIT steps back, or SMALL_LIMIT small
-        ones that are SMALL_SHARE of its messages, within WINDOW_S of now_s (it clears again after WINDOW_S without them, so bursts of lost messages
-        only pause a vehicle)."""
-        def within(times: deque[float]) -> int:
-            return sum(now_s - t <= self.WINDOW_S for t in times)
-        small = within(self.small)
-        return (within(self.backs) >= self.LIMIT
-                or small >= max(self.SMALL_LIMIT, self.SMALL_SHARE * within(self.seen)))
+        ones that are SMALL_SHARE of its messages, within WINDOW_S of now_s (it clears again after WINDOW_S
+        without them, so bursts of lost messages only pause a vehicle)."""
+        self._forget(now_s)
+        small = len(self.small)
+        return len(self.backs) >= self.LIMIT or small >= max(self.SMALL_LIMIT, self.SMALL_SHARE * len(self.seen))
 
 
 @dataclass(frozen=True)
