@@ -28,7 +28,8 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from quality import CACHE, RESULTS, _cpu_model, _git_commit, _init_worker  # noqa: E402
+from common import cpu_model  # noqa: E402
+from quality import CACHE, RESULTS, _git_commit, _init_worker  # noqa: E402
 from zoo.methods import Method, ZooFleet, tune_seed  # noqa: E402
 from zoo.plants import PLANTS  # noqa: E402
 from zoo.stats import wilson  # noqa: E402
@@ -98,7 +99,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                   file=sys.stderr, flush=True)
     doc = {"command": "python benchmarks/interval_coverage.py " + " ".join(argv if argv is not None else sys.argv[1:]),
            "commit": _git_commit(), "started": start.isoformat(timespec="seconds"), "wall_s": time.time() - wall,
-           "machine": {"cpu": _cpu_model(), "nproc": os.cpu_count(), "load_start": load0,
+           "machine": {"cpu": cpu_model(), "nproc": os.cpu_count(), "load_start": load0,
                        "load_end": os.getloadavg()[0]}, "table": table}
     if args.save_runs is not None:
         args.save_runs.write_text(json.dumps(all_rows))

@@ -40,6 +40,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import cpu_model  # noqa: E402
 from zoo import stats  # noqa: E402
 from zoo.methods import PEERS, Method, candidates, peer_run, tune_run  # noqa: E402
 from zoo.plants import PLANTS  # noqa: E402
@@ -192,16 +193,6 @@ def _git_commit() -> str:
         return "unknown"
 
 
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def _clean(o: Any) -> Any:
     if isinstance(o, float):
         return o if math.isfinite(o) else None
@@ -340,7 +331,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     doc["meta"] = {"command": "python benchmarks/quality.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                    "half": args.half, "started_utc": started.isoformat(timespec="seconds"),
                    "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                   "commit": commit, "engine": engine, "cpu_model": _cpu_model(), "cpus": os.cpu_count(),
+                   "commit": commit, "engine": engine, "cpu_model": cpu_model(), "cpus": os.cpu_count(),
                    "workers": args.workers, "load_start": load0, "load_end": os.getloadavg(),
                    "wall_s": time.perf_counter() - wall0, "sizes": sizes, "seeds": seeds, "plants": plants,
                    "python": platform.python_version()}
