@@ -14,7 +14,7 @@ and .json (one section per autopilot, kept from earlier runs of the other autopi
     python benchmarks/effort_ab.py --autopilot px4 --pairs 10 --activity-weight 0.25
 
 A section keeps a `label` (set by hand in the .json, e.g. for numbers measured before a harness change), printed
-in its heading; `--activity-weight` other than the default is kept as AUTOPILOT-activityW.
+in its heading; `--activity-weight` other than the default is kept as AUTOPILOT-activityW, `--name N` as AUTOPILOT-N.
 """
 
 from __future__ import annotations
@@ -69,6 +69,7 @@ def main() -> None:
                         help="the tune's cost (iae: the tracking-only one, for comparison; kept as AUTOPILOT-iae)")
     parser.add_argument("--activity-weight", type=float, default=None, metavar="M_S",
                         help="the balanced cost's activity weight, m·s (default: Balance's)")
+    parser.add_argument("--name", default="", help="suffix of the section's key (a repeat kept beside the first)")
     parser.add_argument("--render", action="store_true", help="only write the .md again from the .json")
     args = parser.parse_args()
     if args.render:
@@ -127,10 +128,10 @@ def main() -> None:
                "balance": balance.model_dump()}
     path = RESULTS / "effort_ab.json"
     data = json.loads(path.read_text()) if path.exists() else {}
-    section["cost"] = args.cost
+    section["cost"], section["name"] = args.cost, args.name
     weighted = balance != Balance()
     data[args.autopilot + ("" if args.cost == "balanced" else f"-{args.cost}") + (
-        f"-activity{balance.activity_weight_ms:g}" if weighted else "")] = section
+        f"-activity{balance.activity_weight_ms:g}" if weighted else "") + (f"-{args.name}" if args.name else "")] = section
     render(data)
 
 
@@ -159,6 +160,7 @@ def _section(ap: str, s: dict) -> list[str]:
     where = ", ".join(f"{k} {v:g}" for k, v in s["sim"].items()) or (
         "calm air (PX4 SIH has no wind parameter)" if ap == "px4" else "calm air")
     cmd = f"python benchmarks/effort_ab.py --autopilot {ap} --pairs {s['pairs']}" + (
+        f" --name {s['name']}" if s.get("name") else "") + (
         f" --cost {cost}" if cost != "balanced" else "") + (
         f" --activity-weight {s['balance']['activity_weight_ms']:g}" if weights == "weights" else "") + (
         " --sim " + " ".join(f"{k}={v:g}" for k, v in s["sim"].items()) if s["sim"] else "")
