@@ -22,7 +22,8 @@ pytestmark = [
 ]
 
 ORIGINALS = {"MPC_Z_P": 1.0, "MPC_Z_VEL_P_ACC": 4.0}  # this build's defaults (mc_pos_control)
-SHORT = dict(bootstraps=1, epsilon=0.25)
+SHORT = dict(bootstraps=1, epsilon=0.25, adaptive=False)  # a known number of rounds (~12 s each at real time):
+# adaptive averaging flies close comparisons again, 40+ rounds with the balanced cost, past the test's bound
 
 
 def px4_config(**changes) -> MavlinkConfig:
