@@ -11,6 +11,10 @@ and .json (one section per autopilot, kept from earlier runs of the other autopi
 
     python benchmarks/effort_ab.py --autopilot ardupilot --pairs 10 --sim SIM_WIND_SPD=5 SIM_WIND_TURB=2
     python benchmarks/effort_ab.py --autopilot px4 --pairs 10
+    python benchmarks/effort_ab.py --autopilot px4 --pairs 10 --activity-weight 0.25
+
+A section keeps a `label` (set by hand in the .json, e.g. for numbers measured before a harness change), printed
+in its heading; `--activity-weight` other than the default is kept as AUTOPILOT-activityW, `--name N` as AUTOPILOT-N.
 """
 
 from __future__ import annotations
@@ -63,6 +67,9 @@ def main() -> None:
     parser.add_argument("--sim", nargs="*", default=[], metavar="NAME=VALUE", help="ArduCopter SITL parameters")
     parser.add_argument("--cost", choices=("balanced", "iae"), default="balanced",
                         help="the tune's cost (iae: the tracking-only one, for comparison; kept as AUTOPILOT-iae)")
+    parser.add_argument("--activity-weight", type=float, default=None, metavar="M_S",
+                        help="the balanced cost's activity weight, m·s (default: Balance's)")
+    parser.add_argument("--name", default="", help="suffix of the section's key (a repeat kept beside the first)")
     parser.add_argument("--render", action="store_true", help="only write the .md again from the .json")
     args = parser.parse_args()
     if args.render:
@@ -76,7 +83,8 @@ def main() -> None:
     from mavtune.vehicles.mavlink.originals import OriginalsStore
     from mavtune.vehicles.mavlink.vehicle import MavlinkVehicle
 
-    config = MavlinkConfig(param_timeout_s=0.5, heartbeat_wait_s=30.0, cost=args.cost)
+    balance = Balance() if args.activity_weight is None else Balance(activity_weight_ms=args.activity_weight)
+    config = MavlinkConfig(param_timeout_s=0.5, heartbeat_wait_s=30.0, cost=args.cost, balance=balance)
     before = machine()
     out = Path(tempfile.mkdtemp(prefix="mavtune-effort-ab-"))
     flights: list[dict] = []
@@ -99,7 +107,7 @@ def main() -> None:
                     m = f.info.get("measures") or {}
                     flights.append({"pair": pair, "side": side, "status": f.status.value,
                                     "reason": f.info.get("reason"), "measures": m,
-                                    "balanced": Measures(**m).balanced(Balance()) if m.get("steps") else None})
+                                    "balanced": Measures(**m).balanced(balance) if m.get("steps") else None})
                     print(pair, side, f.status.value, m, flush=True)
     after = machine()
     shutil.rmtree(out, ignore_errors=True)
@@ -117,11 +125,13 @@ def main() -> None:
                    "tuned_params": result.get("tuned_params", {}).get(url), "stock_params": stock_params,
                    "range_edges": [e["message"] for e in result.get("range_edges", [])]},
                "pairs": args.pairs, "complete_pairs": len(complete), "tests": tests, "flights": flights,
-               "balance": Balance().model_dump()}
+               "balance": balance.model_dump()}
     path = RESULTS / "effort_ab.json"
     data = json.loads(path.read_text()) if path.exists() else {}
-    section["cost"] = args.cost
-    data[args.autopilot + ("" if args.cost == "balanced" else f"-{args.cost}")] = section
+    section["cost"], section["name"] = args.cost, args.name
+    weighted = balance != Balance()
+    data[args.autopilot + ("" if args.cost == "balanced" else f"-{args.cost}") + (
+        f"-activity{balance.activity_weight_ms:g}" if weighted else "") + (f"-{args.name}" if args.name else "")] = section
     render(data)
 
 
@@ -144,18 +154,26 @@ def _section(ap: str, s: dict) -> list[str]:
     t, m = s["tune"], s["machine_before"]
     cost = s.get("cost", "balanced")
     ap = ap.split("-")[0]
+    from mavtune.sim.balance import Balance
+
+    weights = "default weights" if Balance(**s["balance"]) == Balance() else "weights"
     where = ", ".join(f"{k} {v:g}" for k, v in s["sim"].items()) or (
         "calm air (PX4 SIH has no wind parameter)" if ap == "px4" else "calm air")
     cmd = f"python benchmarks/effort_ab.py --autopilot {ap} --pairs {s['pairs']}" + (
+        f" --name {s['name']}" if s.get("name") else "") + (
         f" --cost {cost}" if cost != "balanced" else "") + (
+        f" --activity-weight {s['balance']['activity_weight_ms']:g}" if weights == "weights" else "") + (
         " --sim " + " ".join(f"{k}={v:g}" for k, v in s["sim"].items()) if s["sim"] else "")
-    lines = [f"## {'ArduCopter' if ap == 'ardupilot' else 'PX4'} SITL" + (f", tuned on {cost}" if cost != "balanced"
-                                                                             else ""), "",
+    heading = f"## {'ArduCopter' if ap == 'ardupilot' else 'PX4'} SITL" + (
+        f", tuned on {cost}" if cost != "balanced" else "") + (
+        f", activity weight {s['balance']['activity_weight_ms']:g} m·s" if weights == "weights" else "") + (
+        f", {s['label']}" if s.get("label") else "")
+    lines = [heading, "",
              f"`{cmd}`: {m['cpu']}, nproc {m['nproc']}, load {m['load'][0]:.1f} before, "
              f"{s['machine_after']['load'][0]:.1f} after; " + (f"SITL ×{s['speedup']}; " if ap == "ardupilot" else
                                                                   "real time; ") + f"conditions: {where}.", "",
              ("Tune (IAE, tracking only; " if cost == "iae" else
-              f"Tune (balanced cost, default weights: activity {s['balance']['activity_weight_ms']:g} m·s, "
+              f"Tune (balanced cost, {weights}: activity {s['balance']['activity_weight_ms']:g} m·s, "
               f"oscillation {s['balance']['oscillation_weight']:g} above {s['balance']['oscillation_hz']:g} Hz; ") +
              f"ε 0.25, 1 bootstrap): {t['status']}, {t['rounds']} rounds, {t['flights']} flights, "
              f"{t['wall_s']:.0f} s wall = {t['wall_s_per_round']:.1f} s a round.", "",

@@ -39,6 +39,7 @@ GRIDS = {  # (position P values, velocity P values), within the documented limit
 }
 LIMITS = {"PSC_POSZ_P": (1.0, 3.0), "PSC_VELZ_P": (1.0, 8.0), "MPC_Z_P": (0.1, 1.5), "MPC_Z_VEL_P_ACC": (2.0, 15.0)}
 STOCK = {"ardupilot": (1.0, 5.0), "px4": (1.0, 4.0)}
+OTHER_ACTIVITY_WEIGHTS_MS = (0.1, 0.25, 0.5, 1.0)  # where the grid's optimum would lie with a heavier activity weight
 
 
 def machine() -> dict:
@@ -161,8 +162,8 @@ def report(data: dict, name: str) -> None:
     m = data["machine_before"]
     lines = [f"# The balanced cost's parts on {autopilot} SITL", "",
              f"`python benchmarks/effort_weights.py --autopilot {autopilot} --repeats {data['repeats']}"
-             + (f" --name {name.split(autopilot + '_', 1)[1]} --sim " + " ".join(f"{k}={v:g}" for k, v in data["sim"].items())
-                if data.get("sim") else "") + "`"
+             + (f" --name {name.split(autopilot + '_', 1)[1]}" if name != f"effort_weights_{autopilot}" else "")
+             + (" --sim " + " ".join(f"{k}={v:g}" for k, v in data["sim"].items()) if data.get("sim") else "") + "`"
              + (f" (SITL ×{data['speedup']})" if autopilot == "ardupilot" else " (PX4 SIH, real time)")
              + f"; {m['cpu']}, nproc {m['nproc']}, load {m['load'][0]:.1f} before, "
              f"{data.get('machine_after', m)['load'][0]:.1f} after; {len(data['flights'])} flights, "
@@ -175,7 +176,10 @@ def report(data: dict, name: str) -> None:
              f"- lowest mean IAE (tracking only): `{p_name}` {b_iae[0]:g}, `{v_name}` {b_iae[1]:g} "
              f"({inside(b_iae)})",
              f"- lowest mean balanced cost: `{p_name}` {b_bal[0]:g}, `{v_name}` {b_bal[1]:g} "
-             f"({inside(b_bal)})", "",
+             f"({inside(b_bal)})",
+             "- lowest mean balanced cost with other activity weights (the same flights): " + "; ".join(
+                 f"{w:g} m·s: `{p_name}` {b[0]:g}, `{v_name}` {b[1]:g}" for w, b in (
+                     (w, best(means, Balance(activity_weight_ms=w))) for w in OTHER_ACTIVITY_WEIGHTS_MS)), "",
              f"| `{p_name}` | `{v_name}` | flights | IAE (m·sample) | oscillation (m·sample) | motor activity (1/s) | "
              "peak error (m) | balanced |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for pt in sorted(means):
