@@ -125,8 +125,8 @@ def results(folder: Path) -> list[Result]:
     found, claimed = [], set()
     for md in sorted(folder.glob("*.md")):
         stem = md.stem
-        data = sorted(p for p in folder.glob("*.json") if p.stem == stem or p.stem.startswith(stem + "_")
-                      or p.stem.startswith(stem + "."))
+        data = sorted(p for p in folder.glob("*.json") if p.stem == stem or (
+            (p.stem.startswith(stem + "_") or p.stem.startswith(stem + ".")) and not (folder / f"{p.stem}.md").exists()))
         claimed.update(data)
         text = md.read_text()
         lines = text.splitlines()
