@@ -118,7 +118,9 @@ class ParamMap(BaseModel):
 # ---- named gain sets a MAVLink run selects by `[mavlink] gain_set` (the names it tunes: config.GAIN_SETS) ----------
 # Each gain: (parameter in ArduCopter ≤ 4.6 / PX4 names and units, min, max); 4.7's PSC_D_* names are found by
 # probing.
-# "altitude" is the built-in default map (mavtune.vehicles.mavlink.config.DEFAULT_GAINS). "altitude-inner" adds the
+# "altitude" is the paper's pair and the default map (mavtune.vehicles.mavlink.config.DEFAULT_GAINS): the PX4 cascade
+# kx = MPC_Z_P · MPC_Z_VEL_P_ACC, kv = MPC_Z_VEL_P_ACC (acceleration units); ArduCopter's has the same structure,
+# PSC_POSZ_P (1/s) then PSC_VELZ_P (1/s). "altitude-inner" adds the
 # inner altitude loop: ki, the integrator that carries the hover thrust (ArduCopter PSC_ACCZ_I on the acceleration
 # error, PX4 MPC_Z_VEL_I_ACC on the climb-rate error), and ka, the innermost damping (ArduCopter PSC_ACCZ_P on the
 # acceleration error, PX4 MPC_Z_VEL_D_ACC on the measured vertical acceleration). Ranges lie within the documented
@@ -126,11 +128,13 @@ class ParamMap(BaseModel):
 # PSC_ACCZ_P 0.2–1.5, PSC_ACCZ_I 0–3) and PX4's parameter reference (docs.px4.io parameter_reference,
 # mc_pos_control @min/@max: MPC_Z_VEL_I_ACC 0.2–3, MPC_Z_VEL_D_ACC 0–2). PSC_ACCZ_I starts at 0.2 rather than 0,
 # as PX4's MPC_Z_VEL_I_ACC does: without an integrator a wrong hover throttle is a steady altitude error.
+ALTITUDE_GAINS: dict[str, dict[str, tuple[str, float, float]]] = {
+    "ardupilot": {"kp": ("PSC_POSZ_P", 1.0, 3.0), "kd": ("PSC_VELZ_P", 1.0, 8.0)},
+    "px4": {"kp": ("MPC_Z_P", 0.1, 1.5), "kd": ("MPC_Z_VEL_P_ACC", 2.0, 15.0)},
+}
 INNER_ALTITUDE_GAINS: dict[str, dict[str, tuple[str, float, float]]] = {
-    "ardupilot": {"kp": ("PSC_POSZ_P", 1.0, 3.0), "kd": ("PSC_VELZ_P", 1.0, 8.0),
-                  "ka": ("PSC_ACCZ_P", 0.2, 1.5), "ki": ("PSC_ACCZ_I", 0.2, 3.0)},
-    "px4": {"kp": ("MPC_Z_P", 0.1, 1.5), "kd": ("MPC_Z_VEL_P_ACC", 2.0, 15.0),
-            "ka": ("MPC_Z_VEL_D_ACC", 0.0, 2.0), "ki": ("MPC_Z_VEL_I_ACC", 0.2, 3.0)},
+    "ardupilot": {**ALTITUDE_GAINS["ardupilot"], "ka": ("PSC_ACCZ_P", 0.2, 1.5), "ki": ("PSC_ACCZ_I", 0.2, 3.0)},
+    "px4": {**ALTITUDE_GAINS["px4"], "ka": ("MPC_Z_VEL_D_ACC", 0.0, 2.0), "ki": ("MPC_Z_VEL_I_ACC", 0.2, 3.0)},
 }
 # "horizontal": the horizontal position loop, flown with the out-and-back primitive (MavlinkConfig.loop): kp the
 # position gain (ArduCopter PSC_POSXY_P, AC_PosControl @Range 0.5–2; PX4 MPC_XY_P, mc_pos_control @min/@max 0–2,
@@ -142,7 +146,8 @@ HORIZONTAL_GAINS: dict[str, dict[str, tuple[str, float, float]]] = {
     "px4": {"kp": ("MPC_XY_P", 0.2, 2.0), "kd": ("MPC_XY_VEL_P_ACC", 1.2, 5.0)},
 }
 GAIN_SET_BINDINGS: dict[str, dict[str, dict[str, tuple[str, float, float]]]] = {
+    "altitude": ALTITUDE_GAINS,
     "altitude-inner": INNER_ALTITUDE_GAINS,
     "horizontal": HORIZONTAL_GAINS,
 }
-"""{gain set: {autopilot: {gain: (parameter, min, max)}}} beyond the default "altitude" set."""
+"""{gain set: {autopilot: {gain: (parameter, min, max)}}}, in each set's tuning order."""

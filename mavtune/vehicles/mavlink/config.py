@@ -35,20 +35,6 @@ class GainParam(BaseModel):
         return GainBinding(param=self.param, lo=self.min, hi=self.max).value(normalised)
 
 
-DEFAULT_GAINS: dict[Autopilot, dict[str, GainParam]] = {
-    # PX4 cascade: kx = MPC_Z_P · MPC_Z_VEL_P_ACC, kv = MPC_Z_VEL_P_ACC (acceleration units).
-    Autopilot.PX4: {
-        "kp": GainParam(param="MPC_Z_P", min=0.1, max=1.5),
-        "kd": GainParam(param="MPC_Z_VEL_P_ACC", min=2.0, max=15.0),
-    },
-    # ArduCopter cascade, same structure: PSC_POSZ_P (1/s) then PSC_VELZ_P (1/s); 4.7 names are found by probing.
-    Autopilot.ARDUPILOT: {
-        "kp": GainParam(param="PSC_POSZ_P", min=1.0, max=3.0),
-        "kd": GainParam(param="PSC_VELZ_P", min=1.0, max=8.0),
-    },
-}
-
-
 LOOP_OF_GAIN_SET = {"horizontal": "horizontal"}  # the other gain sets tune the altitude loop
 LOOP_PRIMITIVE = {"altitude": "the climbing circle (altitude error)",
                   "horizontal": "the horizontal out-and-back (error along mavlink.axis)"}
@@ -166,16 +152,17 @@ class MavlinkConfig(BaseModel):
         """The gain → parameter map in force for a vehicle of this autopilot."""
         if self.gains is not None:
             return dict(self.gains)
-        return gain_set_map(self.gain_set or ("horizontal" if self.tuned_loop == "horizontal" else "altitude"),
-                            autopilot)
+        return gain_set_map(self.gain_set or self.tuned_loop, autopilot)  # each loop's own set is named for it
 
 
 def gain_set_map(name: str, autopilot: Autopilot) -> dict[str, GainParam]:
     """The gain → parameter map of a named gain set on an autopilot, in the set's tuning order."""
-    if name not in GAIN_SET_BINDINGS:
-        return dict(DEFAULT_GAINS[autopilot])
     bindings = GAIN_SET_BINDINGS[name][autopilot.value]
     return {g: GainParam(param=p, min=lo, max=hi) for g, (p, lo, hi) in bindings.items()}
+
+
+DEFAULT_GAINS: dict[Autopilot, dict[str, GainParam]] = {ap: gain_set_map("altitude", ap) for ap in Autopilot}
+"""The map a run without gain_set or [mavlink.gains] tunes: the paper's two altitude gains of each autopilot."""
 
 
 def load_mavlink_config(source: str | Path | dict[str, Any] | None) -> MavlinkConfig:
