@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 from mavtune.errors import MavtuneError
 from mavtune.search import METHODS
 from mavtune.strategy import STRATEGIES
-from mavtune.tuner import MAX_BOOTSTRAPS, MAX_POINTS, MAX_ROUNDS, MAX_VEHICLES, MIN_EPSILON, Settings
+from mavtune.tuner import MAX_BOOTSTRAPS, MAX_POINTS, MAX_ROUNDS, MAX_DESIGN_REPEATS, MAX_VEHICLES, MIN_EPSILON, Settings
 
 MIN_PRIMITIVE_S = 1.0  # a shorter primitive samples under 100 altitude errors at 100 Hz: it measures too little
 MAX_SEED = 2**63 - 1 - MAX_VEHICLES  # vehicle j flies seed + j, kept distinct in the simulator's 64-bit seeds
@@ -47,7 +47,8 @@ order (their parameters per autopilot: mavtune.vehicles.parammap): "altitude" is
 
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
-                   "refly", "answer", "edges", "directions")  # what [tuning] gives the engine's Settings
+                   "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
+                   "design_steps", "design_shrink")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -94,6 +95,19 @@ class Tuning(_Section):
                               "edge itself: an optimum on the edge can be answered, and is said with its evidence")
     directions: StrictBool = Field(False, description="between passes over the gains, a line search along the "
                                    "pass's net move (Powell's direction): follows a valley that runs across the gains")
+    design: StrictBool = Field(False, description="after the passes over the gains, fly a designed set of gain "
+                                "vectors around their answer and answer the minimiser of one quadratic in every gain "
+                                "fitted to the run's flights near it, inside the flown design (response surface)")
+    design_width: float = Field(0.15, gt=0.0, le=0.5, description="design: the design's half-width, a share of "
+                                 "each gain's range (the design is shifted inside the ranges, not shrunk)")
+    design_repeats: StrictInt = Field(1, ge=1, le=MAX_DESIGN_REPEATS, description="design: times each design point is flown "
+                                       "(by as many vehicles as the strategy puts on a point)")
+    design_steps: StrictInt = Field(1, ge=1, le=MAX_DESIGN_REPEATS, description="design: designs flown in turn, "
+                                     "each around the answer of the one before (a valley or a far optimum is followed "
+                                     "one design's width at a time)")
+    design_shrink: float = Field(1.0, gt=0.0, le=1.0, description="design: each design's half-width over the one "
+                                  "before (below 1: the later designs narrow in, less bias from a cost that is no "
+                                  "quadratic)")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":

@@ -152,8 +152,14 @@ def candidates() -> list[Method]:
     setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     valley = {"answer": "valley"}
     across = {"answer": "valley", "directions": True}
+    rsm = {"design": True, "adaptive": False, "edges": False}
     return [
         Method("default (config.Tuning())"),
+        Method("surface ±0.15 after the default", {"design": True}),
+        Method("surface ±0.15 x3 steps after 1 pass (fixed)", {**rsm, "bootstraps": 1, "design_steps": 3}),
+        Method("surface ±0.1 after the default", {"design": True, "design_width": 0.1}),
+        Method("surface ±0.15 x2 steps shrink 0.5 after the default",
+               {"design": True, "design_steps": 2, "design_shrink": 0.5}),
         Method("model answer with directions", {"directions": True}),
         Method("valley answer", valley),
         Method("valley answer, directions", across),
