@@ -24,7 +24,8 @@ from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_sear
 from mavtune.search.interval import DRAWS, joint, plausible_region, resample, resolution
 from mavtune.search.joint import newton_step
 from mavtune.search.model import flown_span
-from mavtune.search.surface import answer as surface_answer, design as surface_design, ruled_out as surface_ruled_out
+from mavtune.search.surface import answer as surface_answer, beside_wall, design as surface_design, \
+    ruled_out as surface_ruled_out
 from mavtune.strategy import Strategy
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
@@ -488,6 +489,14 @@ class Tuner:
         best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.stop_reason = reason
+        last = {rec.gain: rec for rec in self.searches}
+        for rec in last.values():  # the caution of an answer next to a failed flight is the final answer's
+            rec.beside_failure = None
+        wall = beside_wall(flown, best, 2.0 * half * math.sqrt(len(names)))
+        if wall is not None:  # said on the gain along which the failed point lies farthest from the answer
+            i = max(range(len(names)), key=lambda k: abs(wall[k] - best[k]))
+            if names[i] in last:
+                last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
 
     def _same_point(self, earlier: Gains) -> bool:
         """True when the latest gains are within the search's tolerance ε·(hi − lo) of `earlier` in every gain:

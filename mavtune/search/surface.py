@@ -72,6 +72,20 @@ def ruled_out(points: Mapping[tuple[float, ...], Sequence[float]], pool: NoisePo
     return {x for x, st in finite.items() if st.mean - best.mean > z * math.hypot(st.se, best.se)}
 
 
+def beside_wall(points: Mapping[tuple[float, ...], Sequence[float]], x: Sequence[float],
+                reach: float) -> tuple[float, ...] | None:
+    """The failed point nearest `x` when the answer `x` lies next to it: within `reach` (the design's span), or
+    with no point flown without failure nearer that failed point than `x` is (nothing safe flown between them);
+    None otherwise (an answer beside a fly-away is said, never silent)."""
+    failed = [k for k, c in points.items() if c and not all(map(math.isfinite, c))]
+    if not failed:
+        return None
+    wall = min(failed, key=lambda k: math.dist(k, x))
+    gap = math.dist(wall, x)
+    safe = [k for k, c in points.items() if c and all(map(math.isfinite, c))]
+    return wall if gap <= reach or not any(math.dist(k, wall) < gap for k in safe) else None
+
+
 def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
            worse: Collection[tuple[float, ...]] = ()) -> tuple[tuple[float, ...], bool]:
     """The minimiser of one weighted quadratic through `points` (gain vector in shares of each range → every
