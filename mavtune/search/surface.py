@@ -8,8 +8,9 @@ lie inside the ranges, so an optimum on an edge or in a corner is flown), fits O
 flight of the run near it (the coordinate stage's flights count too), and answers the minimiser of that fit
 inside the design's box (`answer`): the design's corners were flown, so the answer lies in the convex hull of
 flown gains — never an extrapolation. A failed (diverged) flight is a wall: it has no cost to fit, and the answer
-stays inside the convex hull of the points flown without failure and nearer one of them than any failed point
-(the rule of `interval.plausible_region`): never beyond the last gain flown safely towards a wall. Nor is a gain
+stays inside the convex hull of the points flown without failure, nearer one of them than any failed point (the
+rule of `interval.plausible_region`), and is reached from the best point flown without passing a failed one: never
+on the far side of a wall. Nor is a gain
 vector answered whose nearest flown point the flights rule out (worse than the best point by more than the 90 %
 two-sided error of their difference, `ruled_out`): a quadratic bent by a steep wall of oscillating gains must not
 answer next to the wall.
@@ -122,11 +123,24 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         except (QhullError, ValueError):  # too few or flat (all on a line): the best point flown is the answer
             return fallback, False
 
+    walls = every[~ok]
+    base = np.asarray(fallback)  # the best point flown in the box: an answer is reached from it
+    radius = 0.5 * cKDTree(every[ok]).query(walls)[0] if len(walls) and np.any(ok) else np.zeros(len(walls))
+
     def allowed(x: np.ndarray) -> np.ndarray:
-        """Each candidate's nearest flown point did not fail, and with failures it lies in the hull of the safe
-        points: no gain beyond the last one flown safely towards a wall is answered."""
+        """Each candidate's nearest flown point neither failed nor is ruled out; with failures, it lies in the
+        hull of the safe points and the way to it from the best point flown passes no failed point (by half that
+        point's distance to the nearest safe one): never on the far side of a wall."""
         out = near_ok[tree.query(x)[1]]
-        return out if hull is None else out & (hull.find_simplex(x, tol=1e-9) >= 0)
+        if hull is None:
+            return out
+        out &= hull.find_simplex(x, tol=1e-9) >= 0
+        step = x - base
+        length = np.maximum(np.sum(step * step, axis=1), 1e-300)
+        for f, r in zip(walls, radius):
+            t = np.clip((step @ (f - base)) / length, 0.0, 1.0)
+            out &= np.linalg.norm(base + t[:, None] * step - f, axis=1) >= r
+        return out
 
     x = (every[ok] - centre) / half
     dist = np.max(np.abs(x), axis=1) / REACH
