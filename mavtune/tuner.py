@@ -476,15 +476,16 @@ class Tuner:
                  for p in points for _ in range(per_point)]
         box = [(min(p[i] for p in points), max(p[i] for p in points)) for i in range(len(names))]
         reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
-        done = 0
-        while done < len(queue):
+        todo = list(queue)
+        while todo:
             record = self.recorded.get(len(self.rounds))
             vehicles = len(record.flights) if record is not None else self.fleet.size
             if vehicles < 1:
                 raise MavtuneError(f"no vehicle is available to fly round {len(self.rounds)}")
-            assignments = [dict(queue[(done + k) % len(queue)]) for k in range(vehicles)]
-            done += vehicles
-            self._fly(assignments, self.bootstrap, SURFACE, (-half, half))
+            batch, todo = todo[:vehicles], todo[vehicles:]
+            spare = [queue[k % len(queue)] for k in range(vehicles - len(batch))]  # no vehicle idles
+            flights = self._fly([dict(a) for a in batch + spare], self.bootstrap, SURFACE, (-half, half))
+            todo += [a for a, f in zip(batch, flights) if not f.measured]  # a lost flight is flown again
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
         best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}

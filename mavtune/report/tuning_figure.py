@@ -30,7 +30,6 @@ from mavtune.report.searches import SearchView  # noqa: E402
 from mavtune.report.timeline import text  # noqa: E402
 from mavtune.report.traces import drawable, to_draw  # noqa: E402
 from mavtune.report.units import GainUnit  # noqa: E402
-from mavtune.tuner import DIRECTION, SURFACE  # noqa: E402
 
 MAX_ROWS = 12  # bootstraps drawn; a longer run shows its last ones (the report's tables have them all)
 INTERVAL_COLOUR = "#d62728"
@@ -43,8 +42,7 @@ def gain_columns(views: Sequence[SearchView], gains: Sequence[str]) -> list[str]
     """The gains to draw, in the order tuned (then any final gain no search tuned)."""
     names: dict[str, None] = {}
     for v in views:
-        if v.gain not in (DIRECTION, SURFACE):  # every gain at once: no panel of its own (the rounds' table has them)
-            names.setdefault(v.gain, None)
+        names.setdefault(v.gain, None)
     for g in gains:
         names.setdefault(g, None)
     return list(names)

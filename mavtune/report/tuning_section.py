@@ -11,7 +11,7 @@ from mavtune.report import units as U
 from mavtune.report.figure_rules import MANY_VEHICLES, OUTLIER_FACTOR
 from mavtune.report.searches import Comparison, SearchView, as_float
 from mavtune.report.units import GainUnit
-from mavtune.tuner import DIRECTION, SURFACE
+from mavtune.tuner import DIRECTION
 
 
 def gains_table(final: dict[str, float], uncertainty: dict[str, dict[str, float]],
@@ -139,11 +139,6 @@ def tuning_section(views: Sequence[SearchView], figure: str | None, figure_note:
             parts += [f"**Bootstrap {v.bootstrap} · {v.gain}**: a line search across the gains (all of them moving "
                       "along one line, towards the minimum of a fit of every flight so far); its rounds and gains "
                       "are in the table of rounds.", ""]
-            continue
-        if v.gain == SURFACE:  # a designed set of gain vectors: its flights are in the rounds' table
-            parts += [f"**Response surface**: a designed set of gain vectors around the answer of the passes, every "
-                      "gain at once; the answer is the minimiser of one quadratic fitted to the flights near it, "
-                      "inside the flown design. Its rounds and gains are in the table of rounds.", ""]
             continue
         head = f"**Bootstrap {v.bootstrap} · {v.gain}**" + (
             f" ({units[v.gain].param})" if v.gain in units else "") + (
