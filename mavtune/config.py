@@ -62,9 +62,10 @@ class Tuning(_Section):
     inside the flown design. Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs:
     benchmarks/results/selection.md): 43 % of runs within 2 % of the optimum on mean over the plants against 37 %
     without the design (paired sign test over the zoo: better in 80 runs, worse in 37, p 8.7e-05), no fly-away
-    answer, 121 flights on mean against 100; two designs in turn (the second half as wide) scored 47 % at 142
-    flights but halved the nominal simulator's share, and a fixed budget (1 pass, not adaptive, 3 designs: 88
-    flights) scored 36 % with 2 fly-away answers. No configuration met the zoo's flight goals without losing most
+    answer, 121 flights on mean against 100; two designs in turn (the second half as wide: `design_steps = 2`,
+    `design_shrink = 0.5`) scored 47 % and beat it in the paired test (75 runs to 43) at 142 flights, but halved
+    the nominal simulator's share (50 %); a fixed budget (1 pass, not adaptive, 3 designs: 88 flights) scored
+    36 % with 2 fly-away answers. No configuration met the zoo's flight goals without losing most
     of its quality. This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options
     both take it (`settings()`). `PAPER_TUNING` restores the paper's exact setting.
     """
