@@ -18,6 +18,7 @@ from typing import Any, Callable, Sequence
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Gains
 
+UNCONVERGED = ("still moved", "do not pin it down", "no longer are")  # the run's cautions that its answer is unsettled
 MASS_DECIMALS = 6  # masses are kept to the milligram: 2.3 + 0.9 is stored as 3.2, not 3.1999999999999997
 
 
@@ -52,8 +53,19 @@ def run_facts(summary: dict[str, Any]) -> dict[str, Any]:
     cautions = [str(c) for c in summary.get("cautions") or []]
     params = next(iter((summary.get("tuned_params") or {}).values()), {})
     return {"se": standard_errors(uncertainty), "interval": interval, "cautions": cautions,
-            "converged": not any("still moved" in c or "do not pin it down" in c for c in cautions),
+            "converged": not any(m in c for c in cautions for m in UNCONVERGED),
             "params": {k: float(v) for k, v in params.items() if _finite(v)}}
+
+
+def sim_params(gains: Gains) -> dict[str, float]:
+    """The simulated vehicle's own controller gains for normalised (kp, kd): its SO(3) altitude loop's k_x(z) in
+    1/s² and k_v(z) in 1/s (`mavtune.sim.gains`), the units a simulator bank entry has; {} for other gains."""
+    from mavtune.sim.gains import GAIN_NAMES, to_physical
+
+    if set(gains) != set(GAIN_NAMES):
+        return {}
+    kx, kv = to_physical(gains["kp"], gains["kd"])
+    return {"k_x(z)": kx, "k_v(z)": kv}
 
 
 @dataclass(frozen=True)
@@ -174,6 +186,7 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
 
     def keep(i: int, result: Any) -> None:
         facts = run_facts(result.to_dict())
+        facts["params"] = facts["params"] or sim_params(result.gains)
         bank.add(MASS_KG + payloads_kg[i], result.gains, str(folders[i]), **facts)
         bank.save(out / "bank.json")
 

@@ -7,7 +7,7 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from mavtune.bank import GainBank
+from mavtune.bank import GainBank, run_facts, sim_params
 from mavtune.cli import app
 from mavtune.errors import MavtuneError
 
@@ -100,6 +100,13 @@ def test_bank_build_tunes_each_payload_in_the_simulator(tmp_path):
         result = json.loads((tmp_path / e.source.split("/")[-1] / "result.json").read_text())
         assert result["gains"] == e.gains
         assert e.se == {k: u["se"] for k, u in result["uncertainty"].items()} and set(e.se) == {"kp", "kd"}
+        assert e.interval == {k: [u["lo"], u["hi"]] for k, u in result["uncertainty"].items()}
+        assert e.converged == run_facts(result)["converged"] and isinstance(e.converged, bool)
+        # the simulated vehicle's own units: k_x(z) spans 0-250 1/s², k_v(z) 0-40 1/s over the normalised range
+        assert e.params == pytest.approx({"k_x(z)": 250 * e.gains["kp"], "k_v(z)": 40 * e.gains["kd"]})
+    assert "k_x(z)" in out.output and "converged" in out.output
+    assert sim_params({"kp": 0.5, "kd": 0.25}) == {"k_x(z)": 125.0, "k_v(z)": 10.0}
+    assert sim_params({"kp": 0.5, "ki": 0.25}) == {}  # not the simulator's gains: no units claimed
 
 
 def test_a_tuned_mass_is_looked_up_as_itself_not_as_an_end_of_a_bracket():
