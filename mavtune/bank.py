@@ -18,7 +18,8 @@ from typing import Any, Callable, Sequence
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Gains
 
-UNCONVERGED = ("still moved", "do not pin it down", "no longer are")  # the run's cautions that its answer is unsettled
+UNCONVERGED = ("still moved", "no longer are")  # a run's cautions that its answer had not settled (a wide interval
+# alone is not one: the entry's interval shows it)
 MASS_DECIMALS = 6  # masses are kept to the milligram: 2.3 + 0.9 is stored as 3.2, not 3.1999999999999997
 
 
@@ -45,15 +46,16 @@ def standard_errors(uncertainty: dict[str, dict[str, float]] | None) -> dict[str
 def run_facts(summary: dict[str, Any]) -> dict[str, Any]:
     """What a bank entry keeps of a finished run beyond its gains, from its result.json (or a result's
     `to_dict()` with the tuned outcome): standard errors, intervals, whether it converged (no caution that
-    its answer still moved or spans most of its range; the reasons otherwise) and, where the vehicle has them,
+    its answer still moved or that a gain's last line search held the others where they no longer are; those
+    cautions otherwise: a wide interval is in the interval itself) and, where the vehicle has them,
     the tuned autopilot parameters (of the first vehicle; all vehicles of one file share them)."""
     uncertainty = summary.get("uncertainty") or {}
     interval = {k: [float(u["lo"]), float(u["hi"])] for k, u in uncertainty.items()
                 if isinstance(u, dict) and _finite(u.get("lo")) and _finite(u.get("hi"))}
-    cautions = [str(c) for c in summary.get("cautions") or []]
+    cautions = [str(c) for c in summary.get("cautions") or [] if any(m in str(c) for m in UNCONVERGED)]
     params = next(iter((summary.get("tuned_params") or {}).values()), {})
     return {"se": standard_errors(uncertainty), "interval": interval, "cautions": cautions,
-            "converged": not any(m in c for c in cautions for m in UNCONVERGED),
+            "converged": not cautions,
             "params": {k: float(v) for k, v in params.items() if _finite(v)}}
 
 

@@ -153,6 +153,12 @@ def test_entries_keep_intervals_parameters_and_whether_their_run_converged(tmp_p
     moving = {"uncertainty": {"kp": {"se": 0.05, "lo": 0.2, "hi": 0.9}},
               "cautions": ["kp still moved +0.2 between its last two line searches"],
               "tuned_params": {"s0": {"PSC_POSZ_P": 2.1}}}
+    wide = {"uncertainty": {"kp": {"se": 0.05, "lo": 0.0, "hi": 0.9}},
+            "cautions": ["kp's 90% interval 0 – 0.9 spans 90% of its range: the flights do not pin it down"]}
+    assert run_facts(wide)["converged"] and run_facts(wide)["interval"] == {"kp": [0.0, 0.9]}  # unsure, settled
+    stale = {"cautions": ["kp's 90% interval 0 – 1 spans 100%", "kp's last line search held the other gains where "
+                          "they no longer are (kd 0.33 → 0.541)"]}
+    assert not run_facts(stale)["converged"] and run_facts(stale)["cautions"] == stale["cautions"][1:]
     b = GainBank()
     b.add(2.3, {"kp": 0.35}, "a", **run_facts(settled))
     b.add(3.2, {"kp": 0.55}, "b", **run_facts(moving))
