@@ -258,8 +258,11 @@ def test_an_interval_measured_where_the_other_gains_no_longer_are_reaches_both_b
     from mavtune.search.interval import Interval, joint, stale
 
     held = Interval(0.5, 0.01, 0.45, 0.55)
-    assert joint(held, None, [], 0.2, (0.0, 1.0), shift=0.09) == held  # within half the tolerance ε = 0.2: kept
-    assert (joint(held, None, [], 0.2, (0.0, 1.0), shift=0.11).lo, joint(held, None, [], 0.2, (0.0, 1.0), shift=0.11).hi) == (0.0, 1.0)
+    kept, freed = (joint(held, None, [], 0.2, (0.0, 1.0), shift=s) for s in (0.09, 0.11))
+    assert (kept.lo, kept.hi) == (0.45, 0.55)  # the others moved within half the tolerance ε = 0.2: kept
+    assert (freed.lo, freed.hi) == (0.0, 1.0)
+    outside = joint(Interval(0.7, 0.01, 0.45, 0.55), None, [], 0.2, (0.0, 1.0))
+    assert (outside.lo, outside.hi) == (0.45, 0.7)  # an answer another rule moved off the line stays inside
     assert stale({"kd": 0.2}, {"kp": 0.5, "kd": 0.6}, {"kp": (0.0, 1.0), "kd": (0.0, 2.0)}) == pytest.approx(0.2)
     result = mavtune.tune(ridge(0), seed=0, draws=40)
     rec = {s.gain: s for s in result.searches}["kp"]
