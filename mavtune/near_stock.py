@@ -161,7 +161,8 @@ def pick(plain: Mapping[str, float], points: Sequence[FlownPoint], stock: Sequen
                     "plain answer is kept", **common)
     chosen = min(within, key=lambda p: (from_stock(p.gains), p.mean))
     d_chosen, d_plain = from_stock(chosen.gains), from_stock(plain)
-    said = (f"{len(within)} flown point{'s' if len(within) != 1 else ''} within {k:.2g} standard errors of the "
+    said = (f"{len(within)} flown point{'s' if len(within) != 1 else ''} within {k:.2g} standard "
+            f"error{'' if f'{k:.2g}' == '1' else 's'} of the "
             f"difference of the best ({_pm(best)}; noise {cv:.0%} of the cost a flight from {dof:g} repeats; a "
             f"one-sided t-test at {alpha:.0%})")
     if _same(chosen.gains, plain, width):

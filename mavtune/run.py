@@ -442,14 +442,19 @@ def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path, c
     flights there say (`LineSearch.edge_evidence`). With `chosen` (a `near_stock.Pick`) its gains are the answer
     (`gains`, the parameters and files; `answer` says why), and a gain it moved off the search's optimum has no
     range edge (it lies where the flights put it, nearer stock)."""
-    from mavtune.vehicles.tuned import tuned_outcome as outcome
+    from mavtune.vehicles.tuned import explained_edges, tuned_outcome as outcome
 
     maps = fleet.param_maps() if hasattr(fleet, "param_maps") else {}
     evidence, flown = result.edges()
     gains = chosen.gains if chosen is not None else result.gains
     kept = {n: v for n, v in gains.items() if v == result.gains.get(n)}
     said = outcome(maps, gains, settings.space, settings.epsilon, out_dir, evidence, flown, result.brackets(), kept)
-    return said if chosen is None else said | {"gains": dict(gains), "answer": chosen.to_dict()}
+    if chosen is None:
+        return said
+    moved = {n: v for n, v in result.gains.items() if n not in kept}  # where the search's optimum lay instead
+    usable = {v: m for v, m in maps.items() if m.covers(result.gains)}
+    left = explained_edges(usable, moved, settings.space, settings.epsilon, evidence, flown, result.brackets())
+    return said | {"gains": dict(gains), "answer": chosen.to_dict() | {"plain_range_edges": [e.message() for e in left]}}
 
 
 def print_outcome(console: Console, outcome: dict[str, Any]) -> None:

@@ -141,3 +141,24 @@ def test_the_simulator_answers_nearest_stock_only_when_asked(tmp_path):
     if answer["moved"]:
         assert answer["gains"] in [p["gains"] for p in summary["points"]]
     assert "## Answer" in (tmp_path / "near" / "report.md").read_text()
+
+
+def test_an_answer_moved_off_the_limit_says_where_the_optimum_lay(tmp_path):
+    from types import SimpleNamespace
+
+    from mavtune.run import tuned_outcome
+    from mavtune.vehicles.parammap import GainBinding, ParamMap
+
+    m = ParamMap(stack="ardupilot", gains={"kp": GainBinding(param="PSC_POSZ_P", lo=1.0, hi=3.0, limit_hi=3.0),
+                                           "kd": GainBinding(param="PSC_VELZ_P", lo=1.0, hi=8.0, limit_hi=8.0)})
+    flights = [({"kp": 0.5, "kd": 1.0}, 10.0), ({"kp": 0.5, "kd": 0.875}, 10.1)]
+    chosen = pick({"kp": 0.5, "kd": 1.0}, flown(flights, ["kp", "kd"], 0.2), [m.normalised({"PSC_POSZ_P": 1.0,
+                  "PSC_VELZ_P": 5.0})], SPACE, 0.2, MANY)
+    assert chosen.gains == {"kp": 0.5, "kd": 0.875}
+    result = SimpleNamespace(gains={"kp": 0.5, "kd": 1.0}, edges=lambda: ({}, {}), brackets=lambda: {})
+    fleet = SimpleNamespace(param_maps=lambda: {"v": m})
+    out = tuned_outcome(fleet, result, SimpleNamespace(space=SPACE, epsilon=0.125), tmp_path, chosen)
+    assert out["gains"] == chosen.gains and out["tuned_params"]["v"] == {"PSC_POSZ_P": 2.0, "PSC_VELZ_P": 7.125}
+    assert out["range_edges"] == []  # the answer lies inside: nothing to say of it
+    [said] = out["answer"]["plain_range_edges"]  # but the search's optimum lay on the documented limit
+    assert "PSC_VELZ_P" in said and "the autopilot's limit, not the search, stopped it" in said

@@ -186,8 +186,10 @@ def answer_section(summary: dict) -> list[str]:
     rows += [[f"stock{f' ({k})' if len(answer.get('stock') or []) > 1 else ''}", gains(s), ""]
              for k, s in enumerate(answer.get("stock") or [], 1)]
     reason = str(answer.get("reason", ""))
+    left = [f"- The search's optimum: {m}" for m in answer.get("plain_range_edges") or []]
     return ["## Answer", "", f"{reason[:1].upper()}{reason[1:]}.", "",
             md.table(["point", "gains", "mean cost ± se (flights)"], rows, ["l", "l", "r"]), "",
+            *([*left, ""] if left else []),
             "± se here is the standard error of a point's mean cost (the run's pooled flight-to-flight noise over √ "
             "its flights); the final gains above are the search's optimum, the tuned parameters below the answer.",
             ""]

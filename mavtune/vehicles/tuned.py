@@ -60,9 +60,9 @@ def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
     if missing := {v: f"its parameters bind gains {sorted(m.gains)}, not the tuned {sorted(gains)}"
                    for v, m in maps.items() if v not in usable}:
         outcome["tuned_params_missing"] = missing
-    edges = range_edges(gains if edge_gains is None else edge_gains, space, epsilon, evidence, flown, brackets)
+    edges = explained_edges(usable, gains if edge_gains is None else edge_gains, space, epsilon, evidence, flown,
+                            brackets)
     if usable:
-        edges = [x for e in edges for x in _unique(m.explain_edge(e) for m in usable.values())]
         tolerance = {n: epsilon * (hi - lo) for n, (lo, hi) in space.items()}
         files = write_tuned_files(usable, gains, out_dir)
         outcome |= {"tuned_params": {v: m.values(gains) for v, m in usable.items()},
@@ -70,6 +70,19 @@ def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
                     "param_files": list(files), "param_file_vehicles": files}
     outcome["range_edges"] = [e.to_dict() for e in edges]
     return outcome
+
+
+def explained_edges(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
+                    space: Mapping[str, tuple[float, float]], epsilon: float,
+                    evidence: Mapping[str, Any] | None = None,
+                    flown: Mapping[str, tuple[float, float]] | None = None,
+                    brackets: Mapping[str, tuple[float, float]] | None = None) -> list:
+    """The range edges the gains lie at (`mavtune.edges.range_edges`), each named by the parameter it drives on
+    every vehicle whose map binds the gains (once per parameter)."""
+    edges = range_edges(gains, space, epsilon, evidence, flown, brackets)
+    if not maps:
+        return edges
+    return [x for e in edges for x in _unique(m.explain_edge(e) for m in maps.values())]
 
 
 def _unique(items: Iterable[Any]) -> list[Any]:

@@ -31,8 +31,8 @@ def test_a_vehicle_run_answers_nearest_stock_within_noise(tmp_path):
     tuned = summary["tuned_params"][url]
     assert tuned == pytest.approx({"MPC_Z_P": 0.1 + 1.4 * answer["gains"]["kp"],
                                    "MPC_Z_VEL_P_ACC": 2.0 + 13.0 * answer["gains"]["kd"]})
-    assert f"MPC_Z_P {tuned['MPC_Z_P']:g}" in " ".join((tmp_path / "tuned.params").read_text().split("\t")) or \
-        "MPC_Z_P" in (tmp_path / "tuned.params").read_text()
+    assert "MPC_Z_P" in (tmp_path / "tuned.params").read_text()
+    assert all("range" in m or "limit" in m for m in answer["plain_range_edges"])  # where the optimum lay, if at one
     plain = answer["plain"]
     assert set(plain["gains"]) == {"kp", "kd"} and isinstance(plain["flown"], bool)
     flown = [p["gains"] for p in summary["points"]]
