@@ -191,7 +191,8 @@ def answer_section(summary: dict) -> list[str]:
             md.table(["point", "gains", "mean cost ± se (flights)"], rows, ["l", "l", "r"]), "",
             *([*left, ""] if left else []),
             "± se here is the standard error of a point's mean cost (the run's pooled flight-to-flight noise over √ "
-            "its flights); the final gains above are the search's optimum, the tuned parameters below the answer.",
+            "its flights). The final gains above are the search's optimum; the answer is the run's `gains` in "
+            "result.json and, on vehicles, its tuned parameters and files.",
             ""]
 
 
