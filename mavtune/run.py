@@ -419,8 +419,11 @@ def picked(config: Config, fleet: Fleet, result: TuningResult):
     rule = config.tuning.pick or ("near-stock" if config.fleet.kind == "mavlink" else "best")
     if rule != "near-stock":
         return None
-    return near_stock(result, fleet.stock_gains() if hasattr(fleet, "stock_gains") else [],
-                      config.settings().space)
+    try:
+        stock = fleet.stock_gains() if hasattr(fleet, "stock_gains") else []
+    except (MavtuneError, ValueError, AttributeError):  # a vehicle that cannot say: the rule says stock is unknown
+        stock = []
+    return near_stock(result, stock, config.settings().space)
 
 
 def near_stock(result: TuningResult, stock: list, space: dict[str, tuple[float, float]], alpha: float | None = None):
