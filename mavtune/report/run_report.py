@@ -317,7 +317,7 @@ def _rounds(rep: Report) -> list[str]:
 
 
 def _points(rep: Report) -> list[str]:
-    return points_section(flown_points(rep.rounds), rep.units)
+    return points_section(flown_points(rep.rounds), rep.units, rep.summary.get("answer"))
 
 
 def _fleet_events(rep: Report) -> list[str]:
