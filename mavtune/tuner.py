@@ -23,7 +23,7 @@ from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
 from mavtune.search.interval import DRAWS, edge_reach, joint, plausible_region, resample, resolution, stale
 from mavtune.search.joint import newton_step
-from mavtune.search.model import flown_span
+from mavtune.search.model import beside_failure, flown_span
 from mavtune.strategy import Strategy
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
@@ -148,10 +148,12 @@ class TuningResult:
                 out.append(f"{name}'s last line search held the other gains where they no longer are ("
                            f"{moved_others}): how far {name}'s own minimum moved with them no flight tells, so its "
                            "interval reaches both bounds (another bootstrap would tell)")
-            if rec.beside_failure is not None:
-                out.append(f"{name} = {self.gains.get(name, rec.result):.4g} lies next to {rec.beside_failure:.4g}, "
-                           "where a flight failed (diverged): no gain beyond it was answered, but the margin to it "
-                           "is one step of the search")
+            answer = self.gains.get(name, rec.result)  # another stage may have moved it off the line's result
+            wall = rec.beside_failure if answer == rec.result or not rec.samples else beside_failure(rec.samples,
+                                                                                                        answer)
+            if wall is not None:
+                out.append(f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed (diverged): no "
+                           "gain beyond it was answered, but the margin to it is one step of the search")
         return out
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:

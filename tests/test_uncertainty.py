@@ -279,6 +279,14 @@ def test_the_cautions_fire_for_a_moving_answer_and_an_answer_next_to_a_fly_away(
                                         for g in gs], seed=1, draws=20)
     assert diverges.gains["kp"] <= 0.62
     assert any("where a flight failed" in c for c in diverges.cautions())
+    rec = {s.gain: s for s in diverges.searches}["kp"]
+    wall = min(x for x, c in rec.samples.items() if not all(map(math.isfinite, c)))
+    safe = max(x for x in rec.samples if x < wall)
+    far = min(x for x in rec.samples if x < safe)
+    diverges.gains["kp"] = far  # another stage answered a point with a flown point between it and the wall
+    assert not any("where a flight failed" in c for c in diverges.cautions())
+    diverges.gains["kp"] = safe  # and one next to the wall: said, whatever stage chose it
+    assert any(f"kp = {safe:.4g} lies next to {wall:.4g}" in c for c in diverges.cautions())
     moving = mavtune.tune(ridge(1, cv=0.02), seed=1, draws=20, epsilon=0.125)
     moves = {g: u["moved"] for g, u in moving.uncertainty.items()}
     said = " ".join(moving.cautions())
