@@ -113,6 +113,13 @@ class Tuning(_Section):
     design_shrink: float = Field(1.0, gt=0.0, le=1.0, description="design: each design's half-width over the one "
                                   "before (below 1: the later designs narrow in, less bias from a cost that is no "
                                   "quadratic)")
+    pick: Literal["best", "near-stock"] | None = Field(None, description="the answer among the run's flown points: "
+                                                       "the search's optimum (best), or the flown point nearest the "
+                                                       "vehicles' stock gains whose cost is within one standard error "
+                                                       "of the best's (near-stock: mavtune.near_stock); unset: "
+                                                       "near-stock on MAVLink vehicles, best in the simulator and "
+                                                       "behind swarm agents. Not in the journal: a finished run can "
+                                                       "be answered either way")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":

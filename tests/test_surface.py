@@ -49,7 +49,8 @@ def test_the_surface_answers_an_inside_edge_or_corner_optimum_of_a_noise_free_qu
     assert f(got) <= best + 1e-6  # the fit of a quadratic is exact: its minimum in the flown box
     opt = np.clip([kp, kd], 0.0, 1.0)
     if all(lo[i] <= opt[i] <= hi[i] for i in range(2)) and abs(coupling) < 1e-9:
-        assert got == pytest.approx(tuple(opt), abs=1e-4)  # an edge or corner optimum itself, when flown around
+        assert got == pytest.approx(tuple(opt), abs=1e-3)  # an edge or corner optimum itself (the polish of the
+        # fit's minimum stops within L-BFGS-B's default tolerance)
 
 
 def test_a_corner_optimum_is_answered_on_the_corner():
