@@ -73,6 +73,11 @@ def tune(
     answer: str = DEFAULT,
     edges: bool = DEFAULT,
     directions: bool = DEFAULT,
+    design: bool = DEFAULT,
+    design_width: float = DEFAULT,
+    design_repeats: int = DEFAULT,
+    design_steps: int = DEFAULT,
+    design_shrink: float = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
     max_rounds: int = MAX_ROUNDS,
@@ -89,7 +94,10 @@ def tune(
     flights (None: 4 rounds' worth), `answer` is each line search's answer ("search" or "model": a local fit of
     all its flights), `edges` whether a line search ending against an edge of its range flies the edge (an optimum
     there can be the answer), `answer="valley"` a fit with one curvature each side of the minimum, `directions`
-    whether a line search across the gains follows every pass but the first (a valley across the gains), `on_round`
+    whether a line search across the gains follows every pass but the first (a valley across the gains), `design`
+    whether a designed set of gain vectors (half-width `design_width` of each range, each flown `design_repeats`
+    times, `design_steps` designs in turn, each
+    `design_shrink` times as wide as the one before) follows the passes and the answer is the minimiser of one quadratic fitted to the flights near it, `on_round`
     sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
     `mavtune tune` refuses them. `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
     seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs
@@ -111,7 +119,9 @@ def tune(
         vehicles if vehicles is not None else fleet.size, space=space, method=method, epsilon=epsilon,
         bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial=initial, replicates=replicates, points=points,
         max_bootstraps=max_bootstraps, seed=seed if seed is not None else DEFAULT, adaptive=adaptive,
-        confidence=confidence, cap=cap, answer=answer, edges=edges, directions=directions)
+        confidence=confidence, cap=cap, answer=answer, edges=edges, directions=directions,
+        design=design, design_width=design_width, design_repeats=design_repeats, design_steps=design_steps,
+        design_shrink=design_shrink)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")

@@ -22,6 +22,7 @@ from typing import Callable
 
 from mavtune.errors import MavtuneError
 from mavtune.search.base import P_BEST_STEPS
+from mavtune.search.surface import design as surface_design
 from mavtune.tuner import Settings
 
 MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal costs)
@@ -209,7 +210,8 @@ def _adaptive_rounds(settings: Settings, lo: float, hi: float, work: Work) -> tu
 def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.0, battery_s: float = 600.0,
               work_limit: int | None = None) -> Plan:
     """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps (and the
-    line searches across the gains between passes, `directions`: each the same search over its segment); refused
+    line searches across the gains between passes, `directions`: each the same search over its segment), plus the
+    response surface's design (`surface`: a fixed number of rounds); refused
     (MavtuneError) when the rehearsals would take more than `work_limit` steps (default `PLAN_WORK`)."""
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
     # every gain's line search has the same shape relative to its range: rehearse one, count it per gain
@@ -228,7 +230,12 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
         per_search = max(_rehearse(settings, lo, hi, cost, work) for cost in costs)
         per_search_max = max(per_search, _rounds_without_speculation(settings, lo, hi))
         rounds = per_search * searches
-    evaluations = settings.search(lo, hi).budget()
-    return Plan(rounds, per_search_max * searches, settings.vehicles, evaluations * searches,
+    evaluations = settings.search(lo, hi).budget() * searches
+    surface = settings.design_rounds()  # the design's rounds: the same whatever the costs
+    if surface:
+        evaluations += (len(surface_design([0.5] * len(settings.space), settings.design_width))
+                        * settings.design_repeats * settings.design_steps)
+        rounds, clear = rounds + surface, None if clear is None else clear + surface
+    return Plan(rounds, per_search_max * searches + surface, settings.vehicles, evaluations,
                 bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None,
                 adaptive=settings.adaptive_rule is not None, rounds_min=clear)

@@ -24,16 +24,21 @@ from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_sear
 from mavtune.search.interval import DRAWS, edge_reach, joint, plausible_region, resample, resolution, stale
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
+from mavtune.search.surface import answer as surface_answer, beside_wall, design as surface_design, \
+    ruled_out as surface_ruled_out
 from mavtune.strategy import Strategy
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
                  "value the run's flights cannot rule out with all gains free (a gain vector is ruled out only when "
                  "its nearest flown point is significantly worse than the best, corrected for the many points "
-                 "compared), and reaches back to the previous answer and on, to the range's bound while the answer "
+                 "compared), and reaches back to the previous answer (the last line search's, when the response surface "
+                 "moved it) and on, to the range's bound while the answer "
                  "still moves by more than the search's tolerance between bootstraps, where the line's cost still "
                  "falls at its outermost flown point, and on both sides when the other gains moved by more than half "
                  "the tolerance after its last line search")
 DIRECTION = "direction"  # the `gain` of a round of a line search across the gains (all gains at once)
+SURFACE = "design"  # the `gain` of a round of the response surface's design (all gains at once)
+MAX_DESIGN_REPEATS = 100
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 # Bounds of every accepted setting, the same for the Python API and the CLI: each run plans and flies in bounded time.
 MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
@@ -119,6 +124,7 @@ class TuningResult:
     uncertainty: dict[str, dict[str, float]] = field(default_factory=dict)  # gain -> Interval.to_dict()
     noise: dict[str, float] = field(default_factory=dict)  # the pooled flight-to-flight noise: cv and its dof
     in_progress: LineSearchRecord | None = None  # the line search under way when the run stopped, if any
+    designed: Gains = field(default_factory=dict)  # the response surface's answer, when a design was flown
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each: an answer still moving between
@@ -151,6 +157,8 @@ class TuningResult:
             answer = self.gains.get(name, rec.result)  # another stage may have moved it off the line's result
             wall = rec.beside_failure if answer == rec.result or not rec.samples else beside_failure(rec.samples,
                                                                                                         answer)
+            if wall is None and answer == self.designed.get(name):  # the design's verdict on its own answer
+                wall = rec.beside_failure  # (`Tuner._surface`: from every flight of the run)
             if wall is not None:
                 out.append(f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed (diverged): no "
                            "gain beyond it was answered, but the margin to it is one step of the search")
@@ -213,6 +221,11 @@ class Settings:
     answer: str = "search"
     edges: bool = False
     directions: bool = False
+    design: bool = False
+    design_width: float = 0.15
+    design_repeats: int = 1
+    design_steps: int = 1
+    design_shrink: float = 1.0
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -254,6 +267,16 @@ class Settings:
             self.adaptive_rule = Adaptive(float(self.confidence), int(cap), bool(self.stop_undecided))
         else:
             self.adaptive_rule = None
+        if not 0.0 < float(self.design_width) <= 0.5:
+            raise MavtuneError(f"design_width {self.design_width} is outside (0, 0.5]: the design's half-width, a "
+                               "share of each gain's range")
+        if not 1 <= int(self.design_repeats) <= MAX_DESIGN_REPEATS:
+            raise MavtuneError(f"design_repeats must be from 1 to {MAX_DESIGN_REPEATS}, got {self.design_repeats}")
+        if not 0.0 < float(self.design_shrink) <= 1.0:
+            raise MavtuneError(f"design_shrink {self.design_shrink} is outside (0, 1]: each design's half-width "
+                               "over the one before")
+        if not 1 <= int(self.design_steps) <= MAX_DESIGN_REPEATS:
+            raise MavtuneError(f"design_steps must be from 1 to {MAX_DESIGN_REPEATS}, got {self.design_steps}")
         self.search(0.0, 1.0)  # validates
 
     def search(self, lo: float, hi: float, pool: NoisePool | None = None, edges: bool | None = None) -> LineSearch:
@@ -267,7 +290,16 @@ class Settings:
         """The rounds a run of these settings takes at the least: every line search's budget of evaluations,
         as many a round as the strategy has slots, per gain and bootstrap (one, for the paper's stop rule)."""
         rounds = math.ceil(self.search(0.0, 1.0, edges=False).budget() / self.strategy_rule.slots(int(self.vehicles)))
-        return rounds * len(self.space) * (self.bootstraps or 1)  # (a line search across the gains may be skipped)
+        return (rounds * len(self.space) * (self.bootstraps or 1)  # (a line search across the gains may be skipped)
+                + self.design_rounds())
+
+    def design_rounds(self, vehicles: int | None = None) -> int:
+        """Rounds of `vehicles` (the settings' by default) the response surface's designs take (0 without)."""
+        if not self.design:
+            return 0
+        n = len(surface_design([0.5] * len(self.space), self.design_width))
+        per_point = self.strategy_rule.per_point(int(self.vehicles)) * int(self.design_repeats)
+        return math.ceil(n * per_point / int(vehicles or self.vehicles)) * int(self.design_steps)
 
     def direction_searches(self, bootstraps: int) -> int:
         """Line searches across the gains a run of `bootstraps` passes may fly (`directions`: one after every pass
@@ -297,7 +329,10 @@ class Settings:
                                                                   "stop": self.adaptive_rule.stop},
             "answer": self.answer if self.answer != "search" else None,
         } | ({"edges": True} if self.edges else {}) | (  # absent when off: journals from before still resume
-            {"directions": True} if self.directions else {})
+            {"directions": True} if self.directions else {}) | (
+            {"design": {"width": float(self.design_width), "repeats": int(self.design_repeats),
+                         "steps": int(self.design_steps), "shrink": float(self.design_shrink)}}
+            if self.design else {})
 
 
 class StageDone(Exception):
@@ -335,7 +370,8 @@ class Tuner:
         self.flown = 0  # rounds flown (not replayed) by this process
         self.pool = NoisePool()  # the run's flight-to-flight noise, pooled over every line search
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
-        self._uncertainty: tuple[int, dict[str, dict[str, float]]] = (-1, {})
+        self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
+        self.designed: Gains = {}  # the response surface's answer (`_surface`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
 
     def snapshot(self) -> TuningResult:
@@ -351,7 +387,8 @@ class Tuner:
         return TuningResult(gains=dict(self.gains), rounds=list(self.rounds), searches=list(self.searches),
                             bootstraps=self.bootstrap, stop_reason=stop_reason,
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
-                            noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress)
+                            noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
+                            designed=dict(self.designed))
 
     @staticmethod
     def _record(bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
@@ -364,8 +401,10 @@ class Tuner:
     def uncertainty(self) -> dict[str, dict[str, float]]:
         """Per tuned gain its interval, from the flights of the last line search that set it."""
         done, cached = self._uncertainty
-        if done == len(self.searches):
+        state = (len(self.searches), tuple(self.gains.values()))  # the surface moves the gains after the searches
+        if done == state:
             return cached
+        surfaced = any(r.gain == SURFACE for r in self.rounds)
         s, rule = self.settings, self.settings.strategy_rule
         last = {rec.gain: (i, rec) for i, rec in enumerate(self.searches)}
         region = dict(zip(s.space, self._region() or [])) if self.draws and last else {}
@@ -378,10 +417,12 @@ class Tuner:
                                 rec.samples, self.pool, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
             answers = [start[name], *(r.result for r in self.searches[:i + 1] if r.gain == name)]
+            if surfaced and answers[-1] != self.gains[name]:  # the response surface's move counts as the last one
+                answers.append(self.gains[name])
             moves = [b - a for a, b in zip(answers, answers[1:])]
             out[name] = joint(interval, region.get(name), moves, s.epsilon * (hi - lo), (lo, hi),
                               edge_reach(rec.samples, (lo, hi)), stale(rec.held, self.gains, s.space)).to_dict()
-        self._uncertainty = (len(self.searches), out)
+        self._uncertainty = (state, out)
         return out
 
     def _region(self) -> list[tuple[float, float]] | None:
@@ -435,7 +476,48 @@ class Tuner:
                     break
                 found.append(dict(self.gains))
                 self.stop_reason = f"reached the cap of {limit} bootstraps without a repeated point"
+        for step in range(s.design_steps if s.design else 0):
+            self._surface(s.design_width * s.design_shrink ** step)
         return self.snapshot()
+
+    def _surface(self, half: float) -> None:
+        """One step of the response surface (`design_steps` in turn, each around the answer of the one before):
+        fly the design around the gains now (`surface.design`, the same rounds whatever the
+        costs: the plan knows them), then answer the minimiser of one quadratic in every gain fitted to the run's
+        flights near it, inside the design's box and never where the nearest flight failed (`surface.answer`)."""
+        s = self.settings
+        names = list(s.space)
+        lo = [s.space[n][0] for n in names]
+        width = [s.space[n][1] - s.space[n][0] for n in names]
+        points = surface_design([(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)], half)
+        per_point = s.strategy_rule.per_point(int(s.vehicles)) * int(s.design_repeats)
+        queue = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, p)}
+                 for p in points for _ in range(per_point)]
+        box = [(min(p[i] for p in points), max(p[i] for p in points)) for i in range(len(names))]
+        reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
+        todo = list(queue)
+        while todo:
+            record = self.recorded.get(len(self.rounds))
+            vehicles = len(record.flights) if record is not None else self.fleet.size
+            if vehicles < 1:
+                raise MavtuneError(f"no vehicle is available to fly round {len(self.rounds)}")
+            batch, todo = todo[:vehicles], todo[vehicles:]
+            spare = [queue[k % len(queue)] for k in range(vehicles - len(batch))]  # no vehicle idles
+            flights = self._fly([dict(a) for a in batch + spare], self.bootstrap, SURFACE, (-half, half))
+            todo += [a for a, f in zip(batch, flights) if not f.measured]  # a lost flight is flown again
+        flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
+        best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool))
+        self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
+        self.stop_reason = reason
+        last = {rec.gain: rec for rec in self.searches}
+        for rec in last.values():  # the caution of an answer next to a failed flight is the final answer's
+            rec.beside_failure = None
+        wall = beside_wall(flown, best, 2.0 * half * math.sqrt(len(names)))
+        if wall is not None:  # said on the gain along which the failed point lies farthest from the answer
+            i = max(range(len(names)), key=lambda k: abs(wall[k] - best[k]))
+            if names[i] in last:
+                last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
+        self.designed = dict(self.gains)
 
     def _same_point(self, earlier: Gains) -> bool:
         """True when the latest gains are within the search's tolerance ε·(hi − lo) of `earlier` in every gain:
@@ -495,7 +577,15 @@ class Tuner:
             raise MavtuneError(f"no vehicle is available to fly round {index}")
         points = self.settings.strategy_rule.assign(search, vehicles)
         assignments = [place(p) if place is not None else {**gains, name: p} for p in points]
-        bracket = search.bracket
+        flights = self._fly(assignments, bootstrap, name, search.bracket)
+        told_points, costs = Strategy.measured(points, flights)
+        search.tell(told_points, costs)
+
+    def _fly(self, assignments: list[Gains], bootstrap: int, name: str, bracket: tuple[float, float]) -> list[Flight]:
+        """Fly (or replay from the journal) and account one round of `assignments`: journaled before the next,
+        told to `on_round`; its flights."""
+        index = len(self.rounds)
+        record = self.recorded.get(index)
         if record is not None:
             self._check_replay(record, assignments)
             flights, started, finished, replayed = record.flights, record.started_s, record.finished_s, True
@@ -514,14 +604,13 @@ class Tuner:
                 self.journal.append(RoundRecord(index, bootstrap, name, assignments, flights, started, finished))
         rnd = Round(index, bootstrap, name, bracket, assignments, flights, started, finished, replayed)
         self.rounds.append(rnd)
-        told_points, costs = Strategy.measured(points, flights)
-        search.tell(told_points, costs)
-        self._dry_rounds = 0 if told_points else self._dry_rounds + 1
+        self._dry_rounds = 0 if any(f.measured for f in flights) else self._dry_rounds + 1
         if self.on_round is not None:
             self.on_round(rnd)
         if self._dry_rounds >= MAX_ROUNDS_WITHOUT_RESULT:
             raise MavtuneError(f"no vehicle returned a result in {MAX_ROUNDS_WITHOUT_RESULT} consecutive rounds "
                                f"(last: round {index}); the journal keeps every round so far")
+        return flights
 
     def _check_replay(self, record: RoundRecord, assignments: list[Gains]) -> None:
         same = len(record.assignments) == len(assignments) and all(

@@ -39,10 +39,10 @@ def test_batteries_count_whole_rounds_per_pack():
        st.sampled_from(["avg", "split", "groups"]), st.integers(1, 4), st.booleans(),
        st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.05, 0.45), st.integers(0, 3), st.booleans(),
        st.sampled_from(["search", "model", "valley"]), st.floats(0.6, 0.95), st.integers(1, 8), st.booleans(),
-       st.booleans())
+       st.booleans(), st.booleans())
 @settings(max_examples=40, deadline=None)
 def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsilon, noise_seed, adaptive, answer,
-                                   confidence, cap, edges, directions):
+                                   confidence, cap, edges, directions, design):
     vehicles = 2 * half
     import random
 
@@ -53,7 +53,7 @@ def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsi
 
     kwargs = dict(space=SPACE, method=method, epsilon=epsilon, strategy=strategy, vehicles=vehicles, reuse=reuse,
                   adaptive=adaptive, answer=answer, confidence=confidence, cap=cap if adaptive else None, edges=edges,
-                  directions=directions)
+                  directions=directions, design=design)
     plan = make_plan(Settings(**kwargs, bootstraps=2))
     result = mavtune.tune(evaluate, bootstraps=2, draws=0, **kwargs)  # no interval: only the rounds count here
     if adaptive:  # the worst case is stated before take-off and bounds every run
@@ -67,8 +67,9 @@ def test_plan_command_prints_the_numbers():
                                    "--no-adaptive"])
     assert out.exit_code == 0, out.output
     text = " ".join(out.output.split())
-    assert "rounds 8 (guaranteed at most 32" in text  # 28 of the method's comparisons, 4 at a range's edge
-    assert "flights 64" in text and "1 min 12 s" in text and "batteries 2 per vehicle" in text
+    assert "rounds 10 (guaranteed at most 34" in text  # 28 of the method's comparisons, 4 at a range's edge, and
+    # the design's 9 points on 8 vehicles: 2 rounds
+    assert "flights 80" in text and "1 min 30 s" in text and "batteries 2 per vehicle" in text
 
 
 def test_adaptive_plan_says_the_expected_and_the_worst_case():

@@ -103,7 +103,9 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
     assert math.isnan(result.rounds[0].costs[0])
     assert result.rounds[0].flights[0].status is mavtune.Status.FAILED
     assert result.rounds[1].assignments[0]["kp"] == 0.875
-    assert result.gains["kp"] > 0.125  # NaN lost the first comparison
+    assert result.searches[0].result > 0.125  # NaN lost the first comparison
+    # the design flew 0.0375 without failure, the best point of the run: the answer is reached from it
+    assert result.gains["kp"] != 0.125 and result.gains["kp"] <= 0.1875
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -128,21 +130,22 @@ def test_bad_input_is_one_line_naming_the_problem(kwargs, message):
 
 
 def test_the_api_refuses_what_the_cli_refuses_before_anything_flies():
-    """ε = 1e-4 asks EQL for 40 004 rounds: refused at once, as `mavtune tune` refuses it, not flown for minutes."""
+    """ε = 1e-4 asks EQL for 40 004 rounds (and the design 9): refused at once, as `mavtune tune` refuses it, not flown for minutes."""
     flown = []
 
     def evaluate(assignments):
         flown.append(assignments)
         return [1.0] * len(assignments)
 
-    with pytest.raises(MavtuneError, match="at least 40004 rounds, more than max_rounds = 2000") as info:
+    with pytest.raises(MavtuneError, match="at least 40013 rounds, more than max_rounds = 2000") as info:
         mavtune.tune(evaluate, epsilon=1e-4)
     assert "\n" not in str(info.value) and not flown
     plain = dict(adaptive=False, edges=False)  # no re-flights, no comparison at an edge: exactly the budget
-    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=5, **plain)
-    assert len(result.rounds) == 5  # EQL's 5 evaluations at ε = 0.25, one a round: allowed at max_rounds = 5
-    with pytest.raises(MavtuneError, match="at least 5 rounds, more than max_rounds = 4"):
-        mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=4)
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=8, **plain)
+    assert len(result.rounds) == 8  # EQL's 5 evaluations at ε = 0.25, one a round, and the design's 3 points (one
+    # gain, both vehicles at a point): allowed at max_rounds = 8
+    with pytest.raises(MavtuneError, match="at least 8 rounds, more than max_rounds = 7"):
+        mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=7)
 
 
 def test_wrong_number_of_costs_is_named():

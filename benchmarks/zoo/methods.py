@@ -150,19 +150,14 @@ def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str
 def candidates() -> list[Method]:
     """The configurations the default is chosen from (the first is today's default; `--half select`). The paper's
     setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
-    valley = {"answer": "valley"}
-    across = {"answer": "valley", "directions": True}
+    fixed = {"adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
     return [
         Method("default (config.Tuning())"),
-        Method("model answer with directions", {"directions": True}),
-        Method("valley answer", valley),
-        Method("valley answer, directions", across),
-        Method("valley answer, not adaptive", {**valley, "adaptive": False}),
-        Method("valley answer, directions, not adaptive", {**across, "adaptive": False}),
-        Method("valley answer, directions, lean (confidence 0.8, cap 2)", {**across, "confidence": 0.8, "cap": 2}),
-        Method("valley answer, directions, not adaptive, ε 0.25", {**across, "adaptive": False, "epsilon": 0.25}),
-        Method("valley answer, directions, not adaptive, split, 3 bootstraps",
-               {**across, "adaptive": False, "strategy": "split", "bootstraps": 3}),
+        Method("previous default (no design)", {"design": False}),
+        Method("two designs, the second half as wide", {"design_steps": 2, "design_shrink": 0.5}),
+        Method("design ±0.1", {"design_width": 0.1}),
+        Method("fixed budget: 1 pass, not adaptive, 3 designs", {**fixed, "design_steps": 3}),
+        Method("valley answer, directions, no design", {"answer": "valley", "directions": True, "design": False}),
     ]
 
 

@@ -16,6 +16,7 @@ from typing import Any, Sequence
 
 from mavtune.fleet import Status
 from mavtune.search.evidence import sample_variance
+from mavtune.tuner import SURFACE
 
 NAN = math.nan
 
@@ -162,6 +163,8 @@ def search_views(result) -> list[SearchView]:
     space = (getattr(result, "settings", None) or {}).get("space") or {}
     views, used = [], set()
     for bootstrap, gain, indices in search_rounds(rounds):
+        if gain == SURFACE:  # the response surface's design is no line search: its rounds are in the rounds' table
+            continue
         width = _width(space.get(gain))
         view = SearchView(bootstrap, gain, indices, point_stats(rounds, indices, gain, width),
                           brackets=[tuple(rounds[k].bracket) for k in indices])

@@ -45,6 +45,23 @@ def newton_step(points: Mapping[tuple[float, ...], Sequence[float]], centre: Seq
     if np.count_nonzero(w > 0) < coefficients or not np.max(w) > 0:
         return None
     w = w / np.max(w)
+    fit = quadratic(x, y, w)
+    if fit is None:
+        return None
+    gradient, hessian = fit[1], fit[2]
+    if np.min(np.linalg.eigvalsh(hessian)) <= 0:
+        return None
+    step = -np.linalg.solve(hessian, gradient)
+    return [float(v) for v in step * scale] if np.all(np.isfinite(step)) else None
+
+
+def quadratic(x, y, w):
+    """Weighted least squares of one quadratic in every gain through points `x` (rows, in the gains' scale) with
+    costs `y` and weights `w`: (constant, gradient, Hessian) at x = 0, None when the solver fails or the fit is
+    not finite. (Shared by `newton_step` and the response surface's answer, `mavtune.search.surface`.)"""
+    import numpy as np
+
+    d = x.shape[1]
     pairs = [(i, j) for i in range(d) for j in range(i, d)]
     design = np.column_stack([np.ones(len(x)), x] + [x[:, i] * x[:, j] for i, j in pairs])
     sw = np.sqrt(w)
@@ -58,7 +75,6 @@ def newton_step(points: Mapping[tuple[float, ...], Sequence[float]], centre: Seq
         hessian[i, j] += b if i != j else 2.0 * b
         if i != j:
             hessian[j, i] += b
-    if not np.all(np.isfinite(hessian)) or np.min(np.linalg.eigvalsh(hessian)) <= 0:
+    if not (np.all(np.isfinite(hessian)) and np.all(np.isfinite(beta))):
         return None
-    step = -np.linalg.solve(hessian, gradient)
-    return [float(v) for v in step * scale] if np.all(np.isfinite(step)) else None
+    return float(beta[0]), gradient, hessian

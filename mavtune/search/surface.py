@@ -1,0 +1,177 @@
+"""A run's answer from one response surface over every gain (Box & Wilson's response-surface methodology).
+
+Coordinate line searches answer one gain at a time, the others held: they cannot follow a valley that runs across
+the gains, and each line search's answer uses only its own flights. After them the tuner flies a designed set of
+gain vectors around their answer (`design`: every corner, face centre and the centre of a box ±`half` of each
+range — 3^d points up to three gains, a face-centred central composite design beyond — shifted, not shrunk, to
+lie inside the ranges, so an optimum on an edge or in a corner is flown), fits ONE quadratic in every gain to every
+flight of the run near it (the coordinate stage's flights count too), and answers the minimiser of that fit
+inside the design's box (`answer`): the design's corners were flown, so the answer lies in the convex hull of
+flown gains — never an extrapolation. A failed (diverged) flight is a wall: it has no cost to fit, and the answer
+stays inside the convex hull of the points flown without failure, nearer one of them than any failed point (the
+rule of `interval.plausible_region`), and is reached from the best point flown without passing a failed one: never
+on the far side of a wall. Nor is a gain
+vector answered whose nearest flown point the flights rule out (worse than the best point by more than the 90 %
+two-sided error of their difference, `ruled_out`): a quadratic bent by a steep wall of oscillating gains must not
+answer next to the wall.
+
+Weights as the line search's own fit (`model`): each point by its flights over its variance (the noise is
+relative, sd ∝ cost), times a tricube kernel in its largest distance (in shares of each range) from the design's
+centre, reaching twice the design's half-width: the fit is local to where the design flew.
+"""
+
+from __future__ import annotations
+
+import math
+from itertools import product
+from typing import Collection, Mapping, Sequence
+
+from mavtune.search.evidence import NoisePool, point_stats
+
+LEVEL = 0.9  # a flown point worse than the best by more than this two-sided quantile of the error is ruled out
+
+REACH = 2.0  # the kernel spans this many half-widths of the design from its centre
+GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the design's box (then polished)
+
+
+def design(centre: Sequence[float], half: float) -> list[tuple[float, ...]]:
+    """The design's points in shares of each range ([0, 1] per gain), the centre first: a box ±`half` around
+    `centre`, shifted inside [0, 1] (an answer on an edge puts the box against it); every corner, face centre
+    and the centre (3^d points) up to three gains, else the corners, the face centres of the axes (±half on one
+    gain) and the centre (a face-centred central composite design: 2^d + 2d + 1 points)."""
+    half = min(max(float(half), 0.0), 0.5)
+    mid = [min(max(float(c), half), 1.0 - half) for c in centre]
+    d = len(mid)
+    if d <= 3:
+        levels = [lv for lv in product((0, -1, 1), repeat=d)]
+    else:
+        axes = [tuple(s if k == i else 0 for k in range(d)) for i in range(d) for s in (-1, 1)]
+        levels = [(0,) * d, *axes, *product((-1, 1), repeat=d)]
+    return [tuple(min(max(m + half * lv, 0.0), 1.0) for m, lv in zip(mid, level)) for level in levels]
+
+
+def coefficients(d: int) -> int:
+    """Coefficients of a quadratic in `d` gains."""
+    return 1 + d + d * (d + 1) // 2
+
+
+def ruled_out(points: Mapping[tuple[float, ...], Sequence[float]], pool: NoisePool,
+              level: float = LEVEL) -> set[tuple[float, ...]]:
+    """The flown points whose mean cost is worse than the best point's by more than the two-sided `level`
+    quantile of their difference's error (`pool`: the run's noise); none while the noise is unknown or nil (a
+    noise-free cost: the fit is exact there)."""
+    from statistics import NormalDist
+
+    if not (math.isfinite(pool.cv) and pool.cv > 0):
+        return set()
+    stats = {x: point_stats(c, pool) for x, c in points.items() if c}
+    finite = {x: st for x, st in stats.items() if math.isfinite(st.mean) and math.isfinite(st.se)}
+    if not finite:
+        return set()
+    z = NormalDist().inv_cdf(0.5 + 0.5 * level)
+    best = min(finite.values(), key=lambda st: st.mean)
+    return {x for x, st in finite.items() if st.mean - best.mean > z * math.hypot(st.se, best.se)}
+
+
+def beside_wall(points: Mapping[tuple[float, ...], Sequence[float]], x: Sequence[float],
+                reach: float) -> tuple[float, ...] | None:
+    """The failed point nearest `x` when the answer `x` lies next to it: within `reach` (the design's span), or
+    with no point flown without failure nearer that failed point than `x` is (nothing safe flown between them);
+    None otherwise (an answer beside a fly-away is said, never silent)."""
+    failed = [k for k, c in points.items() if c and not all(map(math.isfinite, c))]
+    if not failed:
+        return None
+    wall = min(failed, key=lambda k: math.dist(k, x))
+    gap = math.dist(wall, x)
+    safe = [k for k, c in points.items() if c and all(map(math.isfinite, c))]
+    return wall if gap <= reach or not any(math.dist(k, wall) < gap for k in safe) else None
+
+
+def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+           worse: Collection[tuple[float, ...]] = ()) -> tuple[tuple[float, ...], bool]:
+    """The minimiser of one weighted quadratic through `points` (gain vector in shares of each range → every
+    flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
+    vectors whose nearest flown point neither failed nor is one the flights rule out (`worse`: `ruled_out`); and
+    whether the fit gave it. Without a usable fit: the flown point in the box with the lowest mean cost (never an
+    unflown gain); the box's centre if none."""
+    import numpy as np
+    from scipy.optimize import minimize
+    from scipy.spatial import Delaunay, QhullError, cKDTree
+
+    from mavtune.search.joint import quadratic
+
+    lo = np.array([b[0] for b in box], float)
+    hi = np.array([b[1] for b in box], float)
+    d = len(lo)
+    centre, half = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
+    keys = [k for k, c in points.items() if c]
+    every = np.array(keys, float).reshape(len(keys), d)
+    ok = np.array([all(map(math.isfinite, points[k])) for k in keys], bool)
+    worse = set(worse)
+    near_ok = ok & np.array([k not in worse for k in keys], bool)  # may lie nearest an answer
+    means = np.array([math.fsum(points[k]) / len(points[k]) if o else math.inf for k, o in zip(keys, ok)])
+    counts = np.array([len(points[k]) for k in keys], float)
+    inside = ok & np.all((every >= lo - 1e-12) & (every <= hi + 1e-12), axis=1) if len(keys) else ok
+    if not np.any(inside):
+        return tuple(float(v) for v in centre), False
+    fallback = tuple(float(v) for v in every[inside][np.argmin(means[inside])])
+    tree = cKDTree(every)
+    hull = None
+    if not np.all(ok):  # a wall: the answer stays within the hull of the points flown without failure in the box
+        try:
+            hull = Delaunay(every[inside])
+        except (QhullError, ValueError):  # too few or flat (all on a line): the best point flown is the answer
+            return fallback, False
+
+    walls = every[~ok]
+    base = np.asarray(fallback)  # the best point flown in the box: an answer is reached from it
+    radius = 0.5 * cKDTree(every[ok]).query(walls)[0] if len(walls) and np.any(ok) else np.zeros(len(walls))
+
+    def allowed(x: np.ndarray) -> np.ndarray:
+        """Each candidate's nearest flown point neither failed nor is ruled out; with failures, it lies in the
+        hull of the safe points and the way to it from the best point flown passes no failed point (by half that
+        point's distance to the nearest safe one): never on the far side of a wall."""
+        out = near_ok[tree.query(x)[1]]
+        if hull is None:
+            return out
+        out &= hull.find_simplex(x, tol=1e-9) >= 0
+        step = x - base
+        length = np.maximum(np.sum(step * step, axis=1), 1e-300)
+        for f, r in zip(walls, radius):
+            t = np.clip((step @ (f - base)) / length, 0.0, 1.0)
+            out &= np.linalg.norm(base + t[:, None] * step - f, axis=1) >= r
+        return out
+
+    x = (every[ok] - centre) / half
+    dist = np.max(np.abs(x), axis=1) / REACH
+    y = means[ok]
+    if not np.max(np.abs(y)) > 0:
+        return fallback, False
+    y = y / np.max(np.abs(y))
+    w = counts[ok] / np.maximum(np.abs(y), 1e-6) ** 2 * (1.0 - np.minimum(dist, 1.0) ** 3) ** 3
+    if np.count_nonzero(w > 0) < coefficients(d) + 1:
+        return fallback, False
+    fit = quadratic(x, y, w / np.max(w))
+    if fit is None:
+        return fallback, False
+    c0, gradient, hessian = fit
+
+    def value(u: np.ndarray) -> np.ndarray:
+        u = np.atleast_2d(u)
+        return c0 + u @ gradient + 0.5 * np.einsum("ni,ij,nj->n", u, hessian, u)
+
+    per_gain = max(3, int(GRID_POINTS ** (1.0 / d)))
+    axes = [np.linspace(-1.0, 1.0, per_gain)] * d
+    grid = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+    grid = np.concatenate([grid, x[np.all(np.abs(x) <= 1.0 + 1e-12, axis=1)]])
+    grid = grid[allowed(grid * half + centre)]
+    if not len(grid):
+        return fallback, False
+    best = grid[np.argmin(value(grid))]
+    polished = minimize(lambda u: float(value(u)[0]), best, jac=lambda u: gradient + hessian @ u,
+                        method="L-BFGS-B", bounds=[(-1.0, 1.0)] * d)
+    u = np.clip(polished.x, -1.0, 1.0)
+    if not (np.all(np.isfinite(u)) and value(u)[0] <= value(best)[0] and allowed((u * half + centre)[None])[0]):
+        u = best
+    out = np.clip(u * half + centre, lo, hi)
+    return tuple(float(v) for v in out), True

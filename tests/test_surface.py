@@ -1,0 +1,129 @@
+"""The response surface's answer (`surface`): a designed set of gain vectors flown around the coordinate stage's
+answer and the minimiser of one quadratic fitted to the run's flights — it reaches an edge or corner optimum of a
+noise-free quadratic, never answers a gain vector outside the flown design, never beyond a failed flight, and flies
+exactly the flights the plan expects."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import mavtune
+from mavtune.plan import make_plan
+from mavtune.search.surface import answer, design
+from mavtune.tuner import Settings
+
+SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
+FIXED = dict(design=True, adaptive=False, edges=False, bootstraps=1, draws=0)
+
+
+def bowl(opt, coupling=0.0):
+    """A noise-free quadratic with its minimum at `opt` (possibly outside the box: then on its edge or corner)."""
+    return lambda gs: [1.0 + 3.0 * (g["kp"] - opt[0]) ** 2 + 2.0 * (g["kd"] - opt[1]) ** 2
+                       + coupling * (g["kp"] - opt[0]) * (g["kd"] - opt[1]) for g in gs]
+
+
+def flown(result):
+    """Every gain vector the run flew, as (kp, kd)."""
+    return {(a["kp"], a["kd"]) for r in result.rounds for a in r.assignments}
+
+
+@given(st.floats(-0.3, 1.3), st.floats(-0.3, 1.3), st.floats(-1.5, 1.5), st.sampled_from([0.1, 0.15, 0.25]))
+@settings(max_examples=25, deadline=None)
+def test_the_surface_answers_an_inside_edge_or_corner_optimum_of_a_noise_free_quadratic(kp, kd, coupling, width):
+    """Clipped to the box, the quadratic's constrained minimum; the answer lies in the box of the flown design."""
+    result = mavtune.tune(bowl((kp, kd), coupling), space=SPACE, vehicles=2, design_width=width, **FIXED)
+    design_pts = [(a["kp"], a["kd"]) for r in result.rounds if r.gain == "design" for a in r.assignments]
+    lo = [min(p[i] for p in design_pts) for i in range(2)]
+    hi = [max(p[i] for p in design_pts) for i in range(2)]
+    got = (result.gains["kp"], result.gains["kd"])
+    assert all(lo[i] <= got[i] <= hi[i] for i in range(2))  # inside the flown design's hull (its box)
+    import numpy as np
+    from scipy.optimize import minimize
+
+    f = lambda x: bowl((kp, kd), coupling)([{"kp": x[0], "kd": x[1]}])[0]  # noqa: E731
+    best = minimize(f, got, bounds=list(zip(lo, hi)), method="L-BFGS-B").fun
+    assert f(got) <= best + 1e-6  # the fit of a quadratic is exact: its minimum in the flown box
+    opt = np.clip([kp, kd], 0.0, 1.0)
+    if all(lo[i] <= opt[i] <= hi[i] for i in range(2)) and abs(coupling) < 1e-9:
+        assert got == pytest.approx(tuple(opt), abs=1e-3)  # an edge or corner optimum itself (the polish of the
+        # fit's minimum stops within L-BFGS-B's default tolerance)
+
+
+def test_a_corner_optimum_is_answered_on_the_corner():
+    result = mavtune.tune(bowl((1.2, 1.3)), space=SPACE, vehicles=2, **FIXED)
+    assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((1.0, 1.0), abs=1e-6)
+    assert (1.0, 1.0) in flown(result)  # the corner itself was flown
+
+
+@given(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.05, 0.5))
+@settings(max_examples=40, deadline=None)
+def test_the_design_lies_in_the_ranges_around_its_centre(a, b, half):
+    pts = design([a, b], half)
+    assert len(pts) == 9 and all(0.0 <= v <= 1.0 for p in pts for v in p)
+    assert len(design([a, b, 0.5, 0.5], half)) == 2 ** 4 + 2 * 4 + 1  # a central composite design beyond 3 gains
+    box = [(min(p[i] for p in pts), max(p[i] for p in pts)) for i in range(2)]
+    for (lo, hi), c in zip(box, (a, b)):
+        assert hi - lo == pytest.approx(2 * min(half, 0.5))  # shifted inside the ranges, not shrunk
+        assert lo - 1e-12 <= min(max(c, lo), hi) <= hi + 1e-12
+
+
+@given(st.floats(0.2, 0.8), st.floats(0.0, 1.0), st.sampled_from(["kp", "kd"]), st.booleans(), st.integers(0, 3),
+       st.floats(0.0, 0.3))
+@settings(max_examples=30, deadline=None)
+def test_no_answer_beyond_a_diverged_flight(wall, optimum, gain, above, seed, noise):
+    """Gains past a wall in one gain diverge (infinite cost): no answer nearer a failed point than a safe one."""
+    draw = random.Random(seed)
+
+    def cost(gs):
+        out = []
+        for g in gs:
+            x = g[gain]
+            if (x > wall) if above else (x < wall):
+                out.append(math.inf)
+            else:
+                out.append((1.0 + (g["kp"] - optimum) ** 2 + (g["kd"] - 0.5) ** 2) * (1 + noise * draw.gauss(0, 1)))
+        return out
+
+    result = mavtune.tune(cost, space=SPACE, vehicles=2, **FIXED)
+    got = result.gains[gain]
+    assert (got <= wall) if above else (got >= wall)
+    points = {}
+    for r in result.rounds:
+        for a, f in zip(r.assignments, r.flights):
+            points.setdefault((a["kp"], a["kd"]), []).append(f.cost)
+    nearest = min(points, key=lambda p: math.dist(p, (result.gains["kp"], result.gains["kd"])))
+    assert all(math.isfinite(c) for c in points[nearest])
+
+
+def test_the_answer_lies_in_the_flown_box_and_never_nearest_a_failed_point():
+    """`surface.answer` directly: a failed point where the fit's minimum would be pushes the answer away from it."""
+    pts = {(x, y): [1.0 + (x - 0.5) ** 2 + (y - 0.5) ** 2] for x in (0.4, 0.5, 0.6) for y in (0.4, 0.5, 0.6)}
+    pts[(0.5, 0.5)] = [math.inf]
+    got, fitted = answer(pts, [(0.4, 0.6), (0.4, 0.6)])
+    assert fitted and all(0.4 <= v <= 0.6 for v in got)
+    nearest = min(pts, key=lambda p: math.dist(p, got))
+    assert nearest != (0.5, 0.5)
+
+
+@given(st.sampled_from(["avg", "split"]), st.integers(1, 4), st.integers(1, 2), st.integers(1, 3), st.integers(2, 3),
+       st.integers(0, 5))
+@settings(max_examples=15, deadline=None)
+def test_the_plan_expects_exactly_the_flights_flown_with_a_fixed_design(strategy, vehicles, repeats, bootstraps,
+                                                                         gains, seed):
+    space = {name: (0.0, 1.0) for name in ["kp", "kd", "ki"][:gains]}
+    options = dict(design=True, adaptive=False, edges=False, bootstraps=bootstraps, design_repeats=repeats,
+                   strategy=strategy, vehicles=vehicles, epsilon=0.2)
+    plan = make_plan(Settings(space=space, **options))
+    draw = random.Random(seed)
+    result = mavtune.tune(lambda gs: [sum((v - 0.3) ** 2 for v in g.values()) + 0.1 * draw.random() for g in gs],
+                          space=space, draws=0, **options)
+    surface = [r for r in result.rounds if r.gain == "design"]
+    assert len(surface) == Settings(space=space, **options).design_rounds()  # the design: known before take-off
+    if strategy == "avg":  # no speculation: every round is known before take-off
+        assert result.flights == plan.flights == plan.rounds_max * vehicles
+    else:  # split speculates: a right guess saves a round of the line searches (never of the design)
+        assert result.flights <= plan.rounds_max * vehicles
