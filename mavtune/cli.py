@@ -112,7 +112,7 @@ def plan_command(
 
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
                             flight__max_rounds=max_rounds, tuning__adaptive=adaptive)
-    check_fleet(cfg)  # a run that would be refused is not planned
+    check_fleet(cfg, planning=True)  # a run that would be refused is not planned
     console = Console(emoji=False)
     warn(console, cfg)
     console.print(plan_panel(cfg, plan_of(cfg)))

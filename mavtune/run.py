@@ -79,13 +79,14 @@ def warn(console: Console, config: Config) -> list[str]:
     return ignored
 
 
-def check_fleet(config: Config) -> None:
+def check_fleet(config: Config, planning: bool = False) -> None:
     """Check the fleet's settings as far as they can be without a vehicle or an agent ([mavlink]: the table, URLs,
-    gains; [swarm]: the table), so that a bad one is one line before the plan is shown or a run folder is made."""
+    gains; [swarm]: the table), so that a bad one is one line before the plan is shown or a run folder is made
+    (`planning`: a plan needs no vehicle URL yet)."""
     if config.fleet.kind == "mavlink":
         from mavtune.vehicles.mavlink.fleet import run_settings
 
-        run_settings(config)
+        run_settings(config, urls_needed=not planning)
     elif config.fleet.kind == "zenoh":
         from mavtune.swarm.coordinator import swarm_settings
 

@@ -67,3 +67,12 @@ def test_a_resumed_folder_with_a_bad_setting_is_left_as_it_was(tmp_path):
     code, _, err = cli("tune", "--config", str(path), "--out", str(out), "-q")
     assert code == 2 and err.startswith("error: MAVLink URL 'bogus:1' is not understood")
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]  # no journal, config.json or result.json
+
+
+def test_a_plan_needs_no_vehicle_url_yet(tmp_path):
+    path = tmp_path / "run.toml"
+    path.write_text('[fleet]\nkind = "mavlink"\n[mavlink]\ngain_set = "altitude-inner"\n')
+    code, stdout, err = cli("plan", "--config", str(path))
+    assert code == 0 and "rounds" in stdout and "kp, kd, ka, ki" in stdout, err
+    code, _, err = cli("tune", "--config", str(path), "--out", str(tmp_path / "run"), "-q")
+    assert code == 2 and err.startswith("error: no MAVLink vehicle given") and not (tmp_path / "run").exists()

@@ -305,17 +305,19 @@ def checked_urls(urls: Sequence[str], config: MavlinkConfig) -> list[str]:
     return urls
 
 
-def run_settings(config: Any) -> MavlinkConfig:
+def run_settings(config: Any, urls_needed: bool = True) -> MavlinkConfig:
     """The MAVLink settings of a run config (mavtune.config.Config: [mavlink] with the [flight] timing), checked as
-    far as they can be without a vehicle: the table, the URLs, the gains against tuning.space and, for a named
-    autopilot, the allowed modes. `mavtune tune` calls it before the plan is shown or the run folder made."""
+    far as they can be without a vehicle: the table, the URLs (none given passes when not `urls_needed`: a plan),
+    the gains against tuning.space and, for a named autopilot, the allowed modes. `mavtune tune` calls it before
+    the plan is shown or the run folder made."""
     section = dict(getattr(config, "mavlink", {}) or {})
     flight = getattr(config, "flight", None)
     if flight is not None:
         section.setdefault("primitive_s", flight.primitive_s)
         section.setdefault("settle_s", flight.settle_s)
     cfg = load_mavlink_config(section)
-    checked_urls([], cfg)
+    if cfg.urls or urls_needed:
+        checked_urls([], cfg)
     tuning = getattr(config, "tuning", None)
     if tuning is not None and set(tuning.space) != set(cfg.gain_names):
         raise MavtuneError(f"config tuning.space tunes {', '.join(tuning.space)}, but the [mavlink] gains are "
