@@ -58,6 +58,7 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
         return "give either gain_set or [mavlink.gains] tables, not both"
     return None
 
+
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions")  # what [tuning] gives the engine's Settings
