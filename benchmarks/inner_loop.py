@@ -217,6 +217,17 @@ def again(args) -> None:
     print("\n".join(markdown(data)))
 
 
+def paired_p(s: dict, how: str) -> str:
+    """`how` with the Wilcoxon signed-rank p of tuned against stock over the complete interleaved rounds filled in
+    ('' with fewer than 5)."""
+    from scipy.stats import wilcoxon
+
+    rows = [r for r in s["ab_pairs"] if all(r.get(k) is not None for k in s["ab_mean_cost"])]
+    if len(rows) < 5:
+        return ""
+    return how.format(f"Wilcoxon signed-rank p {wilcoxon([r['tuned'] - r['stock'] for r in rows]).pvalue:.2g}")
+
+
 def spread_of(s: dict) -> list[str]:
     """Each arm's single-flight costs, lowest–highest."""
     return [f"{k} {min(c):.4g}–{max(c):.4g}" for k in s["ab_mean_cost"]
@@ -246,7 +257,7 @@ def markdown(data: dict) -> list[str]:
         if m["stock"] is not None:
             lines += ["", f"Cost, stock vs tuned, {s['ab_pairs_ok']} interleaved rounds: mean {m['stock']:.4g} vs "
                       f"{m['tuned']:.4g} ({(m['tuned'] / m['stock'] - 1):+.0%}); the tuned gains cost less in "
-                      f"{s['ab_tuned_won']} of {s['ab_pairs_ok']}."]
+                      f"{s['ab_tuned_won']} of {s['ab_pairs_ok']}{paired_p(s, ' ({})')}."]
         if m.get("outer only") is not None:
             outer = ", ".join(f"{p} {v:.4g}" for p, v in s["outer_only_params"].items())
             lines += ["", f"Outer loop only (the tuned kp, kd with the stock inner gains: {outer}): mean cost "
@@ -269,8 +280,8 @@ def markdown(data: dict) -> list[str]:
                       f"{e['rounds']} rounds, "
                       f"{e['wall_s_per_round']} s a round; tuned {params}; cost stock {m['stock']:.4g} vs tuned "
                       f"{m['tuned']:.4g} over {e['ab_pairs_ok']} interleaved rounds (tuned lower in "
-                      f"{e['ab_tuned_won']}" + (f"; stock, tuned and outer only single flights "
-                      + ", ".join(spread_of(e)) if "outer only" in m else "") + ")."]
+                      f"{e['ab_tuned_won']}{paired_p(e, '; {}')}" + ("; single flights " + ", ".join(spread_of(e))
+                                                               if "outer only" in m else "") + ")."]
         lines.append("")
     return lines
 
