@@ -13,6 +13,12 @@ and .json (one section per autopilot, kept from earlier runs of the other autopi
     python benchmarks/effort_ab.py --autopilot px4 --pairs 10
     python benchmarks/effort_ab.py --autopilot px4 --pairs 10 --activity-weight 0.25
 
+The tune answers as `mavtune tune` does on vehicles: the flown point nearest the stock gains whose cost is not told
+apart from the best (`mavtune.near_stock`; `--pick best` for the search's own optimum); the section keeps that answer
+(the plain optimum, the best flown point, the chosen point, each with its cost ± se). With `--plain` and an answer
+other than the plain optimum, each block of the A/B also flies the plain optimum (three arms, the order rotating),
+with its paired tests against the stock gains and against the answer.
+
 A section keeps a `label` (set by hand in the .json, e.g. for numbers measured before a harness change), printed
 in its heading; `--activity-weight` other than the default is kept as AUTOPILOT-activityW, `--name N` as AUTOPILOT-N.
 """
@@ -70,6 +76,9 @@ def main() -> None:
     parser.add_argument("--activity-weight", type=float, default=None, metavar="M_S",
                         help="the balanced cost's activity weight, m·s (default: Balance's)")
     parser.add_argument("--name", default="", help="suffix of the section's key (a repeat kept beside the first)")
+    parser.add_argument("--pick", choices=("near-stock", "best"), default="near-stock",
+                        help="the tune's answer (tuning.pick; near-stock: the vehicles' default)")
+    parser.add_argument("--plain", action="store_true", help="also fly the plain optimum in each block of the A/B")
     parser.add_argument("--render", action="store_true", help="only write the .md again from the .json")
     args = parser.parse_args()
     if args.render:
@@ -93,16 +102,21 @@ def main() -> None:
         if sim:
             set_sim(vs[0].pilot_url, sim)
         started = time.monotonic()
-        result = tune_mavlink([url], out, config, vehicles=1, epsilon=0.25, bootstraps=1)
+        result = tune_mavlink([url], out, config, vehicles=1, epsilon=0.25, bootstraps=1, pick=args.pick)
         tune_s = time.monotonic() - started
         tuned, stock_params = result["gains"], result["original_params"][url]
         gain_map = config.gain_map(_autopilot(args.autopilot))
         stock = {g: (stock_params[c.param] - c.min) / (c.max - c.min) for g, c in gain_map.items()}
-        print("tuned", result.get("tuned_params"), "stock", stock_params, flush=True)
+        answer = result.get("answer")
+        plain = answer["plain"]["gains"] if answer and answer.get("moved") and args.plain else None
+        print("tuned", result.get("tuned_params"), "stock", stock_params, "answer", answer, flush=True)
         with MavlinkVehicle(url, config, store=OriginalsStore(Path(tempfile.mkdtemp()))) as vehicle:
             for pair in range(args.pairs):
                 order = [("stock", stock), ("tuned", tuned)]
-                for side, gains in (order if pair % 2 == 0 else order[::-1]):
+                if plain is not None:  # three arms: each first, second and third in turn
+                    order.append(("plain", plain))
+                    order = order[pair % 3:] + order[:pair % 3]
+                for side, gains in (order if pair % 2 == 0 or plain is not None else order[::-1]):
                     f = vehicle.fly(gains, 1000 + len(flights))
                     m = f.info.get("measures") or {}
                     flights.append({"pair": pair, "side": side, "status": f.status.value,
@@ -114,9 +128,15 @@ def main() -> None:
     by = {(f["pair"], f["side"]): f for f in flights if f["status"] == "ok"}
     complete = sorted({p for p, _ in by if (p, "stock") in by and (p, "tuned") in by})
     tests = {}
+    more: dict[str, dict] = {}
     for key, _ in MEASURES:
         val = (lambda f: f["balanced"]) if key == "balanced" else (lambda f, k=key: f["measures"].get(k))
         tests[key] = paired([val(by[(p, "stock")]) for p in complete], [val(by[(p, "tuned")]) for p in complete])
+        if plain is not None:
+            for name, (a, b) in {"plain_vs_stock": ("stock", "plain"), "tuned_vs_plain": ("plain", "tuned")}.items():
+                both = [p for p in range(args.pairs) if (p, a) in by and (p, b) in by]
+                more.setdefault(name, {})[key] = paired([val(by[(p, a)]) for p in both],
+                                                        [val(by[(p, b)]) for p in both])
     rounds = max(result["rounds"], 1)
     section = {"autopilot": args.autopilot, "sim": sim, "speedup": args.speedup if args.autopilot == "ardupilot" else 1,
                "machine_before": before, "machine_after": after, "tune": {
@@ -124,8 +144,12 @@ def main() -> None:
                    "wall_s": tune_s, "wall_s_per_round": tune_s / rounds, "gains": tuned,
                    "tuned_params": result.get("tuned_params", {}).get(url), "stock_params": stock_params,
                    "range_edges": [e["message"] for e in result.get("range_edges", [])]},
+               "pick": args.pick, "answer": answer, "plain_tests": more, "noise": result.get("noise"),
+               "tune_flights": [{"gains": f["gains"], "cost": f["cost"], "status": f["status"]}
+                                for r in result.get("rounds_log", []) for f in r["flights"]],
                "pairs": args.pairs, "complete_pairs": len(complete), "tests": tests, "flights": flights,
-               "balance": balance.model_dump()}
+               "balance": balance.model_dump(),
+               "param_map": {g: [c.param, c.min, c.max] for g, c in gain_map.items()}}
     path = RESULTS / "effort_ab.json"
     data = json.loads(path.read_text()) if path.exists() else {}
     section["cost"], section["name"] = args.cost, args.name
@@ -160,6 +184,7 @@ def _section(ap: str, s: dict) -> list[str]:
     where = ", ".join(f"{k} {v:g}" for k, v in s["sim"].items()) or (
         "calm air (PX4 SIH has no wind parameter)" if ap == "px4" else "calm air")
     cmd = f"python benchmarks/effort_ab.py --autopilot {ap} --pairs {s['pairs']}" + (
+        " --plain" if s.get("plain_tests") else "") + (
         f" --name {s['name']}" if s.get("name") else "") + (
         f" --cost {cost}" if cost != "balanced" else "") + (
         f" --activity-weight {s['balance']['activity_weight_ms']:g}" if weights == "weights" else "") + (
@@ -167,7 +192,8 @@ def _section(ap: str, s: dict) -> list[str]:
     heading = f"## {'ArduCopter' if ap == 'ardupilot' else 'PX4'} SITL" + (
         f", tuned on {cost}" if cost != "balanced" else "") + (
         f", activity weight {s['balance']['activity_weight_ms']:g} m·s" if weights == "weights" else "") + (
-        f", {s['label']}" if s.get("label") else "")
+        f", {s['label']}" if s.get("label") else "") + (
+        ", answer nearest stock within noise" if s.get("pick") == "near-stock" else "")
     lines = [heading, "",
              f"`{cmd}`: {m['cpu']}, nproc {m['nproc']}, load {m['load'][0]:.1f} before, "
              f"{s['machine_after']['load'][0]:.1f} after; " + (f"SITL ×{s['speedup']}; " if ap == "ardupilot" else
@@ -181,19 +207,58 @@ def _section(ap: str, s: dict) -> list[str]:
     for name, value in (t["tuned_params"] or {}).items():
         lines.append(f"| `{name}` | {t['stock_params'].get(name, float('nan')):.4g} | {value:.4g} |")
     lines += [""] + [f"- range edge: {e}" for e in t["range_edges"]] + ([""] if t["range_edges"] else [])
+    lines += _answer_lines(s.get("answer"), t["stock_params"], s.get("param_map"))
     if not s["pairs"]:
         return lines
+    plain = s.get("plain_tests") or {}
     lines += [f"A/B: {s['complete_pairs']} complete pairs of {s['pairs']} (stock and tuned interleaved, order "
-              "alternating).", "",
-              "| measure | stock mean | tuned mean | tuned − stock (± se) | tuned lower in | Wilcoxon p | paired t p |",
-              "| --- | --- | --- | --- | --- | --- | --- |"]
+              + ("rotating, with the plain optimum as a third arm in each block)." if plain else "alternating).")
+              , ""] + _tests_table(s["tests"], "stock", "tuned")
+    if plain:
+        lines += ["The plain optimum against the stock gains, and the answer (tuned) against the plain optimum, in "
+                  "the same blocks:", ""] + _tests_table(plain["plain_vs_stock"], "stock", "plain") + \
+                 _tests_table(plain["tuned_vs_plain"], "plain", "tuned")
+    return lines
+
+
+def _tests_table(tests: dict, a: str, b: str) -> list[str]:
+    """A markdown table of paired tests of arm `b` against arm `a` (b − a)."""
+    lines = [f"| measure | {a} mean | {b} mean | {b} − {a} (± se) | {b} lower in | Wilcoxon p | paired t p |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
     for key, label in MEASURES:
-        r = s["tests"][key]
+        r = tests[key]
         f = lambda x, d=4: "—" if x is None else f"{x:.{d}g}"  # noqa: E731
         lines.append(f"| {label} | {f(r['stock_mean'])} | {f(r['tuned_mean'])} | {f(r['diff_mean'])} ± "
                      f"{f(r['diff_se'], 2)} | {r['tuned_lower']} of {r['pairs']} | {f(r.get('wilcoxon_p'), 2)} | "
                      f"{f(r.get('t_p'), 2)} |")
     return lines + [""]
+
+
+def _answer_lines(answer: dict | None, stock: dict, param_map: dict | None) -> list[str]:
+    """The tune's answer (`mavtune.near_stock`): the plain optimum, the best flown point and the point chosen, each
+    with its cost ± se, in the autopilot's parameters (`param_map`: {gain: [param, lo, hi]})."""
+    if not answer:
+        return []
+    params = param_map or {}
+
+    def where(g: dict | None) -> str:
+        if not g:
+            return "—"
+        return ", ".join(f"`{params[n][0]}` {params[n][1] + v * (params[n][2] - params[n][1]):.4g}" if n in params
+                         else f"{n} {v:.4g}" for n, v in g.items())
+
+    def cost(p: dict | None) -> str:
+        if not p or p.get("cost") is None:
+            return "not flown"
+        return f"{float(p['cost']):.4g} ± {float(p['se']):.2g} ({p['flights']})"
+
+    rows = [("plain optimum (the search's)", answer["plain"]), ("best flown point", answer.get("best")),
+            ("answered", answer.get("chosen") if answer.get("moved") else answer["plain"])]
+    return [f"Answer ({answer['rule']}, within {float(answer['k_se']):.3g} se of the difference, pooled noise cv "
+            f"{float(answer['cv']):.0%}; {answer['within_noise']} flown points within noise):", "",
+            "| point | gains | mean cost ± se (flights) |", "| --- | --- | --- |"] + [
+        f"| {name} | {where((p or {}).get('gains'))} | {cost(p)} |" for name, p in rows] + [
+        f"| stock | {', '.join(f'`{k}` {v:.4g}' for k, v in stock.items())} | |", ""]
 
 
 if __name__ == "__main__":

@@ -108,6 +108,13 @@ class Tuning(_Section):
                               "edge itself: an optimum on the edge can be answered, and is said with its evidence")
     directions: StrictBool = Field(False, description="between passes over the gains, a line search along the "
                                    "pass's net move (Powell's direction): follows a valley that runs across the gains")
+    pick: Literal["best", "near-stock"] | None = Field(None, description="the answer among the run's flown points: "
+                                                       "the search's optimum (best), or the flown point nearest the "
+                                                       "vehicles' stock gains whose cost is within one standard error "
+                                                       "of the best's (near-stock: mavtune.near_stock); unset: "
+                                                       "near-stock on MAVLink vehicles, best in the simulator and "
+                                                       "behind swarm agents. Not in the journal: a finished run can "
+                                                       "be answered either way")
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":

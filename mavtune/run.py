@@ -239,9 +239,11 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
                 tuner.on_round = commits.counted(view)
                 tuner.run()
             status = "finished"
-            if hasattr(fleet, "tuned"):
-                fleet.tuned = tuner.gains  # a real fleet keeps these on the vehicles only when told to
-            outcome = tuned_outcome(fleet, tuner.snapshot(), settings, out_dir)
+            done = tuner.snapshot()
+            chosen = picked(config, fleet, done)
+            if hasattr(fleet, "tuned"):  # a real fleet keeps these on the vehicles only when told to
+                fleet.tuned = chosen.gains if chosen is not None else tuner.gains
+            outcome = tuned_outcome(fleet, done, settings, out_dir, chosen)
         except StageDone:
             status = "stage"
         except BaseException as exc:  # an interrupt can surface as another error from inside an import
@@ -425,16 +427,52 @@ def param_maps(fleet: Fleet | None) -> dict[str, Any]:
         return {}
 
 
-def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path) -> dict[str, Any]:
+def picked(config: Config, fleet: Fleet, result: TuningResult):
+    """The answer `tuning.pick` asks for (unset: "near-stock" on MAVLink vehicles): a `mavtune.near_stock.Pick`
+    from every flight of the run (a failed one's cost infinite, lost ones left out) and the fleet's stock gains;
+    None for the search's own optimum ("best")."""
+    rule = config.tuning.pick or ("near-stock" if config.fleet.kind == "mavlink" else "best")
+    if rule != "near-stock":
+        return None
+    try:
+        stock = fleet.stock_gains() if hasattr(fleet, "stock_gains") else []
+    except (MavtuneError, ValueError, AttributeError):  # a vehicle that cannot say: the rule says stock is unknown
+        stock = []
+    return near_stock(result, stock, config.settings().space)
+
+
+def near_stock(result: TuningResult, stock: list, space: dict[str, tuple[float, float]], alpha: float | None = None):
+    """`mavtune.near_stock.pick` over a run's flights (a failed one's cost infinite, lost ones left out), with its
+    pooled noise, near the `stock` gain vectors (`alpha`: the test's level, if not the rule's)."""
+    from mavtune.near_stock import ALPHA, flown, pick
+    from mavtune.strategy import Strategy
+
+    flights = [f for r in result.rounds for f in r.flights]
+    gains, costs = Strategy.measured([f.gains for f in flights], flights)
+    cv, dof = result.noise.get("cv", math.nan), result.noise.get("dof", 0)
+    return pick(result.gains, flown(zip(gains, costs), list(space), cv), stock, space, cv, dof, alpha or ALPHA)
+
+
+def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path, chosen=None) -> dict[str, Any]:
     """What a finished run says beyond the gains: the range edges they lie at and, for vehicles that map the gains
     to autopilot parameters (MAVLink, directly or behind swarm agents), the gains as each vehicle's parameters
     (± the search tolerance) and the ground-station parameter files written; an edge is said with what the
-    flights there say (`LineSearch.edge_evidence`)."""
-    from mavtune.vehicles.tuned import tuned_outcome as outcome
+    flights there say (`LineSearch.edge_evidence`). With `chosen` (a `near_stock.Pick`) its gains are the answer
+    (`gains`, the parameters and files; `answer` says why), and a gain it moved off the search's optimum has no
+    range edge (it lies where the flights put it, nearer stock)."""
+    from mavtune.vehicles.tuned import explained_edges, tuned_outcome as outcome
 
     maps = fleet.param_maps() if hasattr(fleet, "param_maps") else {}
     evidence, flown = result.edges()
-    return outcome(maps, result.gains, settings.space, settings.epsilon, out_dir, evidence, flown, result.brackets())
+    gains = chosen.gains if chosen is not None else result.gains
+    kept = {n: v for n, v in gains.items() if v == result.gains.get(n)}
+    said = outcome(maps, gains, settings.space, settings.epsilon, out_dir, evidence, flown, result.brackets(), kept)
+    if chosen is None:
+        return said
+    moved = {n: v for n, v in result.gains.items() if n not in kept}  # where the search's optimum lay instead
+    usable = {v: m for v, m in maps.items() if m.covers(result.gains)}
+    left = explained_edges(usable, moved, settings.space, settings.epsilon, evidence, flown, result.brackets())
+    return said | {"gains": dict(gains), "answer": chosen.to_dict() | {"plain_range_edges": [e.message() for e in left]}}
 
 
 def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
@@ -448,6 +486,8 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
                       f"{', '.join(outcome['param_files'])}", highlight=False)
     for edge in outcome.get("range_edges", []):
         console.print(f"[yellow]range edge:[/] {escape(edge['message'])}", highlight=False)
+    if answer := outcome.get("answer"):
+        console.print(f"answer: {escape(answer['reason'])}", highlight=False)
 
 
 def _fleet_line(config: Config) -> str:

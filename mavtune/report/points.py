@@ -3,7 +3,7 @@
 A flight's `info["measures"]` (`mavtune.sim.cost.Measures.to_dict`: the simulator's and the MAVLink vehicles'
 flights carry it) gives its motor activity (mean |du/dt| of the normalised motor commands, 1/s) and its peak
 |altitude error| (m, low-passed as the cost). result.json's `points` and the report's "Points flown" table are
-this list.
+this list (the table marks the point answered and the best flown one, `mavtune.near_stock`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ def flown_points(rounds: Sequence) -> list[dict[str, Any]]:
         for f in rnd.flights:
             if f.status is Status.LOST:
                 continue
-            key = tuple(sorted((k, round(float(v), 12)) for k, v in (f.gains or {}).items()))
+            key = _key(f.gains or {})
             p = points.setdefault(key, {"gains": dict(f.gains), "flights": 0, "costs": [], "activity": [],
                                         "peak": []})
             p["flights"] += 1
@@ -44,22 +44,35 @@ def flown_points(rounds: Sequence) -> list[dict[str, Any]]:
     return out
 
 
+def _key(gains: dict[str, Any]) -> tuple:
+    """A gain vector as a point's key (as `flown_points` groups flights)."""
+    return tuple(sorted((k, round(as_float(v), 12)) for k, v in gains.items()))
+
+
 def _json(x: float) -> float | str:
     """A JSON number, or its repr for inf (a failed flight's cost)."""
     return x if math.isfinite(x) else repr(x)
 
 
-def points_section(points: list[dict[str, Any]], units: dict[str, U.GainUnit] | None = None) -> list[str]:
-    """The report's table of the points flown (nothing when no flight measured motor activity or peak error)."""
+def points_section(points: list[dict[str, Any]], units: dict[str, U.GainUnit] | None = None,
+                   answer: dict[str, Any] | None = None) -> list[str]:
+    """The report's table of the points flown (nothing when no flight measured motor activity or peak error); with
+    result.json's `answer` (`mavtune.near_stock`), the point answered and the best flown point are marked."""
     if not any(p.get("activity_per_s") is not None or p.get("peak_error_m") is not None for p in points):
         return []
     units = units or {}
     names = list(points[0]["gains"])
+    marks = {}
+    if isinstance(answer, dict):
+        for what, key in (("best flown", (answer.get("best") or {}).get("gains")), ("answered", answer.get("gains"))):
+            if isinstance(key, dict):
+                marks[_key(key)] = ", ".join(filter(None, (marks.get(_key(key)), what)))
     rows = [[*(U.num(g, p["gains"].get(g, math.nan), units, 5) for g in names), p["flights"],
              md.num(None if p["mean_cost"] is None else as_float(p["mean_cost"]), 5),
-             md.num(p["activity_per_s"], 3), md.num(p["peak_error_m"], 3)] for p in points]
+             md.num(p["activity_per_s"], 3), md.num(p["peak_error_m"], 3),
+             *([marks.get(_key(p["gains"]), "")] if marks else [])] for p in points]
     header = [U.label(g, units) for g in names] + ["flights", "mean cost", "motor activity (1/s)",
-                                                    "peak altitude error (m)"]
+                                                    "peak altitude error (m)"] + (["answer"] if marks else [])
     return ["## Points flown", "",
             "Motor activity: mean |dū/dt| of the collective motor command (normalised to [0, 1]), averaged over the point's "
             "flights; peak error: the largest |altitude error| (low-passed as the cost) of its flights.", "",

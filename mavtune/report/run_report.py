@@ -133,7 +133,7 @@ def tuned_params_section(summary: dict) -> list[str]:
     """The tuned gains as each vehicle's parameters (± the search tolerance), the parameter files, the range
     edges the gains reached and the run's cautions with what its intervals hold (from result.json; nothing when
     it has none)."""
-    parts: list[str] = []
+    parts: list[str] = answer_section(summary)
     tolerance = summary.get("tuned_params_tolerance") or {}
     rows = [[f"`{vehicle}`", f"`{name}`", md.num(value, 4), md.num(tolerance.get(vehicle, {}).get(name, math.nan), 2)]
             for vehicle, params in (summary.get("tuned_params") or {}).items() for name, value in params.items()]
@@ -159,6 +159,41 @@ def tuned_params_section(summary: dict) -> list[str]:
         parts += ["## Cautions", ""] + [f"- {c}" for c in cautions] + (
             [f"- The intervals: {summary['uncertainty_note']}."] if summary.get("uncertainty_note") else []) + [""]
     return parts
+
+
+def answer_section(summary: dict) -> list[str]:
+    """Why the answer is the point it is (result.json's `answer`, `mavtune.near_stock`): the search's optimum, the
+    best flown point, the point answered, each with its mean cost ± standard error, and the vehicles' stock gains;
+    gains in the autopilot's units where every vehicle binds them alike (nothing without an `answer`)."""
+    answer = summary.get("answer")
+    if not isinstance(answer, dict) or not isinstance(answer.get("plain"), dict):
+        return []
+    units = gain_units(summary)
+
+    def gains(g: dict | None) -> str:
+        return ", ".join(f"{U.label(n, units)} {U.num(n, as_float(v), units)}" for n, v in (g or {}).items()) or "—"
+
+    def cost(p: dict | None) -> str:
+        if not isinstance(p, dict) or p.get("cost") is None:
+            return "not flown"
+        return f"{md.num(as_float(p['cost']), 4)} ± {md.num(as_float(p.get('se')), 2)} ({p.get('flights', '?')})"
+
+    rows = [["the search's optimum (plain)", gains(answer["plain"].get("gains")), cost(answer["plain"])],
+            ["the best flown point", gains((answer.get("best") or {}).get("gains")), cost(answer.get("best"))]]
+    if answer.get("chosen"):
+        rows.append([f"**answered: {answer.get('rule', '')}**", gains(answer["chosen"].get("gains")),
+                     cost(answer["chosen"])])
+    rows += [[f"stock{f' ({k})' if len(answer.get('stock') or []) > 1 else ''}", gains(s), ""]
+             for k, s in enumerate(answer.get("stock") or [], 1)]
+    reason = str(answer.get("reason", ""))
+    left = [f"- The search's optimum: {m}" for m in answer.get("plain_range_edges") or []]
+    return ["## Answer", "", f"{reason[:1].upper()}{reason[1:]}.", "",
+            md.table(["point", "gains", "mean cost ± se (flights)"], rows, ["l", "l", "r"]), "",
+            *([*left, ""] if left else []),
+            "± se here is the standard error of a point's mean cost (the run's pooled flight-to-flight noise over √ "
+            "its flights). The final gains above are the search's optimum; the answer is the run's `gains` in "
+            "result.json and, on vehicles, its tuned parameters and files.",
+            ""]
 
 
 def _guarded(section: Callable[[Report], list[str]], rep: Report) -> list[str]:
@@ -282,7 +317,7 @@ def _rounds(rep: Report) -> list[str]:
 
 
 def _points(rep: Report) -> list[str]:
-    return points_section(flown_points(rep.rounds), rep.units)
+    return points_section(flown_points(rep.rounds), rep.units, rep.summary.get("answer"))
 
 
 def _fleet_events(rep: Report) -> list[str]:

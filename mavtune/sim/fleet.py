@@ -11,7 +11,7 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.sim import batch
 from mavtune.sim import kernel as K
-from mavtune.sim.gains import parse_assignment
+from mavtune.sim.gains import MRS_DEFAULT_NORMALISED, parse_assignment
 from mavtune.sim.scenario import COST_NAMES, Scenario
 
 
@@ -63,6 +63,11 @@ class SimFleet:
             flights.append(Flight(vehicle=f"sim{i}", gains=dict(gains), cost=costs[self.scenario.cost],
                                   status=Status.OK if code == K.OK else Status.FAILED, trace=trace, info=info))
         return flights
+
+    def stock_gains(self) -> list[Gains]:
+        """The simulated controller's stock gains (the MRS defaults, normalised), one per vehicle: what the answer
+        stays near when `tuning.pick` is "near-stock" (`mavtune.near_stock`)."""
+        return [dict(MRS_DEFAULT_NORMALISED)] * self._vehicles
 
     def close(self) -> None:
         """Nothing to release."""

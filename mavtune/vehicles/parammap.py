@@ -89,6 +89,11 @@ class ParamMap(BaseModel):
             raise MavtuneError(f"gains {sorted(gains)} do not match the configured gains {sorted(self.gains)}")
         return {b.param: b.value(gains[g]) for g, b in self.gains.items()}
 
+    def normalised(self, params: Mapping[str, float]) -> dict[str, float]:
+        """{gain: normalised value} of on-vehicle parameter values (the inverse of `values`, not clipped: a stock
+        value outside the tuned range lies outside [0, 1]); gains whose parameter is not given are left out."""
+        return {g: (float(params[b.param]) - b.lo) / (b.hi - b.lo) for g, b in self.gains.items() if b.param in params}
+
     def tolerances(self, tolerance: Mapping[str, float]) -> dict[str, float]:
         """{parameter: ± value}: a normalised tolerance per gain in each parameter's units."""
         return {b.param: tolerance[g] * (b.hi - b.lo) for g, b in self.gains.items()}

@@ -45,22 +45,24 @@ def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
                   space: Mapping[str, tuple[float, float]], epsilon: float, out_dir: str | Path,
                   evidence: Mapping[str, Any] | None = None,
                   flown: Mapping[str, tuple[float, float]] | None = None,
-                  brackets: Mapping[str, tuple[float, float]] | None = None) -> dict[str, Any]:
+                  brackets: Mapping[str, tuple[float, float]] | None = None,
+                  edge_gains: Mapping[str, float] | None = None) -> dict[str, Any]:
     """What result.json says of a finished run beyond the gains: the range edges they lie at and, for vehicles
     with a parameter map, the gains as each vehicle's parameters (± ε of the range) and the files written.
 
     An edge is said once per parameter it names (vehicles of different autopilots or ranges each get theirs).
     `evidence`, `flown` and `brackets` say what the flights at each gain's edge say (`mavtune.edges.range_edges`).
-    A vehicle whose map binds other gains than those tuned
+    `edge_gains`: the gains checked for a range edge (default all; a gain the answer moved off the search's
+    optimum toward stock has none to say). A vehicle whose map binds other gains than those tuned
     gets no parameters (`tuned_params_missing` says why) rather than a wrong file."""
     usable = {v: m for v, m in maps.items() if m.covers(gains)}
     outcome: dict[str, Any] = {}
     if missing := {v: f"its parameters bind gains {sorted(m.gains)}, not the tuned {sorted(gains)}"
                    for v, m in maps.items() if v not in usable}:
         outcome["tuned_params_missing"] = missing
-    edges = range_edges(gains, space, epsilon, evidence, flown, brackets)
+    edges = explained_edges(usable, gains if edge_gains is None else edge_gains, space, epsilon, evidence, flown,
+                            brackets)
     if usable:
-        edges = [x for e in edges for x in _unique(m.explain_edge(e) for m in usable.values())]
         tolerance = {n: epsilon * (hi - lo) for n, (lo, hi) in space.items()}
         files = write_tuned_files(usable, gains, out_dir)
         outcome |= {"tuned_params": {v: m.values(gains) for v, m in usable.items()},
@@ -68,6 +70,19 @@ def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
                     "param_files": list(files), "param_file_vehicles": files}
     outcome["range_edges"] = [e.to_dict() for e in edges]
     return outcome
+
+
+def explained_edges(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
+                    space: Mapping[str, tuple[float, float]], epsilon: float,
+                    evidence: Mapping[str, Any] | None = None,
+                    flown: Mapping[str, tuple[float, float]] | None = None,
+                    brackets: Mapping[str, tuple[float, float]] | None = None) -> list:
+    """The range edges the gains lie at (`mavtune.edges.range_edges`), each named by the parameter it drives on
+    every vehicle whose map binds the gains (once per parameter)."""
+    edges = range_edges(gains, space, epsilon, evidence, flown, brackets)
+    if not maps:
+        return edges
+    return [x for e in edges for x in _unique(m.explain_edge(e) for m in maps.values())]
 
 
 def _unique(items: Iterable[Any]) -> list[Any]:

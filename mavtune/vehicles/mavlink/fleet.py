@@ -222,6 +222,11 @@ class MavlinkFleet:
         """{vehicle name: its gains as its autopilot's parameters}, for the run's tuned parameters and files."""
         return {v.name: v.param_map() for v in self.vehicles}
 
+    def stock_gains(self) -> list[Gains]:
+        """Each vehicle's original (stock) gains, normalised by its parameter map: what the answer stays near
+        (`mavtune.near_stock`)."""
+        return [v.param_map().normalised(v.original_params) for v in self.vehicles]
+
     def finish(self, tuned: Gains | None = None) -> bool:
         """Leave every vehicle with its originals (or `tuned`, normalised) and release it; True if all confirmed."""
         with ThreadPoolExecutor(max_workers=len(self.vehicles)) as pool:
