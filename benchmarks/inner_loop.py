@@ -139,6 +139,7 @@ def main() -> None:
         "ab_pairs": rows, "ab_mean_cost": dict.fromkeys(arms),
         "outer_only_params": outer_params(originals, result["param_maps"][url], tuned),
         **setup(config, args.autopilot),
+        "answer_rule": (result.get("answer") or {}).get("rule", "search"),  # the tuned arm: the run's answer
     }
     summarise(section)
     path = RESULTS / f"{NAME}.json"
@@ -166,13 +167,17 @@ def setup(config: MavlinkConfig, autopilot: str) -> dict:
 
 
 def cost_said(s: dict, autopilot: str) -> str:
-    """The cost and setup of a section, as one phrase (sections from before they were recorded say so)."""
+    """The cost, the answer flown as "tuned" and the setup of a section, as one phrase (sections from before they
+    were recorded say so)."""
     if "cost" not in s:
         cost = "cost not recorded (the vehicles' default then)"
     elif s["cost"] == "balanced":
         cost = "balanced cost (" + ", ".join(f"{k} {v:g}" for k, v in s["balance"].items()) + ")"
     else:
         cost = f"{s['cost']} cost"
+    rule = s.get("answer_rule")
+    cost += ("; the tuned arm is the search's answer (before the near-stock rule)" if rule is None else
+             f"; the tuned arm is the run's answer ({rule})")
     if autopilot == "px4":
         ekf2 = s.get("px4_ekf2")
         cost += ("; pre-EKF2: SIH with PX4's default EKF2 noise settings" if ekf2 is None else
