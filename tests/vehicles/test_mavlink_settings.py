@@ -30,7 +30,7 @@ REFUSED = [
      "MAVLink URL 'udpin:127.0.0.1:9?target_system=3' says target_system 3, the config says 2"),
     (URL + "primitive_s = 0.5\n", "config mavlink.primitive_s: Input should be greater than or equal to 1"),
     (URL + 'autopilot = "px4"\n[mavlink.safety]\nallowed_modes = ["HOVER"]\n',
-     "safety.allowed_modes: unknown PX4 mode 'HOVER'"),
+     "config mavlink.safety.allowed_modes: unknown PX4 mode 'HOVER'"),
 ]
 
 

@@ -329,7 +329,7 @@ def run_settings(config: Any, urls_needed: bool = True) -> MavlinkConfig:
                            f"{', '.join(cfg.gain_names)}; give tuning.space the same gains")
     if cfg.autopilot != "auto":
         profile = profile_for(cfg.autopilot)
-        require_mode_known(profile, list(allowed_modes(profile, cfg.safety)))
+        require_mode_known(profile, list(allowed_modes(profile, cfg.safety)), "config mavlink.safety.allowed_modes")
     return cfg
 
 
