@@ -75,7 +75,8 @@ def test_two_agents_under_the_zenoh_coordinator_give_each_vehicles_parameters(tm
     out = tmp_path / "run"
     with px4_vehicles(2) as vehicles:
         urls = [v.tuner_url for v in vehicles]
-        tune_by_agents(urls, tmp_path, "px4", "autopilot = \"px4\"\nheartbeat_wait_s = 30.0\n[mavlink.safety]\nposition_timeout_s = 2.5\n", ["p0", "p1"],
+        tune_by_agents(urls, tmp_path, "px4", "autopilot = \"px4\"\nheartbeat_wait_s = 30.0\n"
+                       "[mavlink.safety]\nposition_timeout_s = 2.5\n", ["p0", "p1"],
                        result_timeout_s=90.0, timeout_s=540)
         assert_restored(urls)
     result = json.loads((out / "result.json").read_text())
