@@ -18,6 +18,8 @@ from typing import Any, Callable, Sequence
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Gains
 
+UNCONVERGED = ("still moved", "no longer are")  # a run's cautions that its answer had not settled (a wide interval
+# alone is not one: the entry's interval shows it)
 MASS_DECIMALS = 6  # masses are kept to the milligram: 2.3 + 0.9 is stored as 3.2, not 3.1999999999999997
 
 
@@ -44,16 +46,28 @@ def standard_errors(uncertainty: dict[str, dict[str, float]] | None) -> dict[str
 def run_facts(summary: dict[str, Any]) -> dict[str, Any]:
     """What a bank entry keeps of a finished run beyond its gains, from its result.json (or a result's
     `to_dict()` with the tuned outcome): standard errors, intervals, whether it converged (no caution that
-    its answer still moved or spans most of its range; the reasons otherwise) and, where the vehicle has them,
+    its answer still moved or that a gain's last line search held the others where they no longer are; those
+    cautions otherwise: a wide interval is in the interval itself) and, where the vehicle has them,
     the tuned autopilot parameters (of the first vehicle; all vehicles of one file share them)."""
     uncertainty = summary.get("uncertainty") or {}
     interval = {k: [float(u["lo"]), float(u["hi"])] for k, u in uncertainty.items()
                 if isinstance(u, dict) and _finite(u.get("lo")) and _finite(u.get("hi"))}
-    cautions = [str(c) for c in summary.get("cautions") or []]
+    cautions = [str(c) for c in summary.get("cautions") or [] if any(m in str(c) for m in UNCONVERGED)]
     params = next(iter((summary.get("tuned_params") or {}).values()), {})
     return {"se": standard_errors(uncertainty), "interval": interval, "cautions": cautions,
-            "converged": not any("still moved" in c or "do not pin it down" in c for c in cautions),
+            "converged": not cautions,
             "params": {k: float(v) for k, v in params.items() if _finite(v)}}
+
+
+def sim_params(gains: Gains) -> dict[str, float]:
+    """The simulated vehicle's own controller gains for normalised (kp, kd): its SO(3) altitude loop's k_x(z) in
+    1/s² and k_v(z) in 1/s (`mavtune.sim.gains`), the units a simulator bank entry has; {} for other gains."""
+    from mavtune.sim.gains import GAIN_NAMES, to_physical
+
+    if set(gains) != set(GAIN_NAMES):
+        return {}
+    kx, kv = to_physical(gains["kp"], gains["kd"])
+    return {"k_x(z)": kx, "k_v(z)": kv}
 
 
 @dataclass(frozen=True)
@@ -174,6 +188,7 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
 
     def keep(i: int, result: Any) -> None:
         facts = run_facts(result.to_dict())
+        facts["params"] = facts["params"] or sim_params(result.gains)
         bank.add(MASS_KG + payloads_kg[i], result.gains, str(folders[i]), **facts)
         bank.save(out / "bank.json")
 

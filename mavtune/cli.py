@@ -304,7 +304,9 @@ def _print_bank(console, bank) -> None:
     from mavtune.run import plus_minus
 
     table = Table(title="gain bank", caption="each run's gains ± its last line searches' standard error, and its "
-                  "90 % interval with all gains free (see its result.json)")
+                  "90 % interval with all gains free (see its result.json); then the same gains in the vehicle's "
+                  "own units where the run had them (autopilot parameters; the simulator's k_x(z) in 1/s², k_v(z) "
+                  "in 1/s)")
     table.add_column("mass, kg", justify="right")
     names = list(bank.entries[0].gains) if bank.entries else []
     params = list(dict.fromkeys(p for e in bank.entries for p in e.params))

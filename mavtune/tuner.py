@@ -21,15 +21,18 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
-from mavtune.search.interval import DRAWS, joint, plausible_region, resample, resolution
+from mavtune.search.interval import DRAWS, edge_reach, joint, plausible_region, resample, resolution, stale
 from mavtune.search.joint import newton_step
-from mavtune.search.model import flown_span
+from mavtune.search.model import beside_failure, flown_span
 from mavtune.strategy import Strategy
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
                  "value the run's flights cannot rule out with all gains free (a gain vector is ruled out only when "
-                 "its nearest flown point is), and reaches back to the previous answer and on, to the range's bound "
-                 "while the answer still moves by more than the search's tolerance between bootstraps")
+                 "its nearest flown point is significantly worse than the best, corrected for the many points "
+                 "compared), and reaches back to the previous answer and on, to the range's bound while the answer "
+                 "still moves by more than the search's tolerance between bootstraps, where the line's cost still "
+                 "falls at its outermost flown point, and on both sides when the other gains moved by more than half "
+                 "the tolerance after its last line search")
 DIRECTION = "direction"  # the `gain` of a round of a line search across the gains (all gains at once)
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 # Bounds of every accepted setting, the same for the Python API and the CLI: each run plans and flies in bounded time.
@@ -119,8 +122,9 @@ class TuningResult:
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each: an answer still moving between
-        bootstraps by more than the search's tolerance, an interval spanning most of its range, an answer next to
-        a flight that failed."""
+        bootstraps by more than the search's tolerance, an interval spanning most of its range, a gain whose last
+        line search held the others more than half the tolerance from where they ended (`stale`), an answer next
+        to a flight that failed."""
         out = []
         space, epsilon = self.settings.get("space", {}), self.settings.get("epsilon", math.nan)
         last = {s.gain: s for s in self.searches}
@@ -137,10 +141,19 @@ class TuningResult:
                            f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more "
                            "flights per point, less noise, or another bootstrap where the answer still moves)")
         for name, rec in last.items():
-            if rec.beside_failure is not None:
-                out.append(f"{name} = {self.gains.get(name, rec.result):.4g} lies next to {rec.beside_failure:.4g}, "
-                           "where a flight failed (diverged): no gain beyond it was answered, but the margin to it "
-                           "is one step of the search")
+            shift = stale(rec.held, self.gains, space)
+            if math.isfinite(self.uncertainty.get(name, {}).get("lo", math.nan)) and shift > 0.5 * epsilon:
+                moved_others = ", ".join(f"{n} {v:.3g} → {self.gains[n]:.3g}" for n, v in rec.held.items()
+                                         if n in self.gains and n in space and abs(self.gains[n] - v) > 0)
+                out.append(f"{name}'s last line search held the other gains where they no longer are ("
+                           f"{moved_others}): how far {name}'s own minimum moved with them no flight tells, so its "
+                           "interval reaches both bounds (another bootstrap would tell)")
+            answer = self.gains.get(name, rec.result)  # another stage may have moved it off the line's result
+            wall = rec.beside_failure if answer == rec.result or not rec.samples else beside_failure(rec.samples,
+                                                                                                        answer)
+            if wall is not None:
+                out.append(f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed (diverged): no "
+                           "gain beyond it was answered, but the margin to it is one step of the search")
         return out
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
@@ -366,7 +379,8 @@ class Tuner:
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
             answers = [start[name], *(r.result for r in self.searches[:i + 1] if r.gain == name)]
             moves = [b - a for a, b in zip(answers, answers[1:])]
-            out[name] = joint(interval, region.get(name), moves, s.epsilon * (hi - lo), (lo, hi)).to_dict()
+            out[name] = joint(interval, region.get(name), moves, s.epsilon * (hi - lo), (lo, hi),
+                              edge_reach(rec.samples, (lo, hi)), stale(rec.held, self.gains, s.space)).to_dict()
         self._uncertainty = (len(self.searches), out)
         return out
 

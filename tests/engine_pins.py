@@ -5,7 +5,9 @@ repository was written on d53656f, before the plan and the per-round engine were
 (tests/test_engine_pins.py checks that nothing moved since), and written again after the model answer came to fit
 costs in units of the largest (f79f1f9): that moved the model-answer runs' gains and errors by at most 4e-15
 (relative), no assignment and no plan; and the intervals again when they came to be joint, every gain free
-(calib branch): no decision and no other number moved.
+(calib branch): no decision and no other number moved; and the intervals again when they came to reach the bounds
+on a stale hold or a cost still falling at the outermost point, with a Bonferroni test of the plausible region
+(calib, issue 20): no decision and no other number moved.
 
 What a run decides is pinned exactly: its rounds, every assignment flown (the search's decisions, adaptive
 reflights included), the iterations of each line search and a search answer's gains (a point flown). The numbers

@@ -7,7 +7,7 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from mavtune.bank import GainBank
+from mavtune.bank import GainBank, run_facts, sim_params
 from mavtune.cli import app
 from mavtune.errors import MavtuneError
 
@@ -100,6 +100,13 @@ def test_bank_build_tunes_each_payload_in_the_simulator(tmp_path):
         result = json.loads((tmp_path / e.source.split("/")[-1] / "result.json").read_text())
         assert result["gains"] == e.gains
         assert e.se == {k: u["se"] for k, u in result["uncertainty"].items()} and set(e.se) == {"kp", "kd"}
+        assert e.interval == {k: [u["lo"], u["hi"]] for k, u in result["uncertainty"].items()}
+        assert e.converged == run_facts(result)["converged"] and isinstance(e.converged, bool)
+        # the simulated vehicle's own units: k_x(z) spans 0-250 1/s², k_v(z) 0-40 1/s over the normalised range
+        assert e.params == pytest.approx({"k_x(z)": 250 * e.gains["kp"], "k_v(z)": 40 * e.gains["kd"]})
+    assert "k_x(z)" in out.output and "converged" in out.output
+    assert sim_params({"kp": 0.5, "kd": 0.25}) == {"k_x(z)": 125.0, "k_v(z)": 10.0}
+    assert sim_params({"kp": 0.5, "ki": 0.25}) == {}  # not the simulator's gains: no units claimed
 
 
 def test_a_tuned_mass_is_looked_up_as_itself_not_as_an_end_of_a_bracket():
@@ -146,6 +153,12 @@ def test_entries_keep_intervals_parameters_and_whether_their_run_converged(tmp_p
     moving = {"uncertainty": {"kp": {"se": 0.05, "lo": 0.2, "hi": 0.9}},
               "cautions": ["kp still moved +0.2 between its last two line searches"],
               "tuned_params": {"s0": {"PSC_POSZ_P": 2.1}}}
+    wide = {"uncertainty": {"kp": {"se": 0.05, "lo": 0.0, "hi": 0.9}},
+            "cautions": ["kp's 90% interval 0 – 0.9 spans 90% of its range: the flights do not pin it down"]}
+    assert run_facts(wide)["converged"] and run_facts(wide)["interval"] == {"kp": [0.0, 0.9]}  # unsure, settled
+    stale = {"cautions": ["kp's 90% interval 0 – 1 spans 100%", "kp's last line search held the other gains where "
+                          "they no longer are (kd 0.33 → 0.541)"]}
+    assert not run_facts(stale)["converged"] and run_facts(stale)["cautions"] == stale["cautions"][1:]
     b = GainBank()
     b.add(2.3, {"kp": 0.35}, "a", **run_facts(settled))
     b.add(3.2, {"kp": 0.55}, "b", **run_facts(moving))

@@ -10,7 +10,11 @@ knows the minimiser better than the bracket it ended with.
 
 That interval holds with the other gains held at their answers. `joint` frees them: it adds every gain value the
 run's flights (all of them, every gain) cannot rule out (`plausible_region`) and the answer's own last move
-between bootstraps, so the interval holds whatever search flew them.
+between bootstraps; it reaches a range's bound where the line's cost still falls at its outermost flown point
+(`edge_reach`) and on both sides where the other gains have moved since the gain's last line search by more than
+half the search's tolerance (`stale`: the held interval was measured where they no longer are, and how far the
+gain's own minimum moves with them no flight of a coordinate search tells). All of it from the flown points and
+their costs, whatever rule picked the answer.
 """
 
 from __future__ import annotations
@@ -82,10 +86,12 @@ class _Curve:
 def plausible_region(points: dict[tuple[float, ...], list[float]], pool: NoisePool,
                      bounds: list[tuple[float, float]], level: float = LEVEL) -> list[tuple[float, float]] | None:
     """Where the minimiser may lie by all the run's flights, every gain free: each flown point (a gain vector →
-    its costs; a failed flight's cost is infinite) whose mean cost is not worse than the best point's by more
-    than the two-sided `level` quantile of their difference's error could be the minimiser (two-sided: the best
-    of many noisy means lies low), and so could any gain vector whose nearest flown point (in shares of each
-    gain's range) could — flights rule out only what lies nearer to a worse point than to a plausible one, so
+    its costs; a failed flight's cost is infinite) whose mean cost is not worse than the best point's by z
+    standard errors of their difference could be the minimiser: z the one-sided 1 − (1 − `level`)/r quantile, r
+    the rivals the test keeps beside the best (Bonferroni: the truly best point is ruled out only when one of
+    them lies low by chance, at most 1 − `level` in all; the best of many noisy means lies low), never below the
+    two-sided `level` quantile; and so could any gain vector whose nearest flown point (in shares of each gain's
+    range) could — flights rule out only what lies nearer to a worse point than to a plausible one, so
     what a coordinate search never flew (a coupled optimum off its lines) stays in. Per gain, the span of that
     region in its `bounds`, searched on a grid of the box; None when the noise is unknown or fewer than two
     points were flown without failure."""
@@ -98,10 +104,16 @@ def plausible_region(points: dict[tuple[float, ...], list[float]], pool: NoisePo
     finite = {x: s for x, s in stats.items() if math.isfinite(s.mean)}
     if len(finite) < 2 or any(not math.isfinite(s.se) for s in finite.values()):
         return None
-    z = NormalDist().inv_cdf(0.5 + 0.5 * level)
     best = min(finite.values(), key=lambda s: s.mean)
+    rivals, z = 1, NormalDist().inv_cdf(0.5 + 0.5 * level)
+    while True:  # the rivals are the points the test keeps beside the best; more of them, a stricter test
+        near = {x for x, s in finite.items() if s.mean - best.mean <= z * math.hypot(s.se, best.se)}
+        if len(near) - 1 <= rivals:
+            break
+        rivals = len(near) - 1
+        z = max(z, NormalDist().inv_cdf(1.0 - (1.0 - level) / rivals))
     xs = list(stats)
-    ok = np.array([x in finite and finite[x].mean - best.mean <= z * math.hypot(finite[x].se, best.se) for x in xs])
+    ok = np.array([x in near for x in xs])
     lo, hi = np.array([b[0] for b in bounds], float), np.array([b[1] for b in bounds], float)
     scale = np.where(hi > lo, hi - lo, 1.0)
     per_gain = max(3, min(GRID, int(GRID_POINTS ** (1.0 / len(bounds)))))
@@ -132,18 +144,47 @@ def ahead(moves: list[float], tolerance: float) -> float:
     return last
 
 
+def stale(held: dict[str, float], now: dict[str, float], space: dict[str, tuple[float, float]]) -> float:
+    """How far the other gains lie from where a gain's last line search held them: the largest move, in shares
+    of each gain's range, from `held` (theirs during that search) to `now` (the answer's)."""
+    return max((abs(now[n] - v) / (space[n][1] - space[n][0]) for n, v in held.items()
+                if n in now and n in space and space[n][1] > space[n][0]), default=0.0)
+
+
+def edge_reach(samples: dict[float, list[float]], bounds: tuple[float, float]) -> tuple[float, float]:
+    """How far a line's minimiser may lie beyond its flown points (lower, upper): on each side where the mean
+    cost still falls from the last point flown but one to the outermost point flown without failure, to the
+    range's bound (or to the nearest failed point beyond, a wall); inf (lower) and −inf (upper) on a side where
+    it does not, or when fewer than two points were flown without failure: nothing to reach."""
+    flown = sorted((x, math.fsum(c) / len(c)) for x, c in samples.items() if c)
+    finite = [(x, m) for x, m in flown if math.isfinite(m)]
+    if len(finite) < 2:
+        return math.inf, -math.inf
+    (x0, m0), (_, m1), (_, n1), (y0, n0) = finite[0], finite[1], finite[-2], finite[-1]
+    lo = max((x for x, m in flown if not math.isfinite(m) and x < x0), default=bounds[0]) if m0 < m1 else math.inf
+    hi = min((x for x, m in flown if not math.isfinite(m) and x > y0), default=bounds[1]) if n0 < n1 else -math.inf
+    return lo, hi
+
+
 def joint(interval: Interval, region: tuple[float, float] | None, moves: list[float], tolerance: float,
-          bounds: tuple[float, float]) -> Interval:
+          bounds: tuple[float, float], edge: tuple[float, float] | None = None, shift: float = 0.0) -> Interval:
     """A coordinate search's interval beyond "with the other gains held": the resampled one, joined with the span
-    no flight of the run rules out (`plausible_region`, every gain free), back to the previous answer (flight
-    noise moves an answer too) and on in the direction the answer moved by what it may still go (`ahead`; to the
-    range's bound when that is unbounded). `moves`: the answer's, from the start value to each line search's."""
+    no flight of the run rules out (`plausible_region`, every gain free), with the answer itself, back to the
+    previous answer (flight noise moves an answer too) and on in the direction the answer moved by what it may
+    still go (`ahead`; to the range's bound when that is unbounded); to a bound where the line's cost still falls
+    at its outermost flown point (`edge`: `edge_reach`); to both bounds when the other gains moved since its line
+    search by more than half the tolerance (`shift`: `stale`, a share of their ranges; `tolerance` is this
+    gain's, in its units). `moves`: the answer's, from the start value to each line search's."""
     moved = moves[-1] if len(moves) >= 2 else math.nan  # since the gain's previous line search
     if not math.isfinite(interval.lo):
         return replace(interval, moved=moved)
-    lo, hi = interval.lo, interval.hi
+    lo, hi = min(interval.lo, interval.value), max(interval.hi, interval.value)
     if region is not None:
         lo, hi = min(lo, region[0]), max(hi, region[1])
+    if edge is not None:
+        lo, hi = min(lo, edge[0]), max(hi, edge[1])
+    if bounds[1] > bounds[0] and shift > 0.5 * tolerance / (bounds[1] - bounds[0]):
+        lo, hi = bounds
     if math.isfinite(moved):
         lo, hi = min(lo, interval.value - abs(moved)), max(hi, interval.value + abs(moved))
     if moves and moves[-1] != 0.0:
