@@ -138,6 +138,8 @@ def main() -> None:
         "range_edges": [e.get("message") for e in result.get("range_edges", [])],
         "ab_pairs": rows, "ab_mean_cost": dict.fromkeys(arms),
         "outer_only_params": outer_params(originals, result["param_maps"][url], tuned),
+        **setup(config, args.autopilot),
+        "answer_rule": (result.get("answer") or {}).get("rule", "search"),  # the tuned arm: the run's answer
     }
     summarise(section)
     path = RESULTS / f"{NAME}.json"
@@ -149,6 +151,38 @@ def main() -> None:
     path.write_text(json.dumps(data, indent=1))
     (RESULTS / f"{NAME}.md").write_text("\n".join(markdown(data)) + "\n")
     print("\n".join(markdown(data)))
+
+
+def setup(config: MavlinkConfig, autopilot: str) -> dict:
+    """What the flights' costs mean and what the vehicle ran: the cost (and the balanced cost's weights) and, on PX4,
+    the EKF2 settings the harness gives SIH (px4_harness.SIM_EKF2)."""
+    said = {"cost": config.cost}
+    if config.cost == "balanced":
+        said["balance"] = config.balance.model_dump()
+    if autopilot == "px4":
+        from px4_harness import SIM_EKF2
+
+        said["px4_ekf2"] = dict(SIM_EKF2)
+    return said
+
+
+def cost_said(s: dict, autopilot: str) -> str:
+    """The cost, the answer flown as "tuned" and the setup of a section, as one phrase (sections from before they
+    were recorded say so)."""
+    if "cost" not in s:
+        cost = "cost not recorded (the vehicles' default then)"
+    elif s["cost"] == "balanced":
+        cost = "balanced cost (" + ", ".join(f"{k} {v:g}" for k, v in s["balance"].items()) + ")"
+    else:
+        cost = f"{s['cost']} cost"
+    rule = s.get("answer_rule")
+    cost += ("; the tuned arm is the search's answer (before the near-stock rule)" if rule is None else
+             f"; the tuned arm is the run's answer ({rule})")
+    if autopilot == "px4":
+        ekf2 = s.get("px4_ekf2")
+        cost += ("; pre-EKF2: SIH with PX4's default EKF2 noise settings" if ekf2 is None else
+                 "; EKF2 told SIH's sensors (" + ", ".join(f"{k} {v}" for k, v in ekf2.items()) + ")")
+    return cost
 
 
 def summarise(section: dict) -> None:
@@ -188,20 +222,39 @@ def again(args) -> None:
     print("\n".join(markdown(data)))
 
 
+def paired_p(s: dict, how: str) -> str:
+    """`how` with the Wilcoxon signed-rank p of tuned against stock over the complete interleaved rounds filled in
+    ('' with fewer than 5)."""
+    from scipy.stats import wilcoxon
+
+    rows = [r for r in s["ab_pairs"] if all(r.get(k) is not None for k in s["ab_mean_cost"])]
+    if len(rows) < 5:
+        return ""
+    return how.format(f"Wilcoxon signed-rank p {wilcoxon([r['tuned'] - r['stock'] for r in rows]).pvalue:.2g}")
+
+
+def spread_of(s: dict) -> list[str]:
+    """Each arm's single-flight costs, lowest–highest."""
+    return [f"{k} {min(c):.4g}–{max(c):.4g}" for k in s["ab_mean_cost"]
+            if (c := [r[k] for r in s["ab_pairs"] if r.get(k) is not None])]
+
+
 def markdown(data: dict) -> list[str]:
     """The results page of every autopilot measured so far."""
     lines = ["# The inner altitude loop on SITL: a 4-gain tune (gain set altitude-inner) against the stock gains", "",
              "One hovering vehicle; the tune through `mavtune tune --fleet mavlink --gain-set altitude-inner`, then "
              "the stock gains, the four tuned gains and the outer loop alone (tuned kp, kd with the stock inner "
-             "gains) flown in interleaved rounds (order rotated) with mavtune's cost (sum of |altitude error| over "
-             "the primitive; lower is better). A number measured on one SITL airframe is a claim about that "
-             "airframe only; the load average is the whole machine's (other SITLs ran beside).",
+             "gains) flown in interleaved rounds (order rotated) with the run's cost, said per run (iae: the "
+             "integral of |altitude error| over the primitive; balanced, the vehicles' default: that plus weighted "
+             "motor activity and oscillation; lower is better; costs of different runs are comparable only with the "
+             "same cost and setup). A number measured on one SITL airframe is a claim about that airframe only; the "
+             "load average is the whole machine's (other SITLs ran beside).",
              ""]
     for autopilot, s in data.items():
         lines += [f"## {autopilot} ({s['date']}; {s['machine']})", "", f"`{s['command']}` — ε {s['epsilon']}, "
                   f"{s['bootstraps']} bootstrap, speed-up ×{s['speedup']}: {s['status']}, {s['rounds']} rounds "
                   f"({s['flights']} flights) in {s['tune_wall_s']} s wall, {s['wall_s_per_round']} s a round; "
-                  f"originals restored: {s['restored']}.", "",
+                  f"originals restored: {s['restored']}; {cost_said(s, autopilot)}.", "",
                   "| parameter | stock | tuned |", "|---|---|---|"]
         for p, v in s["tuned_params"].items():
             lines.append(f"| {p} | {s['stock_params'].get(p, float('nan')):.4g} | {v:.4g} |")
@@ -209,7 +262,7 @@ def markdown(data: dict) -> list[str]:
         if m["stock"] is not None:
             lines += ["", f"Cost, stock vs tuned, {s['ab_pairs_ok']} interleaved rounds: mean {m['stock']:.4g} vs "
                       f"{m['tuned']:.4g} ({(m['tuned'] / m['stock'] - 1):+.0%}); the tuned gains cost less in "
-                      f"{s['ab_tuned_won']} of {s['ab_pairs_ok']}."]
+                      f"{s['ab_tuned_won']} of {s['ab_pairs_ok']}{paired_p(s, ' ({})')}."]
         if m.get("outer only") is not None:
             outer = ", ".join(f"{p} {v:.4g}" for p, v in s["outer_only_params"].items())
             lines += ["", f"Outer loop only (the tuned kp, kd with the stock inner gains: {outer}): mean cost "
@@ -219,8 +272,7 @@ def markdown(data: dict) -> list[str]:
         for a in s.get("ab_added", []):
             lines += ["", f"{a['rounds']} of these rounds were flown later on a fresh vehicle ({a['date']}; "
                       f"{a['machine']}; `{a['command']}`)."]
-        spread = [f"{k} {min(c):.4g}–{max(c):.4g}" for k in m
-                  if (c := [r[k] for r in s["ab_pairs"] if r.get(k) is not None])]
+        spread = spread_of(s)
         if spread:
             lines += ["", "Cost of single flights, lowest–highest (the flight-to-flight spread at the same gains): "
                       + ", ".join(spread) + "."]
@@ -229,10 +281,12 @@ def markdown(data: dict) -> list[str]:
         for e in s.get("earlier", []):
             m = e["ab_mean_cost"]
             params = ", ".join(f"{p} {v:.4g}" for p, v in e["tuned_params"].items())
-            lines += ["", f"Earlier run ({e['date']}; {e['machine']}; `{e['command']}`): {e['rounds']} rounds, "
+            lines += ["", f"Earlier run ({e['date']}; {e['machine']}; `{e['command']}`; {cost_said(e, autopilot)}): "
+                      f"{e['rounds']} rounds, "
                       f"{e['wall_s_per_round']} s a round; tuned {params}; cost stock {m['stock']:.4g} vs tuned "
                       f"{m['tuned']:.4g} over {e['ab_pairs_ok']} interleaved rounds (tuned lower in "
-                      f"{e['ab_tuned_won']})."]
+                      f"{e['ab_tuned_won']}{paired_p(e, '; {}')}" + ("; single flights " + ", ".join(spread_of(e))
+                                                               if "outer only" in m else "") + ")."]
         lines.append("")
     return lines
 

@@ -107,11 +107,12 @@ def plan_command(
     max_rounds: Optional[int] = MaxRoundsOpt,
 ) -> None:
     """Print, before anything flies, the rounds, flights, flight time and batteries a run needs."""
-    from mavtune.run import plan_of, plan_panel, warn
+    from mavtune.run import check_fleet, plan_of, plan_panel, warn
     from rich.console import Console
 
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
                             flight__max_rounds=max_rounds, tuning__adaptive=adaptive)
+    check_fleet(cfg, planning=True)  # a run that would be refused is not planned
     console = Console(emoji=False)
     warn(console, cfg)
     console.print(plan_panel(cfg, plan_of(cfg)))

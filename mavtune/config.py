@@ -22,10 +22,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 
 from mavtune.errors import MavtuneError
 from mavtune.search import METHODS
+from mavtune.sim.scenario import MIN_PRIMITIVE_S
 from mavtune.strategy import STRATEGIES
 from mavtune.tuner import MAX_BOOTSTRAPS, MAX_POINTS, MAX_ROUNDS, MAX_DESIGN_REPEATS, MAX_VEHICLES, MIN_EPSILON, Settings
 
-MIN_PRIMITIVE_S = 1.0  # a shorter primitive samples under 100 altitude errors at 100 Hz: it measures too little
 MAX_SEED = 2**63 - 1 - MAX_VEHICLES  # vehicle j flies seed + j, kept distinct in the simulator's 64-bit seeds
 
 
@@ -45,6 +45,20 @@ GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inn
 order (their parameters per autopilot: mavtune.vehicles.parammap): "altitude" is the paper's two altitude gains,
 "altitude-inner" adds the inner altitude loop (ka, ki), "horizontal" is the horizontal position loop's two gains
 (flown with the horizontal out-and-back)."""
+
+
+def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
+    """Why `[mavlink] gain_set` cannot be used beside `[mavlink.gains]` as given (an unknown set, or both given), or
+    None: the one check of both, for the run's configuration (the set gives tuning.space) and for the MAVLink
+    settings (the set gives each autopilot's parameters)."""
+    if gain_set is None:
+        return None
+    if not isinstance(gain_set, str) or gain_set not in GAIN_SETS:
+        return f"unknown gain set {gain_set!r}; known: {', '.join(GAIN_SETS)}"
+    if gains is not None:
+        return "give either gain_set or [mavlink.gains] tables, not both"
+    return None
+
 
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
@@ -303,10 +317,8 @@ def _apply_gain_set(data: dict[str, Any]) -> None:
     if not isinstance(mav, dict) or mav.get("gain_set") is None:
         return
     name = mav["gain_set"]
-    if not isinstance(name, str) or name not in GAIN_SETS:
-        raise MavtuneError(f"config mavlink.gain_set: unknown gain set {name!r}; known: {', '.join(GAIN_SETS)}")
-    if mav.get("gains") is not None:
-        raise MavtuneError("config mavlink: give either gain_set or [mavlink.gains] tables, not both")
+    if problem := gain_set_problem(name, mav.get("gains")):
+        raise MavtuneError(f"config mavlink: {problem}")
     fleet = data.get("fleet") if isinstance(data.get("fleet"), dict) else {}
     if fleet.get("kind") not in ("mavlink", "zenoh") or (tuning is not None and not isinstance(tuning, dict)):
         return  # the [mavlink] table is not used (said as a warning), or [tuning] is malformed (said by validation)

@@ -79,6 +79,20 @@ def warn(console: Console, config: Config) -> list[str]:
     return ignored
 
 
+def check_fleet(config: Config, planning: bool = False) -> None:
+    """Check the fleet's settings as far as they can be without a vehicle or an agent ([mavlink]: the table, URLs,
+    gains; [swarm]: the table), so that a bad one is one line before the plan is shown or a run folder is made
+    (`planning`: a plan needs no vehicle URL yet)."""
+    if config.fleet.kind == "mavlink":
+        from mavtune.vehicles.mavlink.fleet import run_settings
+
+        run_settings(config, urls_needed=not planning)
+    elif config.fleet.kind == "zenoh":
+        from mavtune.swarm.coordinator import swarm_settings
+
+        swarm_settings(config)
+
+
 def build_fleet(config: Config, out_dir: Path) -> Fleet:
     """The vehicles the configuration names: the built-in simulator, swarm agents or MAVLink vehicles."""
     kind = config.fleet.kind
@@ -200,6 +214,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console = console or Console(emoji=False)
     out_dir = Path(out_dir)
     settings = config.settings()
+    check_fleet(config)
     plan = plan_of(config)
     prepare_folder(out_dir)
     with claimed(out_dir), Journal(out_dir / JOURNAL) as book:

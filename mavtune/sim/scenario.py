@@ -13,6 +13,10 @@ SIM_ACTIVITY_WEIGHT_MS = 0.001
 (0.25, 0.5), 21 % less motor activity for 6 % more IAE (benchmarks/results/effort_weights_sim.md); the vehicles'
 default (0.05 m·s) put it at the lowest gains."""
 
+MIN_PRIMITIVE_S = 1.0
+"""The shortest primitive a flight may fly, s, in the simulator, [flight] and on vehicles: a shorter one samples
+under 100 altitude errors at 100 Hz and measures too little."""
+
 PrimitiveName = Literal["circle", "step", "figure8"]
 CostName = Literal["iae", "ise", "itae", "effort", "balanced"]
 COST_NAMES: tuple[str, ...] = get_args(CostName)  # the kernel computes all five, in this order
@@ -58,8 +62,8 @@ class Scenario(_Model):
     """What a flight costs: iae (the paper's: integral of |altitude error|), ise, itae, effort (iae plus
     effort_weight × the relative thrust change), or balanced (iae plus weighted motor activity and oscillation,
     `balance`: the MAVLink vehicles' default)."""
-    primitive_s: float = Field(8.0, ge=1.0, le=120, description="duration of the reference primitive, s (at least "
-                               "1 s: 100 altitude errors at 100 Hz)")
+    primitive_s: float = Field(8.0, ge=MIN_PRIMITIVE_S, le=120, description="duration of the reference primitive, "
+                               "s (at least 1 s: 100 altitude errors at 100 Hz)")
     settle_s: float = Field(1.0, ge=0, le=60, description="hover after a gain change: flown, not in the cost, s")
     altitude_m: float = Field(2.0, gt=0.2, description="height of the primitive's first point, m")
     payload_kg: float = Field(0.0, ge=0, le=4.0, description="mass added to the vehicle (paper: 0.9 kg battery)")

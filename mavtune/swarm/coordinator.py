@@ -27,7 +27,7 @@ from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
-from mavtune.swarm.config import SwarmConfig, ensure_key
+from mavtune.swarm.config import SwarmConfig, ensure_key, load_swarm_config
 from mavtune.swarm.messages import (Ack, AgentState, Assignment, Codec, Finish, Hello, Knock, Probe, Rejected, Result,
                                     Start, State, Welcome, vehicle_key)
 from mavtune.swarm.ratelog import RateLimitedLog
@@ -635,15 +635,19 @@ class _Round:
         return out
 
 
-def fleet_from_config(config: Any, out_dir: Any = None) -> ZenohFleet:
-    """The ZenohFleet a run configuration names ([swarm] section), listening, expecting tuning.vehicles agents
-    before round 1. Unless [swarm] says otherwise the settle time is [flight].settle_s."""
-    from mavtune.swarm.config import load_swarm_config
-
+def swarm_settings(config: Any) -> SwarmConfig:
+    """The SwarmConfig of a run configuration ([swarm]; unless it says otherwise the settle time is
+    [flight].settle_s), checked before the run folder is made."""
     swarm = dict(getattr(config, "swarm", {}) or {})
     flight = getattr(config, "flight", None)
     if flight is not None:
         swarm.setdefault("settle_s", flight.settle_s)
-    cfg = load_swarm_config(None, **swarm)
+    return load_swarm_config(None, **swarm)
+
+
+def fleet_from_config(config: Any, out_dir: Any = None) -> ZenohFleet:
+    """The ZenohFleet a run configuration names ([swarm] section), listening, expecting tuning.vehicles agents
+    before round 1."""
+    cfg = swarm_settings(config)
     key = ensure_key(cfg, out_dir)
     return ZenohFleet(cfg.listen, cfg, expected=int(config.tuning.vehicles), key=key)

@@ -72,7 +72,7 @@ def test_a_gain_set_run_resumes_with_its_space_and_swarm_agents_share_it():
 
 @pytest.mark.parametrize("flags, message", [
     ({"mavlink.gain_set": "inner"},
-     "config mavlink.gain_set: unknown gain set 'inner'; known: altitude, altitude-inner, horizontal"),
+     "config mavlink: unknown gain set 'inner'; known: altitude, altitude-inner, horizontal"),
     ({"mavlink.gain_set": "altitude-inner", "tuning.space": {"kp": [0, 1], "kd": [0, 1]}},
      "config tuning.space: gain set altitude-inner tunes kp, kd, ka, ki, not kp, kd"),
     ({"mavlink.gain_set": "altitude-inner", "mavlink.gains": {"kp": {"param": "MPC_Z_P", "min": 0.1, "max": 1}}},
@@ -87,7 +87,7 @@ def test_a_wrong_gain_set_is_one_line_naming_it(flags, message):
 @pytest.mark.parametrize("args, expected", [
     (("--gain-set", "altitude-inner"), "error: --gain-set applies to --fleet mavlink only; this run's fleet is sim"),
     (("--fleet", "mavlink", "--mavlink", "udpin:127.0.0.1:9", "--gain-set", "inner"),
-     "error: config mavlink.gain_set: unknown gain set 'inner'; known: altitude, altitude-inner, horizontal"),
+     "error: config mavlink: unknown gain set 'inner'; known: altitude, altitude-inner, horizontal"),
 ])
 def test_the_gain_set_flag_refuses_in_one_line_before_anything_flies(tmp_path, args, expected):
     from tests.test_fuzz import cli

@@ -9,8 +9,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from mavtune.config import GAIN_SETS, read_toml, validated
+from mavtune.config import GAIN_SETS, gain_set_problem, read_toml, validated
 from mavtune.sim.balance import Balance
+from mavtune.sim.scenario import MIN_PRIMITIVE_S
 from mavtune.vehicles.mavlink.profiles import Autopilot, param_loop
 from mavtune.vehicles.parammap import GAIN_SET_BINDINGS, PARAM_PATTERN, GainBinding
 
@@ -72,7 +73,7 @@ class MavlinkConfig(BaseModel):
     # the error along that axis. Gains of the other loop are refused
     axis: Literal["north", "east"] = "north"  # the horizontal loop: the axis of the out-and-back
     travel_m: float = Field(2.0, gt=0, le=10.0)  # the horizontal loop: how far out (and back) within primitive_s
-    primitive_s: float = Field(8.0, ge=1.0)  # one circle (paper: 8 s); under 1 s it measures too little
+    primitive_s: float = Field(8.0, ge=MIN_PRIMITIVE_S)  # one circle (paper: 8 s); under 1 s it measures too little
     settle_s: float = Field(1.0, ge=0)  # hover after a gain change before measuring (paper: 1 s)
     calm_tolerance_m: float = Field(0.15, gt=0)  # after settle_s, also wait until |altitude error| is below this
     calm_speed_mps: float = Field(0.3, gt=0)  # … and |vertical speed| below this (after an abort the vehicle recovers)
@@ -115,10 +116,8 @@ class MavlinkConfig(BaseModel):
 
     @model_validator(mode="after")
     def _known_gain_set(self) -> "MavlinkConfig":
-        if self.gain_set is not None and self.gain_set not in GAIN_SETS:
-            raise ValueError(f"unknown gain set {self.gain_set!r}; known: {', '.join(GAIN_SETS)}")
-        if self.gain_set is not None and self.gains is not None:
-            raise ValueError("give either gain_set or [mavlink.gains] tables, not both")
+        if problem := gain_set_problem(self.gain_set, self.gains):
+            raise ValueError(problem)
         return self
 
     @model_validator(mode="after")
@@ -147,6 +146,13 @@ class MavlinkConfig(BaseModel):
     def tuned_loop(self) -> str:
         """The loop flown: "altitude" (the climbing circle) or "horizontal" (the out-and-back along `axis`)."""
         return self.loop or self._implied_loop()
+
+    @property
+    def gain_names(self) -> tuple[str, ...]:
+        """The gains tuned, in order: the [mavlink.gains] tables', else the gain set's (the same on every autopilot)."""
+        if self.gains is not None:
+            return tuple(self.gains)
+        return GAIN_SETS[self.gain_set or self.tuned_loop]
 
     def gain_map(self, autopilot: Autopilot) -> dict[str, GainParam]:
         """The gain → parameter map in force for a vehicle of this autopilot."""

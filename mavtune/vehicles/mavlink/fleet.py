@@ -15,6 +15,10 @@ from typing import Any, Callable, Mapping, Sequence, TypeVar
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status
 from mavtune.vehicles.mavlink.config import MavlinkConfig, load_mavlink_config
+from mavtune.vehicles.mavlink.link import link_target
+from mavtune.vehicles.mavlink.profiles import profile_for
+from mavtune.vehicles.mavlink.safety import allowed_modes
+from mavtune.vehicles.mavlink.setpoints import require_mode_known
 from mavtune.vehicles.mavlink.vehicle import MavlinkVehicle
 from mavtune.vehicles.parammap import ParamMap
 
@@ -89,11 +93,7 @@ class MavlinkFleet:
         check_ready: bool = True,
     ):
         self.config = config or MavlinkConfig()
-        urls = list(urls) or list(self.config.urls)
-        if not urls:
-            raise MavtuneError("no MAVLink vehicle given: pass at least one URL (--mavlink udpin:127.0.0.1:14540)")
-        if len(set(urls)) != len(urls):
-            raise MavtuneError("the same MAVLink URL is given twice")
+        urls = checked_urls(urls, self.config)
         names = list(names) if names is not None else list(urls)
         if len(names) != len(urls):
             raise MavtuneError(f"{len(names)} names for {len(urls)} MAVLink URLs")
@@ -297,12 +297,43 @@ def journaled_fleet(urls: Sequence[str], config: MavlinkConfig, out_dir: str | P
     return fleet
 
 
-def fleet_from_config(config: Any, out_dir: str | Path) -> MavlinkFleet:
-    """The MavlinkFleet of a run config (mavtune.config.Config): [mavlink] settings, [flight] timing."""
+def checked_urls(urls: Sequence[str], config: MavlinkConfig) -> list[str]:
+    """The vehicles' URLs (the config's when none are given): at least one, none twice, each understood and agreeing
+    with the configured target_system — all that is checked of them without opening a link."""
+    urls = list(urls) or list(config.urls)
+    if not urls:
+        raise MavtuneError("no MAVLink vehicle given: pass at least one URL (--mavlink udpin:127.0.0.1:14540)")
+    if len(set(urls)) != len(urls):
+        raise MavtuneError("the same MAVLink URL is given twice")
+    for url in urls:
+        link_target(url, config.target_system)
+    return urls
+
+
+def run_settings(config: Any, urls_needed: bool = True) -> MavlinkConfig:
+    """The MAVLink settings of a run config (mavtune.config.Config: [mavlink] with the [flight] timing), checked as
+    far as they can be without a vehicle: the table, the URLs (none given passes when not `urls_needed`: a plan),
+    the gains against tuning.space and, for a named autopilot, the allowed modes. `mavtune tune` calls it before
+    the plan is shown or the run folder made."""
     section = dict(getattr(config, "mavlink", {}) or {})
     flight = getattr(config, "flight", None)
     if flight is not None:
         section.setdefault("primitive_s", flight.primitive_s)
         section.setdefault("settle_s", flight.settle_s)
     cfg = load_mavlink_config(section)
+    if cfg.urls or urls_needed:
+        checked_urls([], cfg)
+    tuning = getattr(config, "tuning", None)
+    if tuning is not None and set(tuning.space) != set(cfg.gain_names):
+        raise MavtuneError(f"config tuning.space tunes {', '.join(tuning.space)}, but the [mavlink] gains are "
+                           f"{', '.join(cfg.gain_names)}; give tuning.space the same gains")
+    if cfg.autopilot != "auto":
+        profile = profile_for(cfg.autopilot)
+        require_mode_known(profile, list(allowed_modes(profile, cfg.safety)), "config mavlink.safety.allowed_modes")
+    return cfg
+
+
+def fleet_from_config(config: Any, out_dir: str | Path) -> MavlinkFleet:
+    """The MavlinkFleet of a run config (mavtune.config.Config): [mavlink] settings, [flight] timing."""
+    cfg = run_settings(config)
     return journaled_fleet(cfg.urls, cfg, out_dir)

@@ -86,6 +86,16 @@ def parse_url(url: str) -> tuple[str, int]:
     return url, 57600
 
 
+def link_target(url: str, target_system: int | None) -> int | None:
+    """The system to tune on a URL's link: its ?target_system=N suffix, else the configured one (both given: they
+    must agree); a URL that is not understood is one line naming it. Checks the URL without opening it."""
+    parse_url(url)
+    suffix = split_target(url)[1]
+    if suffix is not None and target_system is not None and suffix != target_system:
+        raise MavtuneError(f"MAVLink URL {url!r} says target_system {suffix}, the config says {target_system}")
+    return suffix if suffix is not None else target_system
+
+
 MOTOR_MESSAGES = ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS")
 """The autopilot's motor outputs: ArduPilot sends SERVO_OUTPUT_RAW (PWM µs), PX4 both (ACTUATOR_OUTPUT_STATUS,
 the mixer's outputs, is taken from PX4)."""
@@ -213,11 +223,8 @@ class MavlinkLink:
 
     def __init__(self, url: str, *, source_system: int = 255, target_system: int | None = None):
         device, baud = parse_url(url)
-        suffix = split_target(url)[1]
-        if suffix is not None and target_system is not None and suffix != target_system:
-            raise MavtuneError(f"MAVLink URL {url!r} says target_system {suffix}, the config says {target_system}")
         self.url = url
-        self.target_system = suffix if suffix is not None else target_system
+        self.target_system = link_target(url, target_system)
         self.chosen = False  # choose_target() settled the system: only then is anything sent or taken as state
         self.heard: dict[int, Heard] = {}  # autopilots heard on the link, by system id
         self._conflicts: dict[int, str] = {}  # system id → why two autopilots seem to answer as it

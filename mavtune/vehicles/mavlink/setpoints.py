@@ -131,10 +131,10 @@ def set_mode(link: MavlinkLink, profile: AutopilotProfile, mode: str, timeout_s:
     return False
 
 
-def require_mode_known(profile: AutopilotProfile, modes: list[str]) -> None:
-    """Fail early, naming the mode, when a configured mode is not one of the autopilot's."""
+def require_mode_known(profile: AutopilotProfile, modes: list[str], where: str = "safety.allowed_modes") -> None:
+    """Fail early, naming the setting (`where`) and the mode, when a configured mode is not one of the autopilot's."""
     for mode in modes:
         try:
             profile.mode_number(mode)
         except MavtuneError as exc:
-            raise MavtuneError(f"safety.allowed_modes: {exc}") from None
+            raise MavtuneError(f"{where}: {exc}") from None
