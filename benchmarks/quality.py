@@ -209,6 +209,12 @@ def _f(x, fmt: str = ".2f") -> str:
     return "—" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
 
 
+def _width(s: dict[str, Any]) -> str:
+    """The mean interval width beside its coverage: a coverage bought with intervals spanning the range shows."""
+    w = s.get("interval_width_mean")
+    return f" ({w:.0%})" if w is not None and s.get("coverage") is not None else ""
+
+
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["meta"]
     lines = [f"# Quality of the tuned gains on the plant zoo (issue 20) — {m['half']} half", "",
@@ -237,7 +243,7 @@ def markdown(doc: dict[str, Any]) -> str:
               "truth repeat at the answer diverged.", "",
               "## Per plant and method", "",
               "| plant | method | within 2 % [95 % CI] | median / p90 / worst excess % | flights mean (max) | plan expects "
-              "| 90 % interval covers optimum | fly-away answers | vs default (sign test) |",
+              "| 90 % interval covers optimum (mean width, share of range) | fly-away answers | vs default (sign test) |",
               "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for p, per in doc["table"].items():
         for lb, s in per.items():
@@ -248,7 +254,7 @@ def markdown(doc: dict[str, Any]) -> str:
                          f"[{lo:.0%}, {hi:.0%}] | {_f(s['median_excess_pct'])} / {_f(s['p90_excess_pct'])} / "
                          f"{_f(s['worst_excess_pct'])} | {s['flights_mean']:.1f} ({s['flights_max']}) | "
                          f"{_f(s['expected_flights'], '.0f')} | "
-                         f"{_f(s['coverage'], '.0%')} "
+                         f"{_f(s['coverage'], '.0%')}{_width(s)} "
                          f"| {s['fly_away_answers']} | {vs} |")
     lines += ["", "## Over the zoo: the default against each method (paired sign test, all plants' runs)", "",
               "| method | runs | default better | method better | ties | p | verdict |", "| --- | --- | --- | --- | --- | --- | --- |"]
