@@ -4,13 +4,14 @@ every recorded round kept (result.json and the journal)."""
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
 from mavtune.errors import MavtuneError
 from mavtune.journal import Journal
 
-from mavlink_harness import fast_config, fast_safety, mavsim, read_params, tune_mavlink
+from mavlink_harness import OFFBOARD_LOSS_S, fast_config, fast_safety, mavsim, read_params, tune_mavlink
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]  # mavsim may compile first
 
@@ -38,6 +39,35 @@ def test_heartbeat_gap_aborts_the_primitive_and_the_run_continues(tmp_path):
     assert lost[0]["info"]["restored_last_safe"] is True
     assert summary["restored"] is True and summary["gains"] is not None
     assert len(_journal_rounds(tmp_path)) == summary["rounds"]
+
+
+def test_a_position_gap_aborts_that_flight_the_vehicle_holds_in_offboard_and_flies_the_next_round():
+    """Positions stop for 4 s wall time (past the 2 s position timeout) while HEARTBEATs go on: the flight is
+    lost, the hover setpoints keep coming, so PX4's offboard-loss failsafe (OFFBOARD_LOSS_S without setpoints
+    → Hold) never fires, and the vehicle flies the next round."""
+    import time
+
+    from mavtune.fleet import Status
+    from mavtune.vehicles.mavlink import MavlinkVehicle
+
+    gains = {"kp": 0.3, "kd": 0.5}
+    with mavsim("--fault", "position-gap:2:4", autopilot="px4") as url:
+        with MavlinkVehicle(url, fast_config()) as vehicle:
+            assert vehicle.fly(gains, 0).status is Status.OK
+            aborted = vehicle.fly(gains, 1)
+            assert aborted.status is Status.LOST and aborted.info["reason"] == "position_lost"
+            assert aborted.info["held"] is True and aborted.info["restored_last_safe"] is True
+            sent = vehicle.streamer.sent
+            # past the failsafe's delay from the abort, with margin: the mode stays OFFBOARD all along
+            deadline = time.monotonic() + OFFBOARD_LOSS_S + 2.0
+            while time.monotonic() < deadline:
+                assert vehicle.link.snapshot().mode == "OFFBOARD"
+                time.sleep(0.1)
+            assert vehicle.streamer.sent > sent and vehicle.released is None
+            later = vehicle.fly(gains, 2)
+            assert later.status is Status.OK and math.isfinite(later.cost)
+            assert vehicle.link.snapshot().mode == "OFFBOARD"
+        assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
 
 
 def test_pilot_mode_change_releases_the_vehicle_and_keeps_the_rounds(tmp_path):

@@ -147,11 +147,14 @@ def test_servo_output_raw_time_is_unwrapped_against_the_position_clock():
 
 
 def test_fault_flags():
-    f = parse_faults(["mode-change:2", "heartbeat-gap:3:1.5", "param-drop:MPC_Z_P:3", "diverge:MPC_Z_P:1.2"])
-    assert f.mode_change == 2 and f.heartbeat_gap == (3, 1.5)
+    f = parse_faults(["mode-change:2", "heartbeat-gap:3:1.5", "param-drop:MPC_Z_P:3", "diverge:MPC_Z_P:1.2",
+                      "position-gap:2"])
+    assert f.mode_change == 2 and f.heartbeat_gap == (3, 1.5) and f.position_gap == (2, 1.0)
     assert f.param_drop == {"MPC_Z_P": 3} and f.diverge == {"MPC_Z_P": 1.2}
     with pytest.raises(MavtuneError, match="not understood"):
         parse_faults(["explode:1"])
+    with pytest.raises(MavtuneError, match="position-gap:2:0"):
+        parse_faults(["position-gap:2:0"])
 
 
 def _from(component: int, msg):

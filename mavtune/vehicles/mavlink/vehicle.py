@@ -307,6 +307,15 @@ class MavlinkVehicle:
             hover = Setpoint(self._hover_ned)
             self.streamer.set_target(lambda t: hover)
 
+    def _link_alive(self) -> bool:
+        """After positions stopped: True when a HEARTBEAT newer than now arrives within heartbeat_timeout_s and
+        shows the flight mode — only positions are missing, so the vehicle (still sent the hover) holds there.
+        False for a link that is silent as a whole (heartbeat loss) or a mode someone else chose."""
+        since = time.monotonic()
+        if not self.link.wait_for(lambda st: st.heartbeat_wall_s > since, self.config.safety.heartbeat_timeout_s):
+            return False
+        return self.link.snapshot().mode == self.profile.flight_mode
+
     def _release(self, pilot: bool) -> None:
         """Stop commanding the vehicle; unless the pilot took it, leave it in a position-holding mode first."""
         if self._in_control and not pilot:
@@ -523,7 +532,11 @@ class MavlinkVehicle:
         if reason == "mode_change":
             restored = self._pilot_took_over()
         else:
-            if reason in ("heartbeat_lost", "position_lost"):
+            if reason == "position_lost" and self.config.safety.rejoin_after_link_loss and self._link_alive():
+                info["held"] = True  # still streaming the hover: PX4 stays in OFFBOARD, the vehicle rejoins
+                log.warning("%s: no position, HEARTBEATs go on in %s: holding the hover point", self.name,
+                            self.profile.flight_mode)
+            elif reason in ("heartbeat_lost", "position_lost"):
                 self._in_control = False  # the autopilot's failsafe may have taken over; re-check before flying
                 self.streamer.stop()
                 if not self.config.safety.rejoin_after_link_loss:

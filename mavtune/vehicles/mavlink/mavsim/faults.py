@@ -9,6 +9,8 @@ from mavtune.errors import MavtuneError
 
 FAULT_HELP = (
     "heartbeat-gap:N[:SECONDS] (link silent for SECONDS wall time, default 1, during primitive N), "
+    "position-gap:N[:SECONDS] (no LOCAL_POSITION_NED or GLOBAL_POSITION_INT for SECONDS wall time, default 1, "
+    "during primitive N; HEARTBEATs go on), "
     "mode-change:N (pilot switches mode during primitive N), "
     "param-drop:NAME:K (the K-th PARAM_SET changing NAME, and its retries, are never answered), "
     "diverge:NAME:VALUE (the altitude loop is unstable while NAME > VALUE), "
@@ -21,6 +23,7 @@ class Faults:
     """The faults to inject; primitives are counted from 1 as the vehicle sees them start."""
 
     heartbeat_gap: tuple[int, float] | None = None  # (primitive number, wall seconds)
+    position_gap: tuple[int, float] | None = None  # (primitive number, wall seconds): positions alone withheld
     mode_change: int | None = None  # primitive number
     param_drop: dict[str, int] = field(default_factory=dict)  # name → which value-changing PARAM_SET to drop
     diverge: dict[str, float] = field(default_factory=dict)  # name → threshold
@@ -34,11 +37,11 @@ def parse_faults(specs: list[str] | None) -> Faults:
     for spec in specs or []:
         kind, *args = spec.split(":")
         try:
-            if kind == "heartbeat-gap" and len(args) in (1, 2):
+            if kind in ("heartbeat-gap", "position-gap") and len(args) in (1, 2):
                 gap = float(args[1]) if len(args) == 2 else 1.0
                 if not (gap > 0 and math.isfinite(gap)):
                     raise ValueError
-                faults.heartbeat_gap = (int(args[0]), gap)
+                setattr(faults, kind.replace("-", "_"), (int(args[0]), gap))
             elif kind == "mode-change" and len(args) == 1:
                 faults.mode_change = int(args[0])
             elif kind == "param-drop" and len(args) == 2:

@@ -19,7 +19,8 @@ cascade with its limits and filters; PX4's MPC_Z_P position loop feeding the MPC
 acceleration units): every altitude gain of either autopilot acts on the flight. Horizontally both flavours fly their
 autopilot's own cascade with its gains (`mavtune.vehicles.mavlink.mavsim.horizontal`: PSC_POSXY_P →
 PSC_VELXY_P/_I/_D, MPC_XY_P → MPC_XY_VEL_P_ACC/_I_ACC), commanding the plant's horizontal acceleration. The
-diverge fault adds a growing altitude oscillation to the reference while the named parameter is above its threshold.
+diverge fault adds a growing altitude oscillation to the reference while the named parameter is above its threshold;
+the position-gap fault withholds the position messages alone (an estimator or a loaded link dropping them).
 """
 
 from __future__ import annotations
@@ -65,6 +66,7 @@ PWM_US = (1000.0, 2000.0)  # motor output at command 0 and 1 (MOT_PWM_MIN/MAX, P
 UNUSED_OUTPUT_US = {Autopilot.PX4: 900.0, Autopilot.ARDUPILOT: 0.0}  # what the autopilots send on other outputs
 HOME = (-35.363262, 149.165237, 584.0)  # lat, lon (deg), altitude AMSL (m): ArduPilot SITL's default home
 EARTH_RADIUS_M = 6378137.0
+POSITION_IDS = (mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT)
 OFFBOARD_LOSS_S = 1.0  # PX4 COM_OF_LOSS_T: OFFBOARD without setpoints for this long falls back to Hold
 GUIDED_TIMEOUT_S = 3.0  # ArduCopter GUIDED: a velocity/acceleration target older than this is stopped
 FLAVOURS = ("px4", "ardupilot", "ardupilot-4.7")
@@ -176,6 +178,7 @@ class SimVehicle:
         self.primitives = 0
         self._timed: list[tuple[float, str]] = []  # (vehicle time, action)
         self._silent_until = 0.0  # wall time until which the link is down (heartbeat-gap fault)
+        self._no_position_until = 0.0  # wall time until which no position is sent (position-gap fault)
         self._drop_counts: dict[str, int] = {}
         self._poisoned: dict[str, float] = {}
         self._rates = dict(STREAM_HZ)
@@ -277,6 +280,10 @@ class SimVehicle:
             gap = self.faults.heartbeat_gap[1]
             log.warning("fault: link silent for %.1f s", gap)
             self._silent_until = time.monotonic() + gap
+        elif action == "position-gap":
+            gap = self.faults.position_gap[1]
+            log.warning("fault: no position for %.1f s", gap)
+            self._no_position_until = time.monotonic() + gap
 
     def _set_mode(self, mode: str) -> None:
         if mode != self.mode:
@@ -307,6 +314,8 @@ class SimVehicle:
 
     def _stream(self, msg_id: int) -> None:
         """Send one sample of a streamed message."""
+        if msg_id in POSITION_IDS and time.monotonic() < self._no_position_until:
+            return  # the position-gap fault: the estimator's output is withheld, the rest of the link goes on
         t_ms = int(self.t_s * 1000)
         ned, vel = self._ned_position(), self._ned_velocity()
         if msg_id == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
@@ -523,6 +532,8 @@ class SimVehicle:
             self._timed.append((self.t_s + f.at_s, "mode-change"))
         if f.heartbeat_gap is not None and f.heartbeat_gap[0] == self.primitives:
             self._timed.append((self.t_s + f.at_s, "heartbeat-gap"))
+        if f.position_gap is not None and f.position_gap[0] == self.primitives:
+            self._timed.append((self.t_s + f.at_s, "position-gap"))
 
     # ---- loop ------------------------------------------------------------------------------------------------
     def run(self, duration_s: float | None = None) -> None:
