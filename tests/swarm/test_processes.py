@@ -84,17 +84,18 @@ def test_agents_equal_in_process_run(procs, tmp_path, n, seed):
 
 @pytest.mark.timeout(150)
 def test_agent_killed_mid_flight_run_completes_with_fault_free_gains(procs, tmp_path):
-    # the search's own answer: noise-free, a lost flight changes no comparison (the model's fit weighs a point by
-    # its flights, so there the answer moves with the number of flights a point got)
+    # the search's own answer, no response-surface design: noise-free, a lost flight changes no comparison (the
+    # model's and the design's fits weigh a point by its flights, so there the answer moves with the number of
+    # flights a point got)
     config = tmp_path / "search.toml"
-    config.write_text('[tuning]\nanswer = "search"\n')
+    config.write_text('[tuning]\nanswer = "search"\ndesign = false\n')
     _, out, twin = start_swarm(procs, tmp_path, 2, seed=3, noise_free=True, min_flight_s=0.25, result_timeout_s=10,
                                extra=["--bootstraps", "1", "--config", str(config)])
     assert procs.wait_log("v1", "round 3: FLYING", 60), procs.log("v1")[-2000:]
     procs.kill("v1")
     assert wait_exit(procs, "coordinator", 120) == 0, procs.log("coordinator")[-3000:]
     result = json.loads((out / "result.json").read_text())
-    assert result["gains"] == mavtune.tune(twin, **{**TUNE, "answer": "search"}, bootstraps=1).gains
+    assert result["gains"] == mavtune.tune(twin, **{**TUNE, "answer": "search", "design": False}, bootstraps=1).gains
     assert result["flights_by_status"]["lost"] >= 1
     assert any(e["event"] == "lost" and e["vehicle"] == "v1" for e in result["events"])
     assert [i for i, _ in journal_rounds(out / "journal.sqlite")] == list(range(result["rounds"]))
@@ -165,4 +166,4 @@ def test_frozen_agent_is_noticed_by_the_lease_and_the_run_completes(procs, tmp_p
     assert time.monotonic() - t0 < 5.0
     assert wait_exit(procs, "coordinator", 120) == 0
     result = json.loads((out / "result.json").read_text())
-    assert result["gains"] == mavtune.tune(twin, **{**TUNE, "answer": "search"}, bootstraps=1).gains
+    assert result["gains"] == mavtune.tune(twin, **{**TUNE, "answer": "search", "design": False}, bootstraps=1).gains
