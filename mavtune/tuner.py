@@ -21,7 +21,8 @@ from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
-from mavtune.search.interval import DRAWS, edge_reach, joint, plausible_region, resample, resolution, stale
+from mavtune.search.interval import DRAWS, edge_reach, held_elsewhere, joint, plausible_region, resample, resolution, \
+    stale
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import answer as surface_answer, beside_wall, design as surface_design, \
@@ -148,7 +149,7 @@ class TuningResult:
                            "flights per point, less noise, or another bootstrap where the answer still moves)")
         for name, rec in last.items():
             shift = stale(rec.held, self.gains, space)
-            if math.isfinite(self.uncertainty.get(name, {}).get("lo", math.nan)) and shift > 0.5 * epsilon:
+            if math.isfinite(self.uncertainty.get(name, {}).get("lo", math.nan)) and held_elsewhere(shift, epsilon):
                 moved_others = ", ".join(f"{n} {v:.3g} → {self.gains[n]:.3g}" for n, v in rec.held.items()
                                          if n in self.gains and n in space and abs(self.gains[n] - v) > 0)
                 out.append(f"{name}'s last line search held the other gains where they no longer are ("

@@ -144,6 +144,13 @@ def ahead(moves: list[float], tolerance: float) -> float:
     return last
 
 
+def held_elsewhere(shift: float, epsilon: float) -> bool:
+    """True when the other gains moved (`shift`, `stale`'s share of their ranges) by more than half the search's
+    tolerance `epsilon` (a share of the range) after a gain's last line search: its interval then reaches both
+    bounds, and the cautions say why."""
+    return shift > 0.5 * epsilon
+
+
 def stale(held: dict[str, float], now: dict[str, float], space: dict[str, tuple[float, float]]) -> float:
     """How far the other gains lie from where a gain's last line search held them: the largest move, in shares
     of each gain's range, from `held` (theirs during that search) to `now` (the answer's)."""
@@ -183,7 +190,7 @@ def joint(interval: Interval, region: tuple[float, float] | None, moves: list[fl
         lo, hi = min(lo, region[0]), max(hi, region[1])
     if edge is not None:
         lo, hi = min(lo, edge[0]), max(hi, edge[1])
-    if bounds[1] > bounds[0] and shift > 0.5 * tolerance / (bounds[1] - bounds[0]):
+    if bounds[1] > bounds[0] and held_elsewhere(shift, tolerance / (bounds[1] - bounds[0])):
         lo, hi = bounds
     if math.isfinite(moved):
         lo, hi = min(lo, interval.value - abs(moved)), max(hi, interval.value + abs(moved))
