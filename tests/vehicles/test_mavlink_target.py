@@ -4,6 +4,7 @@ as one system id are refused. Against `mavtune mavsim` behind a relay on 127.0.0
 
 from __future__ import annotations
 
+import random
 import time
 
 import pytest
@@ -89,25 +90,35 @@ def test_a_url_suffix_and_a_config_that_disagree_are_refused():
     assert split_target("tcp:127.0.0.1:5760?target_system=2") == ("tcp:127.0.0.1:5760", 2)
 
 
-@given(start=st.integers(0, 255), gaps=st.lists(st.integers(1, 100), min_size=1, max_size=600))
-def test_one_sender_losing_messages_is_never_taken_for_two(start, gaps):
-    watch, seq = SeqWatch(), start
-    watch.add(seq, 0.0)
-    for i, gap in enumerate(gaps):
-        seq = (seq + gap) % 256
-        watch.add(seq, i * 0.01)
-    assert not watch.interleaved(len(gaps) * 0.01)
+@given(start=st.integers(0, 255), runs=st.lists(st.tuples(st.integers(1, 2000), st.integers(1, 5000)), min_size=1,
+                                                max_size=30))
+def test_one_sender_losing_bursts_is_never_taken_for_two(start, runs):
+    """Bursts of any size lost (a radio fade, a receive buffer overflowing while the ground station waited for a
+    CPU) move the count on and it goes on from there: with bursts no closer than LEFT_S, never a second sender.
+    `runs`: (lost in a row, messages received after them), at PX4's 400 messages a second."""
+    watch, seq, t = SeqWatch(), start, 0.0
+    watch.add(seq, t)
+    for lost, received in runs:
+        t += SeqWatch.LEFT_S
+        for i in range(received):
+            seq = (seq + (1 + lost if i == 0 else 1)) % 256
+            watch.add(seq, t + i / 400)
+        t += received / 400
+    assert not watch.interleaved(t)
 
 
-def test_a_burst_of_lost_messages_only_pauses_a_vehicle():
-    """129+ messages lost in a row step the count back once; even LIMIT such bursts clear after WINDOW_S."""
-    watch, seq = SeqWatch(), 0
-    for burst in range(SeqWatch.LIMIT):
-        watch.add(seq, burst * 1.0)
-        seq = (seq + 200) % 256
-        watch.add(seq, burst * 1.0 + 0.5)
-    assert watch.interleaved(SeqWatch.LIMIT)
-    assert not watch.interleaved(SeqWatch.LIMIT + SeqWatch.WINDOW_S)
+def test_a_starved_ground_station_losing_a_burst_four_times_a_second_keeps_its_vehicle():
+    """What the kernel did to PX4 SITL's 400 messages a second at load 13 on 2 cores, far worse: a burst of 1 to
+    2000 lost every 0.25 s (random sizes, fixed seeds), 30 s each; never flagged. A chance landing of a burst on a
+    count left behind is a return, but LIMIT of them within WINDOW_S does not happen."""
+    rng = random.Random(21)
+    for _ in range(8):
+        watch, seq, flagged = SeqWatch(), rng.randrange(256), 0
+        for k in range(12_000):
+            seq = (seq + (1 + rng.randint(1, 2000) if k % 100 == 0 else 1)) % 256
+            watch.add(seq, k / 400)
+            flagged += k % 400 == 0 and watch.interleaved(k / 400)
+        assert flagged == 0
 
 
 @given(a=st.integers(0, 255), b=st.integers(0, 255), every=st.integers(1, 20))

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
+import socket
 import statistics
 import threading
 import time
@@ -99,7 +100,28 @@ def link_target(url: str, target_system: int | None) -> int | None:
 MOTOR_MESSAGES = ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS")
 """The autopilot's motor outputs: ArduPilot sends SERVO_OUTPUT_RAW (PWM µs), PX4 both (ACTUATOR_OUTPUT_STATUS,
 the mixer's outputs, is taken from PX4)."""
+RECEIVE_BUFFER_B = 4 * 2**20
+"""The UDP receive buffer asked for (SO_RCVBUF). PX4's onboard link sends about 400 datagrams a second, and Linux
+counts each at about 0.8 KiB, so its default 208 KiB holds 256 of them: half a second. A ground station whose process
+waits longer for a CPU (up to 2 s at load 13 on 2 cores, measured) lost the rest, positions and HEARTBEATs among them.
+4 MiB holds about 25 s; Linux grants at most net.core.rmem_max (often 208 KiB: raise it with sysctl)."""
 UINT32_US_S = 2**32 / 1e6  # SERVO_OUTPUT_RAW's time_usec is 32 bits: it wraps every 71.6 min of vehicle time
+
+
+def _enlarge_receive_buffer(conn) -> int | None:
+    """Ask for RECEIVE_BUFFER_B on a UDP connection's socket; the size granted (bytes), None for other links."""
+    sock = getattr(conn, "port", None)
+    if not isinstance(sock, socket.socket) or sock.type != socket.SOCK_DGRAM:
+        return None
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_B)
+    except OSError as exc:
+        log.debug("SO_RCVBUF %d refused: %s", RECEIVE_BUFFER_B, exc)
+    granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    if granted < RECEIVE_BUFFER_B:  # Linux reports twice what it grants (its bookkeeping): less means capped
+        log.info("UDP receive buffer %d KiB (net.core.rmem_max caps it): a ground station that waits for a CPU "
+                 "loses messages; sysctl -w net.core.rmem_max=%d lets it hold more", granted // 1024, RECEIVE_BUFFER_B)
+    return granted
 
 
 @dataclass
@@ -125,13 +147,22 @@ class PositionSample:
 
 
 class SeqWatch:
-    """The MAVLink packet sequence numbers of one (system, component). One sender counts up by one per message
-    (skipping lost ones; a reboot starts again once); two senders answering as one interleave their counters, so
-    about every message of the second steps the count back by a random amount."""
+    """The MAVLink packet sequence numbers of one (system, component). One sender counts up by one per message; a
+    burst of its messages lost (a radio fade, or a receive buffer that overflowed while the ground station waited
+    for a CPU) moves the count on once, by any amount, and it goes on from there. Two senders answering as one
+    interleave their counters: their messages keep *returning* to a count left a moment before, the other's, which
+    a lost burst never does (it moves on and stays). So the watch counts returns, not steps back: a step back by
+    129+ is also what a burst of 129+ lost messages looks like (at load 13 on 2 cores the kernel dropped thousands
+    of PX4 SITL's messages in bursts within two minutes, and counting steps back held a vehicle out of a round)."""
 
-    BACK_MIN = 8  # a step back by fewer is a reordered packet, not another sender
+    BACK_MIN = 8  # a step back by fewer is a reordered packet (or two counters in step), not a jump
+    RETURN_MAX = 2  # a message continuing a count left earlier, one of that sender's messages lost at most
+    LEFT_S = 3.0  # how long a count left behind is remembered (a heartbeat-only second sender speaks at 1 Hz)
+    LEFT_MAX = 2  # counts left behind remembered at once (two senders leave one each)
     WINDOW_S = 10.0
-    LIMIT = 3  # steps back within WINDOW_S that mean two senders (a burst of 129+ lost messages looks like one)
+    LIMIT = 5  # returns within WINDOW_S that mean two senders: a lost burst lands on one of the LEFT_MAX counts
+    # remembered by chance (RETURN_MAX / 256 each), so LIMIT such chances within WINDOW_S are far rarer than two
+    # senders, which return at every switch between them
     SMALL_LIMIT = 20  # repeats or steps back by fewer than BACK_MIN within WINDOW_S: two senders whose counters
     # run in step (started together, sending alike) …
     SMALL_SHARE = 0.2  # … when they are also this share of all its messages (two in step: about half), which one
@@ -139,7 +170,8 @@ class SeqWatch:
 
     def __init__(self) -> None:
         self.last: int | None = None
-        self.backs: deque[float] = deque()
+        self.left: deque[tuple[int, float]] = deque(maxlen=self.LEFT_MAX)  # (count left by a jump, when)
+        self.returns: deque[float] = deque()
         self.small: deque[float] = deque()
         self.seen: deque[float] = deque()  # every message's time within WINDOW_S
         self.flagged = False  # interleaved when last looked at (said once per episode)
@@ -148,27 +180,32 @@ class SeqWatch:
         """Count one message's sequence number, received at wall time now_s."""
         if self.last is not None:
             step = (seq - self.last) % 256
-            if 128 < step <= 256 - self.BACK_MIN:
-                self.backs.append(now_s)
-            elif step == 0 or step > 256 - self.BACK_MIN:
+            if step == 0 or step > 256 - self.BACK_MIN:
                 self.small.append(now_s)
+            elif step > self.RETURN_MAX:  # a jump: messages lost, or another sender's count
+                back = next((i for i, (count, when) in enumerate(self.left)
+                             if 1 <= (seq - count) % 256 <= self.RETURN_MAX and now_s - when <= self.LEFT_S), None)
+                if back is not None:
+                    self.returns.append(now_s)
+                    del self.left[back]
+                self.left.append((self.last, now_s))
         self.last = seq
         self.seen.append(now_s)
         self._forget(now_s)
 
     def _forget(self, now_s: float) -> None:
         """Drop the times more than WINDOW_S before now_s (each once: the reader calls this for every message)."""
-        for times in (self.backs, self.small, self.seen):
+        for times in (self.returns, self.small, self.seen):
             while times and now_s - times[0] > self.WINDOW_S:
                 times.popleft()
 
     def interleaved(self, now_s: float) -> bool:
-        """True when two senders seem to share this (system, component): LIMIT steps back, or SMALL_LIMIT small
-        ones that are SMALL_SHARE of its messages, within WINDOW_S of now_s (it clears again after WINDOW_S
-        without them, so bursts of lost messages only pause a vehicle)."""
+        """True when two senders seem to share this (system, component): LIMIT returns, or SMALL_LIMIT small steps
+        back that are SMALL_SHARE of its messages, within WINDOW_S of now_s (it clears again after WINDOW_S
+        without them)."""
         self._forget(now_s)
         small = len(self.small)
-        return len(self.backs) >= self.LIMIT or small >= max(self.SMALL_LIMIT, self.SMALL_SHARE * len(self.seen))
+        return len(self.returns) >= self.LIMIT or small >= max(self.SMALL_LIMIT, self.SMALL_SHARE * len(self.seen))
 
 
 @dataclass(frozen=True)
@@ -239,6 +276,7 @@ class MavlinkLink:
                                "(pip install pyserial)") from None
         except Exception as exc:  # pymavlink raises OSError/ValueError/serial errors
             raise MavtuneError(f"cannot open MAVLink connection {url!r}: {exc}") from None
+        self.receive_buffer_b = _enlarge_receive_buffer(self._conn)
         self.state = VehicleState()
         self._timesync: dict[int, int] = {}  # our ts1 (ns) → round trip (ns) of its TIMESYNC answer
         self._cond = threading.Condition()
