@@ -1,0 +1,130 @@
+"""The PX4 SITL two-vehicle split test under load: how many runs of N pass, for one or more source trees, the
+trees' runs interleaved (tree A's run 1, tree B's run 1, A's run 2, ...) so that each sees the same load.
+
+    python benchmarks/split_under_load.py --runs 3 --busy 4 --tree before=/tmp/mavtune-before --tree after=.
+
+A tree is a copy of the repository (`git archive COMMIT | tar -x -C /tmp/mavtune-before`); each run is
+`pytest tests/vehicles/test_px4_sitl.py -m slow -k split` with PYTHONPATH at that tree. `--busy K` starts K busy-loop
+processes for the whole measurement (stopped by their ids at the end) on top of whatever else runs. Writes
+benchmarks/results/split_under_load.{md,json}: per run the tree, pass or fail, wall time, the 1-min load before and
+after, and the failure's first assertion or error line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from common import cpu_model, write_results  # noqa: E402
+
+TEST = ["tests/vehicles/test_px4_sitl.py", "-m", "slow", "-k", "split", "-q", "-x", "-p", "no:cacheprovider",
+        "-o", "log_cli=true", "--log-cli-level=WARNING"]  # mavtune's warnings (not ready, aborts) into the log
+TUNER_PORTS = range(14540, 14550)  # PX4 SITL instance N sends its API link to 14540 + N
+
+
+def udp_drops() -> dict[int, int]:
+    """Datagrams the kernel dropped so far on each open UDP socket bound to a tuner port (by socket inode), from
+    /proc/net/udp: a full receive buffer."""
+    out = {}
+    for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
+        f = line.split()
+        if int(f[1].rsplit(":", 1)[1], 16) in TUNER_PORTS:
+            out[int(f[9])] = int(f[-1])
+    return out
+
+
+class DropWatch:
+    """The most datagrams dropped on each tuner socket seen while running (polled each 0.5 s: a socket's count goes
+    with it)."""
+
+    def __init__(self) -> None:
+        self.seen: dict[int, int] = {}
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._poll, daemon=True)
+        self.thread.start()
+
+    def _poll(self) -> None:
+        while not self.stop.wait(0.5):
+            for inode, n in udp_drops().items():
+                self.seen[inode] = max(n, self.seen.get(inode, 0))
+
+    def total(self) -> int:
+        self.stop.set()
+        self.thread.join()
+        return sum(self.seen.values())
+
+
+def one_run(tree: Path, px4: str, log: Path) -> dict:
+    """The split test once from `tree`; pass/fail, wall time, load before/after, the failure's first line."""
+    env = {**os.environ, "PYTHONPATH": str(tree), "MAVTUNE_PX4": px4}
+    load0, started, drops = os.getloadavg()[0], time.monotonic(), DropWatch()
+    with log.open("w") as f:
+        rc = subprocess.run([sys.executable, "-m", "pytest", *TEST], cwd=tree, env=env, stdout=f,
+                            stderr=subprocess.STDOUT, timeout=1200).returncode
+    text = log.read_text()
+    why = next((m.group(0)[:200] for m in re.finditer(r"^E\s+.*$", text, re.M)), None)
+    skipped = " skipped" in text and " passed" not in text
+    return {"rc": rc, "passed": rc == 0 and not skipped, "skipped": skipped,
+            "wall_s": round(time.monotonic() - started),
+            "load_before": load0, "load_after": os.getloadavg()[0], "why": why, "udp_dropped": drops.total(),
+            "two_senders": text.count("two senders answer as"), "not_ready": text.count("not ready:"),
+            "aborted": text.count(" aborted: "), "lost": text.count(" lost: ")}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tree", action="append", required=True, help="LABEL=PATH of a checkout (repeatable)")
+    parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--busy", type=int, default=0, help="busy-loop processes to add for the measurement")
+    parser.add_argument("--name", default="split_under_load")
+    args = parser.parse_args()
+    px4 = os.environ.get("MAVTUNE_PX4") or str(Path(__file__).resolve().parents[2] / "shared" / "px4sitl")
+    trees = [(label, Path(path).resolve()) for label, path in (t.split("=", 1) for t in args.tree)]
+    logs = Path(tempfile.mkdtemp(prefix="split-under-load-"))
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
+    runs = []
+    started = time.time()
+    try:
+        for i in range(args.runs):
+            for label, tree in trees:
+                r = {"tree": label, "run": i + 1, **one_run(tree, px4, logs / f"{label}-{i + 1}.log")}
+                runs.append(r)
+                print(json.dumps(r), flush=True)
+    finally:
+        for p in busy:
+            p.kill()
+            p.wait()
+    meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(started)), "cpu": cpu_model(),
+            "nproc": os.cpu_count(), "busy": args.busy, "logs": str(logs),
+            "command": "python benchmarks/split_under_load.py --runs {} --busy {} {}".format(
+                args.runs, args.busy, " ".join(f"--tree {label}=…" for label, _ in trees)),
+            "trees": {label: str(tree) for label, tree in trees}}
+    lines = [f"# The PX4 SITL split test under load ({meta['date']})", "",
+             f"{meta['cpu']} · nproc {meta['nproc']} · {args.busy} busy-loop processes added to the other jobs · "
+             f"`{meta['command']}`", "",
+             "| tree | passed | runs | 1-min load (min–max over the runs) | wall s (median) | datagrams the kernel "
+             "dropped (per run) | \"two senders\" warnings | not-ready warnings | flights aborted / lost | failures |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for label, _ in trees:
+        mine = [r for r in runs if r["tree"] == label]
+        loads = [x for r in mine for x in (r["load_before"], r["load_after"])]
+        walls = sorted(r["wall_s"] for r in mine)
+        fails = "; ".join(f"run {r['run']}: {r['why'] or 'rc ' + str(r['rc'])}" for r in mine if not r["passed"])
+        lines.append(f"| {label} | {sum(r['passed'] for r in mine)} | {len(mine)} | "
+                     f"{min(loads):.1f}–{max(loads):.1f} "
+                     f"| {walls[len(walls) // 2]} | {', '.join(str(r['udp_dropped']) for r in mine)} | "
+                     f"{sum(r['two_senders'] for r in mine)} | {sum(r['not_ready'] for r in mine)} | "
+                     f"{sum(r['aborted'] for r in mine)} / {sum(r['lost'] for r in mine)} | {fails or '—'} |")
+    write_results(args.name, lines + [""], {"meta": meta, "runs": runs})
+
+
+if __name__ == "__main__":
+    main()
