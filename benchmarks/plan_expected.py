@@ -93,7 +93,11 @@ def sitl_row(result: dict, autopilot: str, speed: int) -> dict:
     rounds = result["rounds_log"]
     walls = [r["finished_s"] - r["started_s"] for r in rounds if not r.get("replayed")]
     ok = result["flights_by_status"].get("ok", 0)
-    return {"config": {"sitl": autopilot, "vehicles": len(urls), "speed": speed}, "expected": plan.rounds,
+    searches = {(r["bootstrap"], r["gain"]) for r in rounds if r["gain"] != "design"}
+    design = sum(r["gain"] == "design" for r in rounds)
+    return {"design_rounds": design, "line_searches": len(searches),
+            "rounds_per_line_search": (len(rounds) - design) / max(1, len(searches)),
+            "plan_rounds_per_line_search": (plan.rounds - settings_design_rounds()) / max(1, len(searches)),"config": {"sitl": autopilot, "vehicles": len(urls), "speed": speed}, "expected": plan.rounds,
             "clear": plan.rounds_min, "max": plan.rounds_max, "flown": result["rounds"],
             "flights": result["flights"], "flights_by_status": result["flights_by_status"],
             "error": (plan.rounds - result["rounds"]) / result["rounds"],
@@ -104,6 +108,13 @@ def sitl_row(result: dict, autopilot: str, speed: int) -> dict:
             "run_wall_s": result.get("wall_s"), "started_s": rounds[0]["started_s"]}
 
 
+def settings_design_rounds() -> int:
+    """The rounds the plan counts for the response surface's design with the default settings."""
+    from mavtune.config import load_config
+
+    return load_config(None, {"fleet.kind": "mavlink"}).settings().design_rounds()
+
+
 def sitl_lines(meta: dict, rows: list[dict]) -> list[str]:
     lines = ["", "## On the SITLs, default settings", "",
              f"{meta['cpu']} · nproc {meta['nproc']} · per SITL the date, the 1-min load at its end and the command "
@@ -112,8 +123,8 @@ def sitl_lines(meta: dict, rows: list[dict]) -> list[str]:
              "(ε 0.2, 2 bootstraps, adaptive averaging, the design, the near-stock answer); the link timeouts of the "
              "SITL tests (position 2.5 s, first heartbeat 30 s).", "",
              "| SITL | expected | clear case | at most | flown | flights (ok) | expected vs flown | clear vs flown | "
-             "round wall s: median (mean, max) | noise | status |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+             "rounds a line search: flown (plan) | design rounds | round wall s: median (mean, max) | noise | status |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
         c = r["config"]
         noise = (r.get("noise") or {}).get("cv")
@@ -121,6 +132,8 @@ def sitl_lines(meta: dict, rows: list[dict]) -> list[str]:
         clear = "—" if r["clear_error"] is None else f"{r['clear_error']:+.0%}"
         lines.append(f"| {c['sitl']} ×{c['vehicles']} at speed {c['speed']} | {r['expected']} | {r['clear']} | "
                      f"{r['max']} | {r['flown']} | {r['flights']} ({r['ok_flights']}) | {r['error']:+.0%} | {clear} | "
+                     f"{r['rounds_per_line_search']:.2f} ({r['plan_rounds_per_line_search']:.2f}) | "
+                     f"{r['design_rounds']} | "
                      f"{r['round_wall_s_median']:.1f} ({r['round_wall_s_mean']:.1f}, {r['round_wall_s_max']:.1f}) | "
                      f"{noise_s} | {r['status']} |")
     lines.append("")
@@ -159,8 +172,8 @@ def main() -> None:
                 r["meta"] |= {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(r.pop("started_s"))),
                               "load": None}
             r.pop("started_s", None)
-        rows += [r for r in data.get("sitl", {}).get("rows", []) if r["config"]["sitl"] not in args.sitl]
-        rows.sort(key=lambda r: r["config"]["sitl"])
+        rows += data.get("sitl", {}).get("rows", [])  # earlier tunes are kept: one tune is one draw
+        rows.sort(key=lambda r: (r["config"]["sitl"], r["meta"]["date"]))
         data["sitl"] = {"meta": meta, "rows": rows}
         path.write_text(json.dumps(data, indent=1) + "\n")
         md = args.out / f"{args.name}.md"

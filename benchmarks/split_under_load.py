@@ -15,6 +15,7 @@ import argparse
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -62,20 +63,57 @@ class DropWatch:
         return sum(self.seen.values())
 
 
-def one_run(tree: Path, px4: str, log: Path) -> dict:
+class Stalls:
+    """The whole test frozen now and then, ground station and PX4 alike (SIGSTOP to its process group, then
+    SIGCONT): what the machine did to every process at once under the other helpers' load (a watchdog thread asleep
+    for 10 ms woke up to 2 s late, in mavtune's process and in a process of its own alike)."""
+
+    def __init__(self, pgid: int, stall_s: float, every_s: float):
+        self.pgid, self.stall_s, self.every_s, self.count = pgid, stall_s, every_s, 0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while not self.stop.wait(self.every_s):
+            try:
+                os.killpg(self.pgid, signal.SIGSTOP)
+                self.count += 1
+                time.sleep(self.stall_s)
+            except ProcessLookupError:
+                return
+            finally:
+                try:
+                    os.killpg(self.pgid, signal.SIGCONT)
+                except ProcessLookupError:
+                    return
+
+    def end(self) -> None:
+        self.stop.set()
+        self.thread.join()
+
+
+def one_run(tree: Path, px4: str, log: Path, freeze: tuple[float, float] | None = None) -> dict:
     """The split test once from `tree`; pass/fail, wall time, load before/after, the failure's first line."""
     env = {**os.environ, "PYTHONPATH": str(tree), "MAVTUNE_PX4": px4}
     load0, started, drops = os.getloadavg()[0], time.monotonic(), DropWatch()
     with log.open("w") as f:
-        rc = subprocess.run([sys.executable, "-m", "pytest", *TEST], cwd=tree, env=env, stdout=f,
-                            stderr=subprocess.STDOUT, timeout=1200).returncode
+        proc = subprocess.Popen([sys.executable, "-m", "pytest", *TEST], cwd=tree, env=env, stdout=f,
+                                stderr=subprocess.STDOUT, start_new_session=True)
+        stalls = Stalls(proc.pid, *freeze) if freeze else None
+        try:
+            rc = proc.wait(timeout=1800)
+        finally:
+            if stalls is not None:
+                stalls.end()
     text = log.read_text()
     why = next((m.group(0)[:200] for m in re.finditer(r"^E\s+.*$", text, re.M)), None)
     skipped = " skipped" in text and " passed" not in text
     return {"rc": rc, "passed": rc == 0 and not skipped, "skipped": skipped,
             "wall_s": round(time.monotonic() - started),
             "load_before": load0, "load_after": os.getloadavg()[0], "why": why, "udp_dropped": drops.total(),
-            "two_senders": text.count("two senders answer as"), "not_ready": text.count("not ready:"),
+            "stalls": stalls.count if stalls else 0, "two_senders": text.count("two senders answer as"),
+            "not_ready": text.count("not ready:"),
             "aborted": text.count(" aborted: "), "lost": text.count(" lost: ")}
 
 
@@ -84,18 +122,21 @@ def main() -> None:
     parser.add_argument("--tree", action="append", required=True, help="LABEL=PATH of a checkout (repeatable)")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--busy", type=int, default=0, help="busy-loop processes to add for the measurement")
+    parser.add_argument("--stall", default=None, metavar="S:EVERY",
+                        help="freeze the whole test (mavtune and PX4) for S seconds every EVERY seconds")
     parser.add_argument("--name", default="split_under_load")
     args = parser.parse_args()
     px4 = os.environ.get("MAVTUNE_PX4") or str(Path(__file__).resolve().parents[2] / "shared" / "px4sitl")
     trees = [(label, Path(path).resolve()) for label, path in (t.split("=", 1) for t in args.tree)]
     logs = Path(tempfile.mkdtemp(prefix="split-under-load-"))
+    freeze = tuple(float(x) for x in args.stall.split(":")) if args.stall else None
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
     runs = []
     started = time.time()
     try:
         for i in range(args.runs):
             for label, tree in trees:
-                r = {"tree": label, "run": i + 1, **one_run(tree, px4, logs / f"{label}-{i + 1}.log")}
+                r = {"tree": label, "run": i + 1, **one_run(tree, px4, logs / f"{label}-{i + 1}.log", freeze)}
                 runs.append(r)
                 print(json.dumps(r), flush=True)
     finally:
@@ -104,12 +145,15 @@ def main() -> None:
             p.wait()
     meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(started)), "cpu": cpu_model(),
             "nproc": os.cpu_count(), "busy": args.busy, "logs": str(logs),
-            "command": "python benchmarks/split_under_load.py --runs {} --busy {} {}".format(
-                args.runs, args.busy, " ".join(f"--tree {label}=…" for label, _ in trees)),
+            "command": "python benchmarks/split_under_load.py --runs {} --busy {}{} {}".format(
+                args.runs, args.busy, f" --stall {args.stall}" if args.stall else "",
+                " ".join(f"--tree {label}=…" for label, _ in trees)),
+            "stall": args.stall,
             "trees": {label: str(tree) for label, tree in trees}}
     lines = [f"# The PX4 SITL split test under load ({meta['date']})", "",
-             f"{meta['cpu']} · nproc {meta['nproc']} · {args.busy} busy-loop processes added to the other jobs · "
-             f"`{meta['command']}`", "",
+             f"{meta['cpu']} · nproc {meta['nproc']} · {args.busy} busy-loop processes added to the other jobs"
+             + (f" · the whole test frozen {args.stall.replace(':', ' s every ')} s" if args.stall else "")
+             + f" · `{meta['command']}`", "",
              "| tree | passed | runs | 1-min load (min–max over the runs) | wall s (median) | datagrams the kernel "
              "dropped (per run) | \"two senders\" warnings | not-ready warnings | flights aborted / lost | failures |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]

@@ -5,6 +5,7 @@ as one system id are refused. Against `mavtune mavsim` behind a relay on 127.0.0
 from __future__ import annotations
 
 import random
+import threading
 import time
 
 import pytest
@@ -195,4 +196,36 @@ def test_messages_of_system_0_are_not_taken_for_two_senders(caplog):
         assert link._seq[(1, 0)].interleaved(time.monotonic())
         assert "answer as 1/0" in caplog.text and "answer as 0/0" not in caplog.text
     finally:
+        link.close()
+
+
+def _wait_until(check, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not check():
+        assert time.monotonic() < deadline, "condition not reached"
+        time.sleep(0.02)
+
+
+def test_time_the_reader_did_not_run_is_not_counted_as_the_vehicle_silent():
+    """A ground station frozen (or starved of a CPU) hears nothing meanwhile: that time is the station's silence,
+    not the vehicle's. Its reader held for over a second, the time since a moment before is counted without the
+    pause, while the pause lasts (another thread may check first) and after it."""
+    from mavtune.vehicles.mavlink.link import DEAF_S, MavlinkLink
+
+    link = MavlinkLink(f"udpin:127.0.0.1:{free_udp_port()}")
+    gate, receive = threading.Event(), link._conn.recv_match
+    try:
+        assert link.heartbeat_age_s() == float("inf")
+        heard = time.monotonic()
+        link._conn.recv_match = lambda **kw: gate.wait() and None  # the reader's next turn blocks
+        _wait_until(lambda: time.monotonic() - link._tick > 1.0)
+        assert link.listened_since(heard) <= time.monotonic() - heard - 1.0
+        paused_from = link._tick
+        link._conn.recv_match = receive
+        gate.set()
+        _wait_until(lambda: link._tick > paused_from + 1.0)  # it runs again
+        assert link.listened_since(heard) <= time.monotonic() - heard - 1.0
+        assert link.listened_since(time.monotonic()) <= DEAF_S
+    finally:
+        gate.set()
         link.close()

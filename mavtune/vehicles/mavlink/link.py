@@ -105,6 +105,11 @@ RECEIVE_BUFFER_B = 4 * 2**20
 counts each at about 0.8 KiB, so its default 208 KiB holds 256 of them: half a second. A ground station whose process
 waits longer for a CPU (up to 2 s at load 13 on 2 cores, measured) lost the rest, positions and HEARTBEATs among them.
 4 MiB holds about 25 s; Linux grants at most net.core.rmem_max (often 208 KiB: raise it with sysctl)."""
+DEAF_S = 0.25
+"""A pause of the reader thread longer than this (it loops at least every 50 ms) is time mavtune was not listening:
+its process was frozen or waited for a CPU. Such time is not counted in how long the vehicle has been silent (a
+2 s stall of the whole machine, as the loaded test machine had, otherwise reads as a lost HEARTBEAT: PX4 sends one
+a second, 3 s is the timeout)."""
 UINT32_US_S = 2**32 / 1e6  # SERVO_OUTPUT_RAW's time_usec is 32 bits: it wraps every 71.6 min of vehicle time
 
 
@@ -286,12 +291,19 @@ class MavlinkLink:
         self.motor_message = "SERVO_OUTPUT_RAW"  # which of MOTOR_MESSAGES is taken (the vehicle sets it)
         self.motor_samples = 0  # how many were received
         self._closed = threading.Event()
+        self._tick = time.monotonic()  # the reader's last turn
+        self._deaf: deque[tuple[float, float]] = deque(maxlen=32)  # (from, to) wall times the reader did not run
         self._thread = threading.Thread(target=self._read_loop, name=f"mavlink-read {url}", daemon=True)
         self._thread.start()
 
     # ---- reading -------------------------------------------------------------------------------------------
     def _read_loop(self) -> None:
         while not self._closed.is_set():
+            now = time.monotonic()
+            if now - self._tick > DEAF_S:
+                with self._cond:
+                    self._deaf.append((self._tick, now))
+            self._tick = now
             try:
                 msg = self._conn.recv_match(blocking=True, timeout=0.05)
             except Exception as exc:  # a closed socket during shutdown, or a garbled frame
@@ -540,11 +552,24 @@ class MavlinkLink:
                                    "param_index": dict(st.param_index), "ignored": dict(st.ignored)})
 
     def heartbeat_age_s(self) -> float:
-        """Wall seconds since the last HEARTBEAT of the target vehicle (inf before the first)."""
+        """Seconds listened since the last HEARTBEAT of the target vehicle (inf before the first)."""
         with self._cond:
             if not self.state.heartbeats:
                 return math.inf
-            return time.monotonic() - self.state.heartbeat_wall_s
+            return self.listened_since(self.state.heartbeat_wall_s)
+
+    def listened_since(self, wall_s: float) -> float:
+        """Wall seconds since `wall_s` (time.monotonic()) that the reader was listening: pauses of the reader
+        longer than DEAF_S (the process frozen or starved, now or before) are left out, so a silence is the
+        vehicle's, not ours."""
+        now = time.monotonic()
+        with self._cond:
+            spans = list(self._deaf)
+        tick = self._tick
+        if now - tick > DEAF_S:  # the reader has not run since: it is not listening now (another thread woke first)
+            spans.append((tick, now))
+        deaf = sum(max(0.0, min(to, now) - max(frm, wall_s)) for frm, to in spans)
+        return max(0.0, now - wall_s - deaf)
 
     def add_position_listener(self, fn: Callable[[PositionSample], None]) -> None:
         """Call fn(sample) from the reader thread for every LOCAL_POSITION_NED."""

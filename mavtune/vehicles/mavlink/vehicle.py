@@ -178,15 +178,16 @@ class MavlinkVehicle:
         duplicate = self.link.duplicate_problem()
         if duplicate:
             return duplicate
+        st = self.link.snapshot()
         problem = preflight_problem(
-            self.link.snapshot(), self.link.heartbeat_age_s(), self.profile, self.config.safety, self._in_control
-        )
+            st, self.link.heartbeat_age_s(), self.profile, self.config.safety, self._in_control,
+            None if st.position is None else self.link.listened_since(st.position.wall_s))
         if problem is None and self.config.altitude_source == "distance_sensor":
             st = self.link.snapshot()
             what = "a downward rangefinder (DISTANCE_SENSOR, orientation PITCH_270)"
             if st.distance_t_s is None:
                 return f"no reading from {what}; altitude_source = \"distance_sensor\" needs one"
-            age_s = time.monotonic() - st.distance_wall_s
+            age_s = self.link.listened_since(st.distance_wall_s)
             if age_s > self.config.safety.position_timeout_s:
                 return f"no reading from {what} for {age_s:.1f} s"
         return problem
@@ -355,7 +356,7 @@ class MavlinkVehicle:
             except queue.Empty:
                 if self.link.heartbeat_age_s() > safety.heartbeat_timeout_s:
                     return "heartbeat_lost"
-                if time.monotonic() - last_wall > safety.position_timeout_s:
+                if self.link.listened_since(last_wall) > safety.position_timeout_s:
                     return "position_lost"
                 continue
             last_wall = time.monotonic()
