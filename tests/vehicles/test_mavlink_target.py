@@ -229,3 +229,22 @@ def test_time_the_reader_did_not_run_is_not_counted_as_the_vehicle_silent():
     finally:
         gate.set()
         link.close()
+
+
+def test_a_heartbeat_saying_critical_marks_the_autopilots_failsafe():
+    """PX4 in its offboard-loss failsafe (RTL) says MAV_STATE_CRITICAL in its HEARTBEAT, a pilot's mode switch does
+    not: the link keeps which, so a mode change is put down to the failsafe or to the pilot."""
+    from mavtune.vehicles.mavlink.link import MavlinkLink
+
+    link = MavlinkLink(f"udpin:127.0.0.1:{free_udp_port()}")
+    try:
+        link.target_system, link.chosen = 1, True
+        px4, ground = mavlink.MAVLink(None, srcSystem=1, srcComponent=1), mavlink.MAVLink(None)
+        for status, failsafe in ((mavlink.MAV_STATE_ACTIVE, False), (mavlink.MAV_STATE_CRITICAL, True),
+                                 (mavlink.MAV_STATE_EMERGENCY, True), (mavlink.MAV_STATE_ACTIVE, False)):
+            sent = px4.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
+                                        mavlink.MAV_MODE_FLAG_SAFETY_ARMED, 0, status)
+            link._handle(ground.decode(bytearray(sent.pack(px4))))
+            assert link.snapshot().failsafe is failsafe
+    finally:
+        link.close()

@@ -240,6 +240,7 @@ class VehicleState:
     mav_autopilot: int | None = None
     mav_type: int | None = None
     mode: str = ""
+    failsafe: bool = False  # the HEARTBEAT's system_status says CRITICAL or EMERGENCY (PX4: a failsafe is active)
     armed: bool = False
     landed_state: int | None = None  # MAV_LANDED_STATE_*, None when never reported
     heartbeat_wall_s: float = 0.0
@@ -345,6 +346,7 @@ class MavlinkLink:
                 st.system, st.component = src, comp
                 st.mav_autopilot, st.mav_type = msg.autopilot, msg.type
                 st.mode = mavutil.mode_string_v10(msg)
+                st.failsafe = msg.system_status in (mavlink.MAV_STATE_CRITICAL, mavlink.MAV_STATE_EMERGENCY)
                 st.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 st.heartbeat_wall_s = time.monotonic()
                 st.heartbeats += 1

@@ -582,7 +582,10 @@ class MavlinkVehicle:
     def _pilot_took_over(self) -> bool:
         """The pilot switched modes: stop commanding and give back the original gains (the vehicle is out of the
         run); True when they were confirmed."""
-        self._released = "the pilot changed the mode; this vehicle is left to the pilot"
+        st = self.link.snapshot()
+        self._released = (f"the autopilot's failsafe changed the mode to {st.mode} (its HEARTBEAT says "
+                          "critical); this vehicle is left to it and the pilot") if st.failsafe else \
+            "the pilot changed the mode; this vehicle is left to the pilot"
         self._release(pilot=True)
         return self.restore_originals()
 
