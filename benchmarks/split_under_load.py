@@ -12,6 +12,7 @@ after, and the failure's first assertion or error line."""
 from __future__ import annotations
 
 import argparse
+import calendar
 import json
 import os
 import re
@@ -24,7 +25,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from common import cpu_model, write_results  # noqa: E402
+from common import RESULTS, cpu_model, write_results  # noqa: E402
 
 TEST = ["tests/vehicles/test_px4_sitl.py", "-m", "slow", "-k", "split", "-q", "-x", "-p", "no:cacheprovider",
         "-o", "log_cli=true", "--log-cli-level=WARNING"]  # mavtune's warnings (not ready, aborts) into the log
@@ -125,6 +126,8 @@ def main() -> None:
     parser.add_argument("--stall", default=None, metavar="S:EVERY",
                         help="freeze the whole test (mavtune and PX4) for S seconds every EVERY seconds")
     parser.add_argument("--name", default="split_under_load")
+    parser.add_argument("--append", action="store_true",
+                        help="add these runs to the results file's (same trees, busy loops and stalls)")
     args = parser.parse_args()
     px4 = os.environ.get("MAVTUNE_PX4") or str(Path(__file__).resolve().parents[2] / "shared" / "px4sitl")
     trees = [(label, Path(path).resolve()) for label, path in (t.split("=", 1) for t in args.tree)]
@@ -133,20 +136,26 @@ def main() -> None:
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
     runs = []
     started = time.time()
+    earlier = json.loads((RESULTS / f"{args.name}.json").read_text()) if args.append else None
+    done = len(earlier["runs"]) // len(trees) if earlier else 0
     try:
         for i in range(args.runs):
             for label, tree in trees:
-                r = {"tree": label, "run": i + 1, **one_run(tree, px4, logs / f"{label}-{i + 1}.log", freeze)}
+                r = {"tree": label, "run": done + i + 1,
+                     **one_run(tree, px4, logs / f"{label}-{done + i + 1}.log", freeze)}
                 runs.append(r)
                 print(json.dumps(r), flush=True)
     finally:
         for p in busy:
             p.kill()
             p.wait()
+    if earlier is not None:
+        runs = earlier["runs"] + runs
+        started = calendar.timegm(time.strptime(earlier["meta"]["date"], "%Y-%m-%d %H:%M UTC"))
     meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(started)), "cpu": cpu_model(),
             "nproc": os.cpu_count(), "busy": args.busy, "logs": str(logs),
             "command": "python benchmarks/split_under_load.py --runs {} --busy {}{} {}".format(
-                args.runs, args.busy, f" --stall {args.stall}" if args.stall else "",
+                len(runs) // len(trees), args.busy, f" --stall {args.stall}" if args.stall else "",
                 " ".join(f"--tree {label}=…" for label, _ in trees)),
             "stall": args.stall,
             "trees": {label: str(tree) for label, tree in trees}}
@@ -154,9 +163,10 @@ def main() -> None:
              f"{meta['cpu']} · nproc {meta['nproc']} · {args.busy} busy-loop processes added to the other jobs"
              + (f" · the whole test frozen {args.stall.replace(':', ' s every ')} s" if args.stall else "")
              + f" · `{meta['command']}`", "",
-             "| tree | passed | runs | 1-min load (min–max over the runs) | wall s (median) | datagrams the kernel "
-             "dropped (per run) | \"two senders\" warnings | not-ready warnings | flights aborted / lost | failures |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+             "| tree | passed | runs | 1-min load (min–max over the runs) | wall s (median) | stalls (per run) | "
+             "datagrams the kernel dropped (per run) | \"two senders\" warnings | not-ready warnings | "
+             "flights aborted / lost | failures |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for label, _ in trees:
         mine = [r for r in runs if r["tree"] == label]
         loads = [x for r in mine for x in (r["load_before"], r["load_after"])]
@@ -164,7 +174,8 @@ def main() -> None:
         fails = "; ".join(f"run {r['run']}: {r['why'] or 'rc ' + str(r['rc'])}" for r in mine if not r["passed"])
         lines.append(f"| {label} | {sum(r['passed'] for r in mine)} | {len(mine)} | "
                      f"{min(loads):.1f}–{max(loads):.1f} "
-                     f"| {walls[len(walls) // 2]} | {', '.join(str(r['udp_dropped']) for r in mine)} | "
+                     f"| {walls[len(walls) // 2]} | {', '.join(str(r.get('stalls', 0)) for r in mine)} | "
+                     f"{', '.join(str(r['udp_dropped']) for r in mine)} | "
                      f"{sum(r['two_senders'] for r in mine)} | {sum(r['not_ready'] for r in mine)} | "
                      f"{sum(r['aborted'] for r in mine)} / {sum(r['lost'] for r in mine)} | {fails or '—'} |")
     write_results(args.name, lines + [""], {"meta": meta, "runs": runs})
