@@ -159,6 +159,7 @@ def main() -> None:
                 " ".join(f"--tree {label}=…" for label, _ in trees)),
             "stall": args.stall,
             "trees": {label: str(tree) for label, tree in trees}}
+    notes = earlier.get("notes", []) if earlier else []  # what was measured beside, written into the json by hand
     lines = [f"# The PX4 SITL split test under load ({meta['date']})", "",
              f"{meta['cpu']} · nproc {meta['nproc']} · {args.busy} busy-loop processes added to the other jobs"
              + (f" · the whole test frozen {args.stall.replace(':', ' s every ')} s" if args.stall else "")
@@ -178,7 +179,8 @@ def main() -> None:
                      f"{', '.join(str(r['udp_dropped']) for r in mine)} | "
                      f"{sum(r['two_senders'] for r in mine)} | {sum(r['not_ready'] for r in mine)} | "
                      f"{sum(r['aborted'] for r in mine)} / {sum(r['lost'] for r in mine)} | {fails or '—'} |")
-    write_results(args.name, lines + [""], {"meta": meta, "runs": runs})
+    lines += [""] + [f"- {note}" for note in notes]
+    write_results(args.name, lines + [""], {"meta": meta, "runs": runs, "notes": notes})
 
 
 if __name__ == "__main__":
