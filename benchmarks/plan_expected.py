@@ -115,7 +115,8 @@ def settings_design_rounds() -> int:
     return load_config(None, {"fleet.kind": "mavlink"}).settings().design_rounds()
 
 
-def sitl_lines(meta: dict, rows: list[dict]) -> list[str]:
+def sitl_lines(meta: dict, rows: list[dict], notes: list[str] = ()) -> list[str]:
+    """The SITL section of the results page; `notes`: tunes that ended without a row (the json's sitl.notes)."""
     lines = ["", "## On the SITLs, default settings", "",
              f"{meta['cpu']} · nproc {meta['nproc']} · per SITL the date, the 1-min load at its end and the command "
              "below", "",
@@ -140,6 +141,7 @@ def sitl_lines(meta: dict, rows: list[dict]) -> list[str]:
     lines += [f"- {r['config']['sitl']}: {r['meta']['date']}, load "
               f"{'not recorded' if r['meta']['load'] is None else format(r['meta']['load'], '.1f')}, "
               f"`{r['meta']['command']}`" for r in rows if "meta" in r]
+    lines += [f"- {note}" for note in notes]
     return lines
 
 
@@ -174,12 +176,12 @@ def main() -> None:
             r.pop("started_s", None)
         rows += data.get("sitl", {}).get("rows", [])  # earlier tunes are kept: one tune is one draw
         rows.sort(key=lambda r: (r["config"]["sitl"], r["meta"]["date"]))
-        data["sitl"] = {"meta": meta, "rows": rows}
+        data["sitl"] = {**data.get("sitl", {}), "meta": meta, "rows": rows}
         path.write_text(json.dumps(data, indent=1) + "\n")
         md = args.out / f"{args.name}.md"
         head = md.read_text().split("\n## On the SITLs")[0].rstrip("\n") if md.exists() else ""
-        md.write_text(head + "\n" + "\n".join(sitl_lines(meta, rows)) + "\n")
-        print("\n".join(sitl_lines(meta, rows)))
+        md.write_text(head + "\n" + "\n".join(sitl_lines(meta, rows, data["sitl"].get("notes", []))) + "\n")
+        print("\n".join(sitl_lines(meta, rows, data["sitl"].get("notes", []))))
         return
     configs = json.loads(args.configs) if args.configs else CONFIGS
     rows = [measure(over, args.seeds) for over in configs]
@@ -200,7 +202,7 @@ def main() -> None:
                      f"{r['max']} | {r['flown_mean']:.1f} ± {r['flown_sd']:.1f} | {r['flown_min']}–{r['flown_max']} | "
                      f"{r['error']:+.0%} |")
     if kept:
-        lines += sitl_lines(kept["sitl"]["meta"], kept["sitl"]["rows"])
+        lines += sitl_lines(kept["sitl"]["meta"], kept["sitl"]["rows"], kept["sitl"].get("notes", []))
     (args.out / f"{args.name}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
