@@ -97,7 +97,8 @@ def sitl_row(result: dict, autopilot: str, speed: int) -> dict:
     design = sum(r["gain"] == "design" for r in rounds)
     return {"design_rounds": design, "line_searches": len(searches),
             "rounds_per_line_search": (len(rounds) - design) / max(1, len(searches)),
-            "plan_rounds_per_line_search": (plan.rounds - settings_design_rounds()) / max(1, len(searches)),"config": {"sitl": autopilot, "vehicles": len(urls), "speed": speed}, "expected": plan.rounds,
+            "plan_rounds_per_line_search": (plan.rounds - settings_design_rounds()) / max(1, len(searches)),
+            "config": {"sitl": autopilot, "vehicles": len(urls), "speed": speed}, "expected": plan.rounds,
             "clear": plan.rounds_min, "max": plan.rounds_max, "flown": result["rounds"],
             "flights": result["flights"], "flights_by_status": result["flights_by_status"],
             "error": (plan.rounds - result["rounds"]) / result["rounds"],
