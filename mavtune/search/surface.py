@@ -90,17 +90,22 @@ def beside_wall(points: Mapping[tuple[float, ...], Sequence[float]], x: Sequence
 
 
 def at_wall(points: Mapping[tuple[float, ...], Sequence[float]]) -> set[tuple[float, ...]]:
-    """The points flown without failure that lie nearest a failed point (each failed point's nearest, ties
-    included): the first safe flights off a wall. Their flights cannot tell a rare fly-away (a few in a hundred
-    flights: on Crazyflow 2 % of flights at kd 0.3 diverge, 88 % at 0.2), so an answer is not given where they
-    are the nearest flown point while a point flown farther from the walls is not told apart from the best."""
-    safe = [k for k, c in points.items() if c and all(map(math.isfinite, c))]
-    failed = [k for k, c in points.items() if c and not all(map(math.isfinite, c))]
+    """The points flown without failure next to a failed point: no other flown point lies in the ball whose
+    diameter joins them, its sphere included (Gabriel neighbours: nothing flown between them). Their flights cannot tell a rare
+    fly-away (a few in a hundred flights: on Crazyflow 2 % of flights at kd 0.3 diverge, 88 % at 0.2), so an
+    answer is not given where they are the nearest flown point while a point flown off the walls is not told
+    apart from the best."""
+    flown = [k for k, c in points.items() if c]
+    safe = [k for k in flown if all(map(math.isfinite, points[k]))]
+    failed = [k for k in flown if not all(map(math.isfinite, points[k]))]
     out = set()
-    for f in failed:
-        if safe:
-            gap = min(math.dist(f, k) for k in safe)
-            out |= {k for k in safe if math.dist(f, k) <= gap * (1 + 1e-9)}
+    for s in safe:
+        for f in failed:
+            mid, r = [0.5 * (a + b) for a, b in zip(s, f)], 0.5 * math.dist(s, f)
+            if not any(math.dist(q, mid) <= r * (1 + 1e-9) for q in flown  # (the same gain vector flown again
+                       if math.dist(q, s) > 1e-9 and q != f):  # with rounding is no point between)
+                out.add(s)
+                break
     return out
 
 
