@@ -91,8 +91,8 @@ def beside_wall(points: Mapping[tuple[float, ...], Sequence[float]], x: Sequence
 
 def at_wall(points: Mapping[tuple[float, ...], Sequence[float]]) -> set[tuple[float, ...]]:
     """The points flown without failure next to a failed point: no other flown point lies in the ball whose
-    diameter joins them, its sphere included (Gabriel neighbours: nothing flown between them). Their flights cannot tell a rare
-    fly-away (a few in a hundred flights: on Crazyflow 2 % of flights at kd 0.3 diverge, 88 % at 0.2), so an
+    diameter joins them, its sphere included (Gabriel neighbours: nothing flown between them). Their flights
+    cannot tell a rare fly-away (a few in a hundred flights: on Crazyflow 2 % of flights at kd 0.3 diverge, 88 % at 0.2), so an
     answer is not given where they are the nearest flown point while a point flown off the walls is not told
     apart from the best."""
     flown = [k for k, c in points.items() if c]
@@ -102,8 +102,8 @@ def at_wall(points: Mapping[tuple[float, ...], Sequence[float]]) -> set[tuple[fl
     for s in safe:
         for f in failed:
             mid, r = [0.5 * (a + b) for a, b in zip(s, f)], 0.5 * math.dist(s, f)
-            if not any(math.dist(q, mid) <= r * (1 + 1e-9) for q in flown  # (the same gain vector flown again
-                       if math.dist(q, s) > 1e-9 and q != f):  # with rounding is no point between)
+            if not any(math.dist(q, mid) <= r * (1 + 1e-9) for q in flown  # (either gain vector flown again
+                       if min(math.dist(q, s), math.dist(q, f)) > 1e-9):  # with rounding is no point between)
                 out.add(s)
                 break
     return out
