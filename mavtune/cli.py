@@ -19,9 +19,8 @@ from mavtune import interrupts
 from mavtune.errors import Interrupted, MavtuneError
 from mavtune.runfolder import usable_path
 from mavtune.options import (
-    AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MaxRoundsOpt, MethodOpt, ReplicatesOpt, ReuseOpt,
-    SchedulerOpt, StrategyOpt,
-    VehiclesOpt, config_from_flags,
+    AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MaxRoundsOpt, MethodOpt, PickOpt, ReplicatesOpt,
+    ReuseOpt, SchedulerOpt, StrategyOpt, VehiclesOpt, config_from_flags,
 )
 
 # name: (module, function, the first line of its docstring — tests/test_cli_text.py keeps them equal)
@@ -150,6 +149,7 @@ def tune_command(
     gain_set: Optional[str] = typer.Option(None, "--gain-set", help="mavlink: the gains to tune, altitude (PSC_POSZ_P/"
                                            "PSC_VELZ_P, MPC_Z_P/MPC_Z_VEL_P_ACC) | altitude-inner (and PSC_ACCZ_P/_I, "
                                            "MPC_Z_VEL_D_ACC/_I_ACC)."),
+    pick: Optional[str] = PickOpt,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No per-round lines or progress bar."),
 ) -> None:
     """Tune the gains with the default settings (those of mavtune.tune()) unless told otherwise."""
@@ -164,7 +164,8 @@ def tune_command(
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s, base,
                             flight__max_rounds=max_rounds, tuning__seed=seed, sim__payload_kg=payload,
                             fleet__kind=fleet, swarm__listen=listen, mavlink__urls=mavlink or None,
-                            mavlink__keep_tuned=keep_tuned, tuning__adaptive=adaptive, mavlink__gain_set=gain_set)
+                            mavlink__keep_tuned=keep_tuned, tuning__adaptive=adaptive, mavlink__gain_set=gain_set,
+                            tuning__pick=pick)
     given = {"--payload": payload, "--listen": listen, "--mavlink": mavlink, "--keep-tuned": keep_tuned,
              "--gain-set": gain_set}
     for flag, value in given.items():

@@ -20,6 +20,8 @@ ReuseOpt = typer.Option(None, "--reuse/--no-reuse", help="Do not fly a point twi
 BatteryOpt = typer.Option(None, "--battery-s", help="Usable flight time of one battery pack, s.")
 AdaptiveOpt = typer.Option(None, "--adaptive/--no-adaptive", help="Fly close comparisons again (up to a cap) until "
                            "the kept point is the best with probability [tuning] confidence.")
+PickOpt = typer.Option(None, "--pick", help="The answer among the flown points: best | near-stock (the flown gains "
+                       "nearest stock whose cost is not told apart from the best) [near-stock on mavlink, else best].")
 MaxRoundsOpt = typer.Option(None, "--max-rounds", help="Refuse a plan of more rounds than this [2000]; raise it "
                             "to fly a longer plan anyway.")
 SchedulerOpt = typer.Option(None, "--scheduler", help="Run the campaign's chunks on the Dask cluster whose "

@@ -126,6 +126,8 @@ def test_stock_parameters_normalise_by_the_vehicle_map():
 def test_the_simulator_answers_nearest_stock_only_when_asked(tmp_path):
     import json
 
+    from tests.test_cli_text import cli
+
     from mavtune.config import load_config
     from mavtune.run import run
     from mavtune.sim.gains import MRS_DEFAULT_NORMALISED
@@ -133,7 +135,9 @@ def test_the_simulator_answers_nearest_stock_only_when_asked(tmp_path):
     flags = {"tuning.bootstraps": 1, "tuning.epsilon": 0.25}
     run(load_config(None, flags), tmp_path / "best", quiet=True, report=False)
     assert "answer" not in json.loads((tmp_path / "best" / "result.json").read_text())  # the default is unchanged
-    run(load_config(None, flags | {"tuning.pick": "near-stock"}), tmp_path / "near", quiet=True)
+    code, _, err = cli("tune", "--bootstraps", "1", "--epsilon", "0.25", "--pick", "near-stock", "-q", "-o",
+                       str(tmp_path / "near"))  # the flag sets [tuning] pick
+    assert code == 0, err
     summary = json.loads((tmp_path / "near" / "result.json").read_text())
     answer = summary["answer"]
     assert answer["stock"] == [MRS_DEFAULT_NORMALISED] and summary["gains"] == answer["gains"]
@@ -142,6 +146,8 @@ def test_the_simulator_answers_nearest_stock_only_when_asked(tmp_path):
         assert answer["gains"] in [p["gains"] for p in summary["points"]]
     report = (tmp_path / "near" / "report.md").read_text()
     assert "## Answer" in report and "answered" in report.split("## Points flown")[1]  # marked among the points
+    code, _, err = cli("tune", "--pick", "nearest", "-q", "-o", str(tmp_path / "bad"))
+    assert code == 2 and "tuning.pick" in err and "'nearest'" in err and not (tmp_path / "bad").exists()
 
 
 def test_an_answer_moved_off_the_limit_says_where_the_optimum_lay(tmp_path):
