@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model  # noqa: E402
-from interval_coverage import DEFAULT, SLOW  # noqa: E402
+from interval_coverage import DEFAULT, plants_of, run_numbers  # noqa: E402
 from quality import CACHE, RESULTS, _git_commit, _init_worker  # noqa: E402
 from zoo.plants import PLANTS  # noqa: E402
 from zoo.truth import Truth  # noqa: E402
@@ -141,15 +141,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
-    plants = [p.strip() for p in args.plants.split(",") if p.strip()] or list(PLANTS)
-    unknown = [p for p in plants if p not in PLANTS]
-    if unknown:
-        raise SystemExit(f"--plants: unknown plant {unknown[0]!r}; known: {', '.join(PLANTS)}")
+    plants = plants_of(args.plants)
     start, load0, wall = datetime.now(timezone.utc), os.getloadavg()[0], time.time()
     table = {}
     with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn"), initializer=_init_worker) as ex:
         for p in plants:
-            runs = list(range(int(args.half == "report"), 2 * (args.slow_runs if p in SLOW else args.runs), 2))
+            runs = run_numbers(p, args.half, args.runs, args.slow_runs)
             rows = list(ex.map(one_run, [p] * len(runs), runs))
             table[p] = {"runs": len(rows), **score(rows, Truth(p, CACHE).optimum)}
             print(f"{p}: {table[p]['all rules']}", file=sys.stderr, flush=True)
