@@ -82,6 +82,20 @@ def score(plant_name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
             "moving_cautions": sum(any("still moved" in c for c in r["cautions"]) for r in rows)}
 
 
+def plants_of(text: str) -> list[str]:
+    """The plants a comma-separated --plants names (the whole zoo when empty); an unknown one is a one-line error."""
+    plants = [p.strip() for p in text.split(",") if p.strip()] or list(PLANTS)
+    unknown = [p for p in plants if p not in PLANTS]
+    if unknown:
+        raise SystemExit(f"--plants: unknown plant {unknown[0]!r}; known: {', '.join(PLANTS)}")
+    return plants
+
+
+def run_numbers(plant: str, half: str, runs: int, slow_runs: int) -> list[int]:
+    """The zoo's runs of a half (select: even, report: odd), fewer on a slow plant."""
+    return list(range(int(half == "report"), 2 * (slow_runs if plant in SLOW else runs), 2))
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--half", choices=("select", "report"), default="select",
@@ -94,15 +108,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--save-runs", type=Path, default=None, help="also write every run's answer and intervals here")
     args = ap.parse_args(argv)
-    plants = [p.strip() for p in args.plants.split(",") if p.strip()] or list(PLANTS)
-    unknown = [p for p in plants if p not in PLANTS]
-    if unknown:
-        raise SystemExit(f"--plants: unknown plant {unknown[0]!r}; known: {', '.join(PLANTS)}")
+    plants = plants_of(args.plants)
     start, load0, wall = datetime.now(timezone.utc), os.getloadavg()[0], time.time()
     table, all_rows = {}, {}
     with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn"), initializer=_init_worker) as ex:
         for p in plants:
-            runs = list(range(int(args.half == "report"), 2 * (args.slow_runs if p in SLOW else args.runs), 2))
+            runs = run_numbers(p, args.half, args.runs, args.slow_runs)
             all_rows[p] = list(ex.map(one_run, [p] * len(runs), runs))
             table[p] = score(p, all_rows[p])
             t = table[p]

@@ -26,6 +26,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
 
+from mavtune.flown import by_gains, within_noise
+
 ALPHA = 0.1587
 """Level of the one-sided test that would call a point worse than the best: Φ(−1), so that with a well-known noise
 a point within one standard error of the difference counts as not told apart (the one-standard-error rule)."""
@@ -83,18 +85,11 @@ class Pick:
 def flown(flights: Iterable[tuple[Mapping[str, float], float]], names: Sequence[str], cv: float) -> list[FlownPoint]:
     """The points of (gains, cost) flights (a failed flight's cost infinite, lost ones left out), in the order first
     flown, each with its mean cost and its standard error cv · mean / √n."""
-    costs: dict[tuple[float, ...], list[float]] = {}
-    exact: dict[tuple[float, ...], dict[str, float]] = {}  # the gains as first flown, not rounded
-    for gains, cost in flights:
-        if all(n in gains for n in names):
-            key = tuple(round(float(gains[n]), 12) for n in names)
-            exact.setdefault(key, {n: float(gains[n]) for n in names})
-            costs.setdefault(key, []).append(float(cost))
     out = []
-    for key, cs in costs.items():
-        mean = math.fsum(cs) / len(cs) if all(map(math.isfinite, cs)) else math.inf
-        se = cv * mean / math.sqrt(len(cs)) if math.isfinite(mean) else math.nan
-        out.append(FlownPoint(exact[key], tuple(cs), mean, se))
+    for gains, costs in by_gains(((g, float(c)) for g, c in flights), names).values():
+        mean = math.fsum(costs) / len(costs) if all(map(math.isfinite, costs)) else math.inf
+        se = cv * mean / math.sqrt(len(costs)) if math.isfinite(mean) else math.nan
+        out.append(FlownPoint({n: float(gains[n]) for n in names}, tuple(costs), mean, se))
     return out
 
 
@@ -153,8 +148,8 @@ def pick(plain: Mapping[str, float], points: Sequence[FlownPoint], stock: Sequen
     def from_stock(g: Mapping[str, float]) -> float:
         return math.fsum(distance(g, s) for s in stock) / len(stock)
 
-    within = [p for p in ok if p.mean - best.mean <= k * math.hypot(p.se, best.se) * (1 + 1e-12)
-              and not beside(p) and not beyond(p)]
+    told = within_noise({i: (p.mean, p.se) for i, p in enumerate(ok)}, k)
+    within = [p for i, p in enumerate(ok) if i in told and not beside(p) and not beyond(p)]
     common = dict(best=best.to_dict(), within=len(within))
     if not within:
         return keep("every flown point not told apart from the best lies beside or beyond a failed flight: the "

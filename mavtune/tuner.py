@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains
+from mavtune.flown import by_gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
 from mavtune.search.interval import DRAWS, Interval, edge_reach, held_elsewhere, joint, plausible_region, resample, resolution, \
@@ -469,12 +470,8 @@ class Tuner:
         """Every gain vector flown in the run (in the order of the space) with its flights' costs as the searches
         count them (`Strategy.measured`: a failed flight's as infinite, a lost one's left out)."""
         names = list(self.settings.space)
-        points: dict[tuple[float, ...], list[float]] = {}
-        for r in self.rounds:
-            flights = [f for f in r.flights if all(n in f.gains for n in names)]
-            for gains, cost in zip(*Strategy.measured([f.gains for f in flights], flights)):
-                points.setdefault(tuple(float(gains[n]) for n in names), []).append(cost)
-        return points
+        told = (pair for r in self.rounds for pair in zip(*Strategy.measured([f.gains for f in r.flights], r.flights)))
+        return {key: costs for key, (_, costs) in by_gains(told, names, digits=None).items()}
 
     def run(self) -> TuningResult:
         s = self.settings
@@ -549,7 +546,7 @@ class Tuner:
             for a, cost in zip(*Strategy.measured(batch + spare, flights)):  # repeats of a point: the run's noise
                 self.pool.add((SURFACE, tuple(a[n] for n in names)), cost)
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
-        best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool))
+        best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool), self.pool)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}

@@ -3,7 +3,8 @@ back through others (no cycle), counting every import: at module level, inside f
 given to importlib as strings (the lazy exports of `mavtune` and `mavtune.sim`, the CLI's command table).
 
     base         errors, edges, interrupts, campaign (the chunk runner: in-process or Dask, runs what it is given),
-                 near_stock (the answer nearest the stock gains within noise)
+                 near_stock (the answer nearest the stock gains within noise), flown (flights grouped by gain vector,
+                 and the points not told apart from the best)
     engine       fleet (the Fleet protocol), journal, search/, strategy, tuner, plan: no simulator, no vehicle
     sim          the simulated quadrotor and its fleet (SimFleet implements the engine's Fleet), cost surfaces
     config       the validated configuration (it names the simulator's Scenario) and the flags that make one
@@ -27,7 +28,8 @@ import mavtune
 PACKAGE = Path(mavtune.__file__).parent
 
 LAYERS = (  # bottom first; a module's layer is that of its longest listed prefix
-    ("base", ("mavtune.errors", "mavtune.edges", "mavtune.interrupts", "mavtune.campaign", "mavtune.near_stock")),
+    ("base", ("mavtune.errors", "mavtune.edges", "mavtune.interrupts", "mavtune.campaign", "mavtune.near_stock",
+              "mavtune.flown")),
     ("engine", ("mavtune.fleet", "mavtune.journal", "mavtune.search", "mavtune.strategy", "mavtune.tuner",
                 "mavtune.plan")),
     ("sim", ("mavtune.sim",)),

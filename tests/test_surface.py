@@ -191,3 +191,26 @@ def test_the_budget_preset_plans_its_flights_exactly(gains, flights):
     settings_ = Tuning(**{k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}).settings(space=space)
     plan = make_plan(settings_)
     assert plan.flights == plan.rounds_max * 2 == flights and not plan.adaptive
+
+
+def test_no_answer_beside_a_wall_while_a_point_off_it_is_as_good():
+    """As on Crazyflow (kp at its bound, kd flat above a wall at 0.2 that diverges 88 % of flights, 2 % at 0.3):
+    the first safe point off a failed one is not answered while the flights cannot tell a point farther from the
+    wall apart from the box's best; where they can (the wall point much the best), it may be, and a caution says
+    so (`Tuner._surface`)."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import at_wall
+
+    pool = NoisePool.prior(0.03, 50)  # 3 % a flight: 2 % over the kd line is within the noise of 4 flights
+    pts = {(x, y): [0.2 * (1.0 + 0.5 * (1.0 - x) ** 2) * (1 + 0.1 * (y - 0.5))] * 4
+           for x in (0.7, 0.85, 1.0) for y in (0.3, 0.4, 0.5)}  # the fit leans to the wall: its minimum (1, 0.3)
+    pts[(1.0, 0.2)] = [math.inf, math.inf]
+    pts[(0.85, 0.2)] = [math.inf]
+    assert at_wall(pts) == {(1.0, 0.3), (0.85, 0.3)}
+    got, _ = answer(pts, [(0.7, 1.0), (0.2, 0.5)], pool=pool)
+    nearest = min(pts, key=lambda p: math.dist(p, got))
+    assert nearest not in at_wall(pts) and all(map(math.isfinite, pts[nearest]))
+    assert got[0] > 0.9  # still the best kp
+    pts[(1.0, 0.3)] = [0.1] * 8  # told apart: much the best, and flown often — the flights say so
+    got, _ = answer(pts, [(0.7, 1.0), (0.2, 0.5)], pool=pool)
+    assert min(pts, key=lambda p: math.dist(p, got)) == (1.0, 0.3)

@@ -12,6 +12,7 @@ import math
 from typing import Any, Sequence
 
 from mavtune.fleet import Status
+from mavtune.flown import by_gains, gain_key
 from mavtune.report import markdown as md
 from mavtune.report import units as U
 from mavtune.report.searches import as_float
@@ -20,33 +21,29 @@ from mavtune.report.searches import as_float
 def flown_points(rounds: Sequence) -> list[dict[str, Any]]:
     """One entry per gain vector flown, in the order first flown: its flights measured (ok or failed), their mean
     cost, mean motor activity (1/s; None where no flight reported one) and largest peak error (m)."""
-    points: dict[tuple, dict[str, Any]] = {}
-    for rnd in rounds:
-        for f in rnd.flights:
-            if f.status is Status.LOST:
-                continue
-            key = _key(f.gains or {})
-            p = points.setdefault(key, {"gains": dict(f.gains), "flights": 0, "costs": [], "activity": [],
-                                        "peak": []})
-            p["flights"] += 1
-            p["costs"].append(as_float(f.cost))
-            m = (f.info or {}).get("measures") or {}
-            for name, into in (("activity_per_s", "activity"), ("peak_error_m", "peak")):
-                if m.get(name) is not None and math.isfinite(as_float(m[name])):
-                    p[into].append(as_float(m[name]))
+    points = by_gains((_numbers(f.gains or {}), f) for rnd in rounds for f in rnd.flights
+                      if f.status is not Status.LOST)
     out = []
-    for p in points.values():
-        costs = [c for c in p["costs"] if not math.isnan(c)]
-        out.append({"gains": p["gains"], "flights": p["flights"],
+    for flights in (fs for _, fs in points.values()):
+        costs = [c for c in (as_float(f.cost) for f in flights) if not math.isnan(c)]
+        measures = [(f.info or {}).get("measures") or {} for f in flights]
+        activity, peak = ([as_float(m[name]) for m in measures if m.get(name) is not None
+                           and math.isfinite(as_float(m[name]))] for name in ("activity_per_s", "peak_error_m"))
+        out.append({"gains": dict(flights[0].gains), "flights": len(flights),
                     "mean_cost": _json(math.fsum(costs) / len(costs)) if costs else None,
-                    "activity_per_s": math.fsum(p["activity"]) / len(p["activity"]) if p["activity"] else None,
-                    "peak_error_m": max(p["peak"]) if p["peak"] else None})
+                    "activity_per_s": math.fsum(activity) / len(activity) if activity else None,
+                    "peak_error_m": max(peak) if peak else None})
     return out
+
+
+def _numbers(gains: dict[str, Any]) -> dict[str, float]:
+    """A gain vector's values as numbers (NaN where one is not)."""
+    return {k: as_float(v) for k, v in gains.items()}
 
 
 def _key(gains: dict[str, Any]) -> tuple:
     """A gain vector as a point's key (as `flown_points` groups flights)."""
-    return tuple(sorted((k, round(as_float(v), 12)) for k, v in gains.items()))
+    return gain_key(_numbers(gains))
 
 
 def _json(x: float) -> float | str:

@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass, replace
 from typing import Callable
 
+from mavtune.flown import within_noise
 from mavtune.search.base import LineSearch
 from mavtune.search.evidence import NoisePool, point_stats
 
@@ -104,14 +105,8 @@ def plausible_region(points: dict[tuple[float, ...], list[float]], pool: NoisePo
     finite = {x: s for x, s in stats.items() if math.isfinite(s.mean)}
     if len(finite) < 2 or any(not math.isfinite(s.se) for s in finite.values()):
         return None
-    best = min(finite.values(), key=lambda s: s.mean)
-    rivals, z = 1, NormalDist().inv_cdf(0.5 + 0.5 * level)
-    while True:  # the rivals are the points the test keeps beside the best; more of them, a stricter test
-        near = {x for x, s in finite.items() if s.mean - best.mean <= z * math.hypot(s.se, best.se)}
-        if len(near) - 1 <= rivals:
-            break
-        rivals = len(near) - 1
-        z = max(z, NormalDist().inv_cdf(1.0 - (1.0 - level) / rivals))
+    near = within_noise({x: (s.mean, s.se) for x, s in finite.items()}, NormalDist().inv_cdf(0.5 + 0.5 * level),
+                        level)  # Bonferroni over the rivals kept beside the best: more of them, a stricter test
     xs = list(stats)
     ok = np.array([x in near for x in xs])
     lo, hi = np.array([b[0] for b in bounds], float), np.array([b[1] for b in bounds], float)

@@ -90,3 +90,37 @@ def test_an_agent_restarted_after_a_crash_restores_the_gains_it_first_found(tmp_
         second.close()
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
     assert not (tmp_path / "original_params.json").exists()  # restored: nothing left to remember
+
+
+class _Hiccup:
+    """A vehicle whose position was heard late: unready for the first `polls` readiness checks, then ready again."""
+
+    def __init__(self, name: str, polls: int):
+        self.name, self.polls, self.released = name, polls, None
+
+    def ready_problem(self) -> str | None:
+        self.polls -= 1
+        return "no LOCAL_POSITION_NED for 2.6 s" if self.polls >= 0 else None
+
+
+def _fleet_of(vehicles, ready_wait_s: float) -> MavlinkFleet:
+    """A MavlinkFleet around stand-in vehicles (no link): only its readiness bookkeeping runs."""
+    fleet = MavlinkFleet.__new__(MavlinkFleet)
+    fleet.vehicles, fleet.events, fleet._problems, fleet._unready_since = list(vehicles), [], {}, {}
+    fleet.config = fast_config(safety=SafetyConfig(ready_wait_s=ready_wait_s))
+    return fleet
+
+
+def test_a_vehicle_heard_late_at_a_rounds_start_is_waited_for_not_left_out():
+    """A ground station starved of CPU reads a vehicle's position late: that vehicle is unready for a moment as a
+    round starts. The round waits for it (up to ready_wait_s) instead of flying without it."""
+    fleet = _fleet_of([_Hiccup("a", 0), _Hiccup("b", 5)], ready_wait_s=60.0)
+    assert fleet.size == 2
+    assert [e["event"] for e in fleet.events] == ["not_ready", "ready"]
+
+
+def test_a_vehicle_unready_for_longer_than_ready_wait_s_is_not_waited_for_again():
+    """One that stays unready (its link is down) is waited for once; then rounds fly without it."""
+    fleet = _fleet_of([_Hiccup("a", 0), _Hiccup("b", 10**9)], ready_wait_s=0.0)
+    assert fleet.size == 1 and fleet.size == 1
+    assert [e["event"] for e in fleet.events] == ["not_ready"]

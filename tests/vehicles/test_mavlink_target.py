@@ -4,6 +4,8 @@ as one system id are refused. Against `mavtune mavsim` behind a relay on 127.0.0
 
 from __future__ import annotations
 
+import random
+import threading
 import time
 
 import pytest
@@ -89,25 +91,35 @@ def test_a_url_suffix_and_a_config_that_disagree_are_refused():
     assert split_target("tcp:127.0.0.1:5760?target_system=2") == ("tcp:127.0.0.1:5760", 2)
 
 
-@given(start=st.integers(0, 255), gaps=st.lists(st.integers(1, 100), min_size=1, max_size=600))
-def test_one_sender_losing_messages_is_never_taken_for_two(start, gaps):
-    watch, seq = SeqWatch(), start
-    watch.add(seq, 0.0)
-    for i, gap in enumerate(gaps):
-        seq = (seq + gap) % 256
-        watch.add(seq, i * 0.01)
-    assert not watch.interleaved(len(gaps) * 0.01)
+@given(start=st.integers(0, 255), runs=st.lists(st.tuples(st.integers(1, 2000), st.integers(1, 5000)), min_size=1,
+                                                max_size=30))
+def test_one_sender_losing_bursts_is_never_taken_for_two(start, runs):
+    """Bursts of any size lost (a radio fade, a receive buffer overflowing while the ground station waited for a
+    CPU) move the count on and it goes on from there: with bursts no closer than LEFT_S, never a second sender.
+    `runs`: (lost in a row, messages received after them), at PX4's 400 messages a second."""
+    watch, seq, t = SeqWatch(), start, 0.0
+    watch.add(seq, t)
+    for lost, received in runs:
+        t += SeqWatch.LEFT_S
+        for i in range(received):
+            seq = (seq + (1 + lost if i == 0 else 1)) % 256
+            watch.add(seq, t + i / 400)
+        t += received / 400
+    assert not watch.interleaved(t)
 
 
-def test_a_burst_of_lost_messages_only_pauses_a_vehicle():
-    """129+ messages lost in a row step the count back once; even LIMIT such bursts clear after WINDOW_S."""
-    watch, seq = SeqWatch(), 0
-    for burst in range(SeqWatch.LIMIT):
-        watch.add(seq, burst * 1.0)
-        seq = (seq + 200) % 256
-        watch.add(seq, burst * 1.0 + 0.5)
-    assert watch.interleaved(SeqWatch.LIMIT)
-    assert not watch.interleaved(SeqWatch.LIMIT + SeqWatch.WINDOW_S)
+def test_a_starved_ground_station_losing_a_burst_four_times_a_second_keeps_its_vehicle():
+    """What the kernel did to PX4 SITL's 400 messages a second at load 13 on 2 cores, far worse: a burst of 1 to
+    2000 lost every 0.25 s (random sizes, fixed seeds), 30 s each; never flagged. A chance landing of a burst on a
+    count left behind is a return, but LIMIT of them within WINDOW_S does not happen."""
+    rng = random.Random(21)
+    for _ in range(8):
+        watch, seq, flagged = SeqWatch(), rng.randrange(256), 0
+        for k in range(12_000):
+            seq = (seq + (1 + rng.randint(1, 2000) if k % 100 == 0 else 1)) % 256
+            watch.add(seq, k / 400)
+            flagged += k % 400 == 0 and watch.interleaved(k / 400)
+        assert flagged == 0
 
 
 @given(a=st.integers(0, 255), b=st.integers(0, 255), every=st.integers(1, 20))
@@ -183,5 +195,56 @@ def test_messages_of_system_0_are_not_taken_for_two_senders(caplog):
         assert (0, 0) not in link._seq
         assert link._seq[(1, 0)].interleaved(time.monotonic())
         assert "answer as 1/0" in caplog.text and "answer as 0/0" not in caplog.text
+    finally:
+        link.close()
+
+
+def _wait_until(check, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not check():
+        assert time.monotonic() < deadline, "condition not reached"
+        time.sleep(0.02)
+
+
+def test_time_the_reader_did_not_run_is_not_counted_as_the_vehicle_silent():
+    """A ground station frozen (or starved of a CPU) hears nothing meanwhile: that time is the station's silence,
+    not the vehicle's. Its reader held for over a second, the time since a moment before is counted without the
+    pause, while the pause lasts (another thread may check first) and after it."""
+    from mavtune.vehicles.mavlink.link import DEAF_S, MavlinkLink
+
+    link = MavlinkLink(f"udpin:127.0.0.1:{free_udp_port()}")
+    gate, receive = threading.Event(), link._conn.recv_match
+    try:
+        assert link.heartbeat_age_s() == float("inf")
+        heard = time.monotonic()
+        link._conn.recv_match = lambda **kw: gate.wait() and None  # the reader's next turn blocks
+        _wait_until(lambda: time.monotonic() - link._tick > 1.0)
+        assert link.listened_since(heard) <= time.monotonic() - heard - 1.0
+        paused_from = link._tick
+        link._conn.recv_match = receive
+        gate.set()
+        _wait_until(lambda: link._tick > paused_from + 1.0)  # it runs again
+        assert link.listened_since(heard) <= time.monotonic() - heard - 1.0
+        assert link.listened_since(time.monotonic()) <= DEAF_S
+    finally:
+        gate.set()
+        link.close()
+
+
+def test_a_heartbeat_saying_critical_marks_the_autopilots_failsafe():
+    """PX4 in its offboard-loss failsafe (RTL) says MAV_STATE_CRITICAL in its HEARTBEAT, a pilot's mode switch does
+    not: the link keeps which, so a mode change is put down to the failsafe or to the pilot."""
+    from mavtune.vehicles.mavlink.link import MavlinkLink
+
+    link = MavlinkLink(f"udpin:127.0.0.1:{free_udp_port()}")
+    try:
+        link.target_system, link.chosen = 1, True
+        px4, ground = mavlink.MAVLink(None, srcSystem=1, srcComponent=1), mavlink.MAVLink(None)
+        for status, failsafe in ((mavlink.MAV_STATE_ACTIVE, False), (mavlink.MAV_STATE_CRITICAL, True),
+                                 (mavlink.MAV_STATE_EMERGENCY, True), (mavlink.MAV_STATE_ACTIVE, False)):
+            sent = px4.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
+                                        mavlink.MAV_MODE_FLAG_SAFETY_ARMED, 0, status)
+            link._handle(ground.decode(bytearray(sent.pack(px4))))
+            assert link.snapshot().failsafe is failsafe
     finally:
         link.close()

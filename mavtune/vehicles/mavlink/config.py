@@ -48,13 +48,13 @@ class SafetyConfig(BaseModel):
 
     max_altitude_error_m: float = Field(1.5, gt=0)  # abort when |z − z_ref| exceeds this
     max_horizontal_error_m: float = Field(2.0, gt=0)  # loop "horizontal": abort when |error along axis| exceeds this
-    heartbeat_timeout_s: float = Field(3.0, gt=0)  # wall time without a HEARTBEAT that counts as link loss
+    heartbeat_timeout_s: float = Field(3.0, gt=0)  # s listened with no HEARTBEAT: link loss (own pauses not counted)
     min_altitude_m: float = Field(2.0, ge=0)  # airborne means at least this high (LOCAL_POSITION_NED, up)
     require_armed: bool = True  # refuse to start unless every vehicle is armed
     allowed_modes: list[str] | None = None  # None: the autopilot's defaults (PX4 POSCTL/LOITER/OFFBOARD, …)
     rejoin_after_link_loss: bool = True  # a vehicle whose link came back may fly later rounds
-    position_timeout_s: float = Field(1.0, gt=0)  # wall time without a position sample that aborts a primitive
-    ready_wait_s: float = Field(5.0, ge=0)  # when no vehicle is ready for a round, wait this long for one
+    position_timeout_s: float = Field(1.0, gt=0)  # time listened without a position sample that aborts a primitive (s)
+    ready_wait_s: float = Field(5.0, ge=0)  # wait this long for a vehicle unready at a round's start
 
 
 class MavlinkConfig(BaseModel):

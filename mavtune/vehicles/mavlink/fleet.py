@@ -102,6 +102,7 @@ class MavlinkFleet:
         self.tuned: Gains | None = None  # set by the caller to keep tuned gains at the end (config.keep_tuned)
         self._closed = False
         self._problems: dict[str, str | None] = {}
+        self._unready_since: dict[str, float] = {}  # vehicle name → when it last became unready (or ready)
         self.restored: bool | None = None  # set by finish(): every vehicle confirmed its final gains
         self.kept_tuned = False  # set by finish(): the tuned gains, not the originals, were left on the vehicles
         saved = read_originals(self.out_dir)
@@ -159,19 +160,28 @@ class MavlinkFleet:
     def size(self) -> int:
         """Vehicles fit to fly the next round (a vehicle left to its pilot, or whose link is down, is not).
 
-        When none is ready, wait up to safety.ready_wait_s for one (a link hiccup should not end the run).
+        When none is ready, wait up to safety.ready_wait_s for one (a link hiccup should not end the run); when
+        one became unready less than ready_wait_s ago, wait as long for it too: a ground station that waited for a
+        CPU hears a vehicle's position late, and that vehicle should fly the round, not sit it out.
         """
-        return len(self._poll(self._ready, lambda ready: bool(ready) or all(
-            v.ready_problem() == v.released for v in self.vehicles)))
+        def settled(ready: list[MavlinkVehicle]) -> bool:
+            now = time.monotonic()
+            out = [v for v in self.vehicles if v not in ready and v.released is None]
+            return (bool(ready) or not out) and all(now - self._unready_since[v.name] >= self.config.safety.ready_wait_s
+                                                    for v in out)
+        return len(self._poll(self._ready, settled))
 
     def _ready(self) -> list[MavlinkVehicle]:
         ready = []
         for v in self.vehicles:
             problem = v.ready_problem()
-            if problem != self._problems.get(v.name):
+            before = self._problems.get(v.name)
+            if problem != before:
                 self._problems[v.name] = problem
                 log.warning("%s: %s", v.name, f"not ready: {problem}" if problem else "ready again")
                 self._event("not_ready" if problem else "ready", vehicle=v.name, reason=problem)
+                if (problem is None) != (before is None):
+                    self._unready_since[v.name] = time.monotonic()
             if problem is None:
                 ready.append(v)
         return ready

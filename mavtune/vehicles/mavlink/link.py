@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
+import socket
 import statistics
 import threading
 import time
@@ -99,7 +100,33 @@ def link_target(url: str, target_system: int | None) -> int | None:
 MOTOR_MESSAGES = ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS")
 """The autopilot's motor outputs: ArduPilot sends SERVO_OUTPUT_RAW (PWM µs), PX4 both (ACTUATOR_OUTPUT_STATUS,
 the mixer's outputs, is taken from PX4)."""
+RECEIVE_BUFFER_B = 4 * 2**20
+"""The UDP receive buffer asked for (SO_RCVBUF). PX4's onboard link sends about 400 datagrams a second, and Linux
+counts each at about 0.8 KiB, so its default 208 KiB holds 256 of them: half a second. A ground station whose process
+waits longer for a CPU (up to 2 s at load 13 on 2 cores, measured) lost the rest, positions and HEARTBEATs among them.
+4 MiB holds about 25 s; Linux grants at most net.core.rmem_max (often 208 KiB: raise it with sysctl)."""
+DEAF_S = 0.25
+"""A pause of the reader thread longer than this (it loops at least every 50 ms) is time mavtune was not listening:
+its process was frozen or waited for a CPU. Such time is not counted in how long the vehicle has been silent (a
+2 s stall of the whole machine, as the loaded test machine had, otherwise reads as a lost HEARTBEAT: PX4 sends one
+a second, 3 s is the timeout)."""
 UINT32_US_S = 2**32 / 1e6  # SERVO_OUTPUT_RAW's time_usec is 32 bits: it wraps every 71.6 min of vehicle time
+
+
+def _enlarge_receive_buffer(conn) -> int | None:
+    """Ask for RECEIVE_BUFFER_B on a UDP connection's socket; the size granted (bytes), None for other links."""
+    sock = getattr(conn, "port", None)
+    if not isinstance(sock, socket.socket) or sock.type != socket.SOCK_DGRAM:
+        return None
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_B)
+    except OSError as exc:
+        log.debug("SO_RCVBUF %d refused: %s", RECEIVE_BUFFER_B, exc)
+    granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    if granted < RECEIVE_BUFFER_B:  # Linux reports twice what it grants (its bookkeeping): less means capped
+        log.info("UDP receive buffer %d KiB (net.core.rmem_max caps it): a ground station that waits for a CPU "
+                 "loses messages; sysctl -w net.core.rmem_max=%d lets it hold more", granted // 1024, RECEIVE_BUFFER_B)
+    return granted
 
 
 @dataclass
@@ -125,13 +152,22 @@ class PositionSample:
 
 
 class SeqWatch:
-    """The MAVLink packet sequence numbers of one (system, component). One sender counts up by one per message
-    (skipping lost ones; a reboot starts again once); two senders answering as one interleave their counters, so
-    about every message of the second steps the count back by a random amount."""
+    """The MAVLink packet sequence numbers of one (system, component). One sender counts up by one per message; a
+    burst of its messages lost (a radio fade, or a receive buffer that overflowed while the ground station waited
+    for a CPU) moves the count on once, by any amount, and it goes on from there. Two senders answering as one
+    interleave their counters: their messages keep *returning* to a count left a moment before, the other's, which
+    a lost burst never does (it moves on and stays). So the watch counts returns, not steps back: a step back by
+    129+ is also what a burst of 129+ lost messages looks like (at load 13 on 2 cores the kernel dropped thousands
+    of PX4 SITL's messages in bursts within two minutes, and counting steps back held a vehicle out of a round)."""
 
-    BACK_MIN = 8  # a step back by fewer is a reordered packet, not another sender
+    BACK_MIN = 8  # a step back by fewer is a reordered packet (or two counters in step), not a jump
+    RETURN_MAX = 2  # a message continuing a count left earlier, one of that sender's messages lost at most
+    LEFT_S = 3.0  # how long a count left behind is remembered (a heartbeat-only second sender speaks at 1 Hz)
+    LEFT_MAX = 2  # counts left behind remembered at once (two senders leave one each)
     WINDOW_S = 10.0
-    LIMIT = 3  # steps back within WINDOW_S that mean two senders (a burst of 129+ lost messages looks like one)
+    LIMIT = 5  # returns within WINDOW_S that mean two senders: a lost burst lands on one of the LEFT_MAX counts
+    # remembered by chance (RETURN_MAX / 256 each), so LIMIT such chances within WINDOW_S are far rarer than two
+    # senders, which return at every switch between them
     SMALL_LIMIT = 20  # repeats or steps back by fewer than BACK_MIN within WINDOW_S: two senders whose counters
     # run in step (started together, sending alike) …
     SMALL_SHARE = 0.2  # … when they are also this share of all its messages (two in step: about half), which one
@@ -139,7 +175,8 @@ class SeqWatch:
 
     def __init__(self) -> None:
         self.last: int | None = None
-        self.backs: deque[float] = deque()
+        self.left: deque[tuple[int, float]] = deque(maxlen=self.LEFT_MAX)  # (count left by a jump, when)
+        self.returns: deque[float] = deque()
         self.small: deque[float] = deque()
         self.seen: deque[float] = deque()  # every message's time within WINDOW_S
         self.flagged = False  # interleaved when last looked at (said once per episode)
@@ -148,27 +185,32 @@ class SeqWatch:
         """Count one message's sequence number, received at wall time now_s."""
         if self.last is not None:
             step = (seq - self.last) % 256
-            if 128 < step <= 256 - self.BACK_MIN:
-                self.backs.append(now_s)
-            elif step == 0 or step > 256 - self.BACK_MIN:
+            if step == 0 or step > 256 - self.BACK_MIN:
                 self.small.append(now_s)
+            elif step > self.RETURN_MAX:  # a jump: messages lost, or another sender's count
+                back = next((i for i, (count, when) in enumerate(self.left)
+                             if 1 <= (seq - count) % 256 <= self.RETURN_MAX and now_s - when <= self.LEFT_S), None)
+                if back is not None:
+                    self.returns.append(now_s)
+                    del self.left[back]
+                self.left.append((self.last, now_s))
         self.last = seq
         self.seen.append(now_s)
         self._forget(now_s)
 
     def _forget(self, now_s: float) -> None:
         """Drop the times more than WINDOW_S before now_s (each once: the reader calls this for every message)."""
-        for times in (self.backs, self.small, self.seen):
+        for times in (self.returns, self.small, self.seen):
             while times and now_s - times[0] > self.WINDOW_S:
                 times.popleft()
 
     def interleaved(self, now_s: float) -> bool:
-        """True when two senders seem to share this (system, component): LIMIT steps back, or SMALL_LIMIT small
-        ones that are SMALL_SHARE of its messages, within WINDOW_S of now_s (it clears again after WINDOW_S
-        without them, so bursts of lost messages only pause a vehicle)."""
+        """True when two senders seem to share this (system, component): LIMIT returns, or SMALL_LIMIT small steps
+        back that are SMALL_SHARE of its messages, within WINDOW_S of now_s (it clears again after WINDOW_S
+        without them)."""
         self._forget(now_s)
         small = len(self.small)
-        return len(self.backs) >= self.LIMIT or small >= max(self.SMALL_LIMIT, self.SMALL_SHARE * len(self.seen))
+        return len(self.returns) >= self.LIMIT or small >= max(self.SMALL_LIMIT, self.SMALL_SHARE * len(self.seen))
 
 
 @dataclass(frozen=True)
@@ -198,6 +240,7 @@ class VehicleState:
     mav_autopilot: int | None = None
     mav_type: int | None = None
     mode: str = ""
+    failsafe: bool = False  # the HEARTBEAT's system_status says CRITICAL or EMERGENCY (PX4: a failsafe is active)
     armed: bool = False
     landed_state: int | None = None  # MAV_LANDED_STATE_*, None when never reported
     heartbeat_wall_s: float = 0.0
@@ -239,6 +282,7 @@ class MavlinkLink:
                                "(pip install pyserial)") from None
         except Exception as exc:  # pymavlink raises OSError/ValueError/serial errors
             raise MavtuneError(f"cannot open MAVLink connection {url!r}: {exc}") from None
+        self.receive_buffer_b = _enlarge_receive_buffer(self._conn)
         self.state = VehicleState()
         self._timesync: dict[int, int] = {}  # our ts1 (ns) → round trip (ns) of its TIMESYNC answer
         self._cond = threading.Condition()
@@ -248,12 +292,19 @@ class MavlinkLink:
         self.motor_message = "SERVO_OUTPUT_RAW"  # which of MOTOR_MESSAGES is taken (the vehicle sets it)
         self.motor_samples = 0  # how many were received
         self._closed = threading.Event()
+        self._tick = time.monotonic()  # the reader's last turn
+        self._deaf: deque[tuple[float, float]] = deque(maxlen=32)  # (from, to) wall times the reader did not run
         self._thread = threading.Thread(target=self._read_loop, name=f"mavlink-read {url}", daemon=True)
         self._thread.start()
 
     # ---- reading -------------------------------------------------------------------------------------------
     def _read_loop(self) -> None:
         while not self._closed.is_set():
+            now = time.monotonic()
+            if now - self._tick > DEAF_S:
+                with self._cond:
+                    self._deaf.append((self._tick, now))
+            self._tick = now
             try:
                 msg = self._conn.recv_match(blocking=True, timeout=0.05)
             except Exception as exc:  # a closed socket during shutdown, or a garbled frame
@@ -295,6 +346,7 @@ class MavlinkLink:
                 st.system, st.component = src, comp
                 st.mav_autopilot, st.mav_type = msg.autopilot, msg.type
                 st.mode = mavutil.mode_string_v10(msg)
+                st.failsafe = msg.system_status in (mavlink.MAV_STATE_CRITICAL, mavlink.MAV_STATE_EMERGENCY)
                 st.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 st.heartbeat_wall_s = time.monotonic()
                 st.heartbeats += 1
@@ -502,11 +554,24 @@ class MavlinkLink:
                                    "param_index": dict(st.param_index), "ignored": dict(st.ignored)})
 
     def heartbeat_age_s(self) -> float:
-        """Wall seconds since the last HEARTBEAT of the target vehicle (inf before the first)."""
+        """Seconds listened since the last HEARTBEAT of the target vehicle (inf before the first)."""
         with self._cond:
             if not self.state.heartbeats:
                 return math.inf
-            return time.monotonic() - self.state.heartbeat_wall_s
+            return self.listened_since(self.state.heartbeat_wall_s)
+
+    def listened_since(self, wall_s: float) -> float:
+        """Wall seconds since `wall_s` (time.monotonic()) that the reader was listening: pauses of the reader
+        longer than DEAF_S (the process frozen or starved, now or before) are left out, so a silence is the
+        vehicle's, not ours."""
+        now = time.monotonic()
+        with self._cond:
+            spans = list(self._deaf)
+        tick = self._tick
+        if now - tick > DEAF_S:  # the reader has not run since: it is not listening now (another thread woke first)
+            spans.append((tick, now))
+        deaf = sum(max(0.0, min(to, now) - max(frm, wall_s)) for frm, to in spans)
+        return max(0.0, now - wall_s - deaf)
 
     def add_position_listener(self, fn: Callable[[PositionSample], None]) -> None:
         """Call fn(sample) from the reader thread for every LOCAL_POSITION_NED."""

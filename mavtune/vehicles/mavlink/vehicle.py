@@ -178,15 +178,16 @@ class MavlinkVehicle:
         duplicate = self.link.duplicate_problem()
         if duplicate:
             return duplicate
+        st = self.link.snapshot()
         problem = preflight_problem(
-            self.link.snapshot(), self.link.heartbeat_age_s(), self.profile, self.config.safety, self._in_control
-        )
+            st, self.link.heartbeat_age_s(), self.profile, self.config.safety, self._in_control,
+            None if st.position is None else self.link.listened_since(st.position.wall_s))
         if problem is None and self.config.altitude_source == "distance_sensor":
             st = self.link.snapshot()
             what = "a downward rangefinder (DISTANCE_SENSOR, orientation PITCH_270)"
             if st.distance_t_s is None:
                 return f"no reading from {what}; altitude_source = \"distance_sensor\" needs one"
-            age_s = time.monotonic() - st.distance_wall_s
+            age_s = self.link.listened_since(st.distance_wall_s)
             if age_s > self.config.safety.position_timeout_s:
                 return f"no reading from {what} for {age_s:.1f} s"
         return problem
@@ -355,7 +356,7 @@ class MavlinkVehicle:
             except queue.Empty:
                 if self.link.heartbeat_age_s() > safety.heartbeat_timeout_s:
                     return "heartbeat_lost"
-                if time.monotonic() - last_wall > safety.position_timeout_s:
+                if self.link.listened_since(last_wall) > safety.position_timeout_s:
                     return "position_lost"
                 continue
             last_wall = time.monotonic()
@@ -581,7 +582,10 @@ class MavlinkVehicle:
     def _pilot_took_over(self) -> bool:
         """The pilot switched modes: stop commanding and give back the original gains (the vehicle is out of the
         run); True when they were confirmed."""
-        self._released = "the pilot changed the mode; this vehicle is left to the pilot"
+        st = self.link.snapshot()
+        self._released = (f"the autopilot's failsafe changed the mode to {st.mode} (its HEARTBEAT says "
+                          "critical); this vehicle is left to it and the pilot") if st.failsafe else \
+            "the pilot changed the mode; this vehicle is left to the pilot"
         self._release(pilot=True)
         return self.restore_originals()
 
