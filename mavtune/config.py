@@ -47,7 +47,7 @@ fit's answer and 0.4 times as wide once it surrounds that answer; 54 flights for
 gains (each point of their 25-point designs flown once). Measured on the zoo's selection half
 (benchmarks/results/selection_budget.md) and reported on the other half (quality_budget.md): mean 56 flights
 (worst 78) against the default's 121 (worst 262), tied with the default in the paired sign test over the zoo on both
-halves, but significantly worse on gusts, an asymmetric valley and 4 gains, with fly-away answers on Crazyflow."""
+halves, but significantly worse on gusts, an asymmetric valley and 4 gains."""
 
 
 GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
@@ -94,8 +94,7 @@ class Tuning(_Section):
     of its quality. This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options
     both take it (`settings()`). `PAPER_TUNING` restores the paper's exact setting. `BUDGET_TUNING` is a fixed
     budget (no passes, three designs from the whole box: 54 flights for 2 gains, exact before take-off), measured
-    in benchmarks/results/selection_budget.md and quality_budget.md; not the default (worse on three zoo plants,
-    fly-away answers on Crazyflow).
+    in benchmarks/results/selection_budget.md and quality_budget.md; not the default (worse on three zoo plants).
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
