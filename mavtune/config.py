@@ -39,6 +39,17 @@ PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`
     "tuning.design": False}
 
 
+BUDGET_TUNING: dict[str, Any] = {  # a fixed budget of flights, exact before take-off (issue 20; not the default)
+    "tuning.bootstraps": 0, "tuning.design_width": 0.5, "tuning.design_steps": 3, "tuning.design_shrink": 0.4,
+    "tuning.design_split": "auto"}
+"""No passes over the gains: three response-surface designs, the first over the whole box, each next one around the
+fit's answer and 0.4 times as wide once it surrounds that answer; 54 flights for 2 gains on 2 vehicles, 78 for 4
+gains (each point of their 25-point designs flown once). Measured on the zoo's selection half
+(benchmarks/results/selection_budget.md) and reported on the other half (quality_budget.md): mean 56 flights
+(worst 78) against the default's 121 (worst 262), tied with the default in the paired sign test over the zoo on both
+halves, but significantly worse on gusts, an asymmetric valley and 4 gains."""
+
+
 GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
                                          "horizontal": ("kp", "kd")}
 """The named gain sets a MAVLink run selects by `[mavlink] gain_set` (or --gain-set), each with the gains it tunes in
@@ -63,7 +74,7 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
-                   "design_steps", "design_shrink")  # what [tuning] gives the engine's Settings
+                   "design_steps", "design_shrink", "design_split")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -81,7 +92,9 @@ class Tuning(_Section):
     the nominal simulator's share (50 %); a fixed budget (1 pass, not adaptive, 3 designs: 88 flights) scored
     36 % with 2 fly-away answers. No configuration met the zoo's flight goals without losing most
     of its quality. This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options
-    both take it (`settings()`). `PAPER_TUNING` restores the paper's exact setting.
+    both take it (`settings()`). `PAPER_TUNING` restores the paper's exact setting. `BUDGET_TUNING` is a fixed
+    budget (no passes, three designs from the whole box: 54 flights for 2 gains, exact before take-off), measured
+    in benchmarks/results/selection_budget.md and quality_budget.md; not the default (worse on three zoo plants).
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
@@ -89,6 +102,7 @@ class Tuning(_Section):
     method: str = "eql"
     epsilon: float = Field(0.2, ge=MIN_EPSILON, lt=0.5)
     bootstraps: StrictInt | Literal["auto"] = 2
+    """Passes over the gains (line searches); "auto": the paper's stop rule; 0 (with `design`): the designs only."""
     max_bootstraps: StrictInt = Field(10, ge=1, le=MAX_BOOTSTRAPS)
     """With `bootstraps = "auto"`: the most passes over the gains before it stops anyway."""
     vehicles: StrictInt = Field(2, ge=1, le=MAX_VEHICLES)
@@ -125,8 +139,15 @@ class Tuning(_Section):
                                      "each around the answer of the one before (a valley or a far optimum is followed "
                                      "one design's width at a time)")
     design_shrink: float = Field(1.0, gt=0.0, le=1.0, description="design: each design's half-width over the one "
-                                  "before (below 1: the later designs narrow in, less bias from a cost that is no "
+                                  "before, once the fit's answer lies inside it or on a range's bound (a trust "
+                                  "region: an answer on a face of the box inside the ranges moves the next design "
+                                  "as wide; below 1 the later designs narrow in, less bias from a cost that is no "
                                   "quadratic)")
+    design_split: StrictBool | Literal["auto"] = Field(False, description="design: the vehicles of a round fly "
+                                     "distinct points of the design, each point once a repeat (one fit over more "
+                                     "points averages the noise as well as repeats of fewer), instead of every vehicle "
+                                     "the strategy puts on a point; \"auto\": so while a design has more than about "
+                                     "three flights per coefficient of its quadratic (3 gains or more)")
     pick: Literal["best", "near-stock"] | None = Field(None, description="the answer among the run's flown points: "
                                                        "the search's optimum (best), or the flown point nearest the "
                                                        "vehicles' stock gains whose cost is within one standard error "
@@ -164,8 +185,9 @@ class Tuning(_Section):
     @field_validator("bootstraps")
     @classmethod
     def _positive(cls, v: int | str) -> int | str:
-        if isinstance(v, int) and not 1 <= v <= MAX_BOOTSTRAPS:
-            raise ValueError(f"must be from 1 to {MAX_BOOTSTRAPS}, or \"auto\" for the paper's stop rule")
+        if isinstance(v, int) and not 0 <= v <= MAX_BOOTSTRAPS:
+            raise ValueError(f"must be from 0 (the designs only) to {MAX_BOOTSTRAPS}, or \"auto\" for the paper's "
+                             "stop rule")
         return v
 
     def settings(self, **given: Any) -> Settings:

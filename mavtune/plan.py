@@ -211,7 +211,8 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
               work_limit: int | None = None) -> Plan:
     """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps (and the
     line searches across the gains between passes, `directions`: each the same search over its segment), plus the
-    response surface's design (`surface`: a fixed number of rounds); refused
+    response surface's designs (`surface`: a fixed number of rounds; with no passes, `bootstraps = 0`, the plan is
+    exact: the designs alone); refused
     (MavtuneError) when the rehearsals would take more than `work_limit` steps (default `PLAN_WORK`)."""
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
     # every gain's line search has the same shape relative to its range: rehearse one, count it per gain
@@ -222,7 +223,9 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
                       else MINIMISER_PROBES + NOISE_PROBES)
     searches = len(settings.space) * bootstraps + settings.direction_searches(bootstraps)
     clear = None
-    if settings.adaptive_rule is not None:
+    if not searches:  # the designs only (bootstraps = 0): no line search to rehearse
+        rounds = per_search_max = 0
+    elif settings.adaptive_rule is not None:
         mean, per_search_max, mean_clear = _adaptive_rounds(settings, lo, hi, work)
         rounds, clear = math.ceil(mean * searches - 1e-9), math.ceil(mean_clear * searches - 1e-9)
     else:
@@ -234,8 +237,8 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
     surface = settings.design_rounds()  # the design's rounds: the same whatever the costs
     if surface:
         evaluations += (len(surface_design([0.5] * len(settings.space), settings.design_width))
-                        * settings.design_repeats * settings.design_steps)
+                        * settings.design_repeats * settings.design_count())
         rounds, clear = rounds + surface, None if clear is None else clear + surface
     return Plan(rounds, per_search_max * searches + surface, settings.vehicles, evaluations,
                 bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None,
-                adaptive=settings.adaptive_rule is not None, rounds_min=clear)
+                adaptive=settings.adaptive_rule is not None and searches > 0, rounds_min=clear)

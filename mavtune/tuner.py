@@ -22,11 +22,12 @@ from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.flown import by_gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
-from mavtune.search.interval import DRAWS, edge_reach, held_elsewhere, joint, plausible_region, resample, resolution, \
+from mavtune.search.interval import DRAWS, Interval, edge_reach, held_elsewhere, joint, plausible_region, resample, resolution, \
     stale
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
-from mavtune.search.surface import answer as surface_answer, beside_wall, design as surface_design, \
+from mavtune.search.surface import answer as surface_answer, beside_wall, coefficients as surface_coefficients, \
+    design as surface_design, \
     ruled_out as surface_ruled_out
 from mavtune.strategy import Strategy
 
@@ -228,6 +229,7 @@ class Settings:
     design_repeats: int = 1
     design_steps: int = 1
     design_shrink: float = 1.0
+    design_split: bool | str = False
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -246,9 +248,9 @@ class Settings:
         self.space = space
         if not MIN_EPSILON <= float(self.epsilon) < 0.5:
             raise MavtuneError(f"epsilon {self.epsilon} is outside [{MIN_EPSILON:g}, 0.5)")
-        if self.bootstraps is not None and not 1 <= int(self.bootstraps) <= MAX_BOOTSTRAPS:
-            raise MavtuneError(f"bootstraps must be from 1 to {MAX_BOOTSTRAPS} (or None for the paper's stop rule), "
-                               f"got {self.bootstraps}")
+        if self.bootstraps is not None and not (1 if not self.design else 0) <= int(self.bootstraps) <= MAX_BOOTSTRAPS:
+            raise MavtuneError(f"bootstraps must be from {0 if self.design else 1} to {MAX_BOOTSTRAPS} (or None for the "
+                               f"paper's stop rule; 0 only with a design), got {self.bootstraps}")
         if not 1 <= int(self.max_bootstraps) <= MAX_BOOTSTRAPS:
             raise MavtuneError(f"max_bootstraps must be from 1 to {MAX_BOOTSTRAPS}, got {self.max_bootstraps}")
         if not 1 <= int(self.vehicles) <= MAX_VEHICLES:
@@ -279,6 +281,8 @@ class Settings:
                                "over the one before")
         if not 1 <= int(self.design_steps) <= MAX_DESIGN_REPEATS:
             raise MavtuneError(f"design_steps must be from 1 to {MAX_DESIGN_REPEATS}, got {self.design_steps}")
+        if self.design_split not in (True, False, "auto"):
+            raise MavtuneError(f"design_split must be true, false or \"auto\", got {self.design_split!r}")
         self.search(0.0, 1.0)  # validates
 
     def search(self, lo: float, hi: float, pool: NoisePool | None = None, edges: bool | None = None) -> LineSearch:
@@ -292,16 +296,36 @@ class Settings:
         """The rounds a run of these settings takes at the least: every line search's budget of evaluations,
         as many a round as the strategy has slots, per gain and bootstrap (one, for the paper's stop rule)."""
         rounds = math.ceil(self.search(0.0, 1.0, edges=False).budget() / self.strategy_rule.slots(int(self.vehicles)))
-        return (rounds * len(self.space) * (self.bootstraps or 1)  # (a line search across the gains may be skipped)
-                + self.design_rounds())
+        passes = self.bootstraps if self.bootstraps is not None else 1
+        return rounds * len(self.space) * passes + self.design_rounds()  # (a line search across the gains may be skipped)
 
-    def design_rounds(self, vehicles: int | None = None) -> int:
-        """Rounds of `vehicles` (the settings' by default) the response surface's designs take (0 without)."""
+    def design_flights(self) -> int:
+        """Flights of one design: its points, each flown `design_repeats` times by as many vehicles as the strategy
+        puts on a point (by one vehicle each with `design_split`: the vehicles fly distinct points)."""
+        n = len(surface_design([0.5] * len(self.space), self.design_width))
+        return n * self.design_per_point() * int(self.design_repeats)
+
+    def design_per_point(self) -> int:
+        """Vehicles that fly each design point in a repeat: as many as the strategy puts on a point; one with
+        `design_split` (distinct points on the vehicles); with "auto", no more than about three flights per
+        coefficient of the quadratic fitted (2 gains: 9 points on two vehicles each; 3 or more: each point once)."""
+        rule = self.strategy_rule.per_point(int(self.vehicles))
+        if self.design_split == "auto":
+            n = len(surface_design([0.5] * len(self.space), self.design_width))
+            return max(1, min(rule, 3 * surface_coefficients(len(self.space)) // n))
+        return 1 if self.design_split else rule
+
+    def design_count(self) -> int:
+        """Designs flown in turn (`design_steps`; 0 without a design)."""
+        return int(self.design_steps) if self.design else 0
+
+    def design_rounds(self, vehicles: int | None = None, per_design: bool = False) -> int:
+        """Rounds of `vehicles` (the settings' by default) the response surface's designs take (0 without; one
+        design's with `per_design`)."""
         if not self.design:
             return 0
-        n = len(surface_design([0.5] * len(self.space), self.design_width))
-        per_point = self.strategy_rule.per_point(int(self.vehicles)) * int(self.design_repeats)
-        return math.ceil(n * per_point / int(vehicles or self.vehicles)) * int(self.design_steps)
+        one = math.ceil(self.design_flights() / int(vehicles or self.vehicles))
+        return one if per_design else one * self.design_count()
 
     def direction_searches(self, bootstraps: int) -> int:
         """Line searches across the gains a run of `bootstraps` passes may fly (`directions`: one after every pass
@@ -333,7 +357,8 @@ class Settings:
         } | ({"edges": True} if self.edges else {}) | (  # absent when off: journals from before still resume
             {"directions": True} if self.directions else {}) | (
             {"design": {"width": float(self.design_width), "repeats": int(self.design_repeats),
-                         "steps": int(self.design_steps), "shrink": float(self.design_shrink)}}
+                         "steps": self.design_count(), "shrink": float(self.design_shrink)}
+                        | ({"split": self.design_split} if self.design_split else {})}
             if self.design else {})
 
 
@@ -374,6 +399,7 @@ class Tuner:
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
         self.designed: Gains = {}  # the response surface's answer (`_surface`)
+        self._design_answers: list[Gains] = []  # each design's answer in turn
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
 
     def snapshot(self) -> TuningResult:
@@ -424,6 +450,14 @@ class Tuner:
             moves = [b - a for a, b in zip(answers, answers[1:])]
             out[name] = joint(interval, region.get(name), moves, s.epsilon * (hi - lo), (lo, hi),
                               edge_reach(rec.samples, (lo, hi)), stale(rec.held, self.gains, s.space)).to_dict()
+        if surfaced and not last and self.draws:  # the designs only: the span no flight rules out, every gain free,
+            region = dict(zip(s.space, self._region() or []))  # back to the previous design's answer and on
+            for name, (lo, hi) in s.space.items():
+                v, span = self.gains[name], region.get(name)
+                answers = [start[name], *(g[name] for g in self._design_answers)]
+                moves = [b - a for a, b in zip(answers, answers[1:])]
+                out[name] = (joint(Interval(v, math.nan, *span), None, moves, s.epsilon * (hi - lo), (lo, hi))
+                             if span is not None else Interval.unknown(v)).to_dict()
         self._uncertainty = (state, out)
         return out
 
@@ -474,23 +508,29 @@ class Tuner:
                     break
                 found.append(dict(self.gains))
                 self.stop_reason = f"reached the cap of {limit} bootstraps without a repeated point"
-        for step in range(s.design_steps if s.design else 0):
-            self._surface(s.design_width * s.design_shrink ** step)
+        if limit == 0:
+            self.stop_reason = "no passes over the gains (bootstraps = 0): the designs only"
+        half = s.design_width
+        for _ in range(s.design_count()):
+            if self._surface(half):  # inside the design's box: the next design narrows in; on its face: it moves
+                half *= s.design_shrink
         return self.snapshot()
 
-    def _surface(self, half: float) -> None:
-        """One step of the response surface (`design_steps` in turn, each around the answer of the one before):
+    def _surface(self, half: float) -> bool:
+        """One step of the response surface (`design_count` in turn, each around the answer of the one before):
         fly the design around the gains now (`surface.design`, the same rounds whatever the
         costs: the plan knows them), then answer the minimiser of one quadratic in every gain fitted to the run's
-        flights near it, inside the design's box and never where the nearest flight failed (`surface.answer`)."""
+        flights near it, inside the design's box and never where the nearest flight failed (`surface.answer`). True
+        when that answer lies inside the box or on a range's bound, not on a face of the box inside the ranges (a
+        trust region: the next design narrows in only around an answer the design surrounds)."""
         s = self.settings
         names = list(s.space)
         lo = [s.space[n][0] for n in names]
         width = [s.space[n][1] - s.space[n][0] for n in names]
         points = surface_design([(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)], half)
-        per_point = s.strategy_rule.per_point(int(s.vehicles)) * int(s.design_repeats)
+        per_point = s.design_per_point()
         queue = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, p)}
-                 for p in points for _ in range(per_point)]
+                 for _ in range(int(s.design_repeats)) for p in points for _ in range(per_point)]
         box = [(min(p[i] for p in points), max(p[i] for p in points)) for i in range(len(names))]
         reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
         todo = list(queue)
@@ -503,6 +543,8 @@ class Tuner:
             spare = [queue[k % len(queue)] for k in range(vehicles - len(batch))]  # no vehicle idles
             flights = self._fly([dict(a) for a in batch + spare], self.bootstrap, SURFACE, (-half, half))
             todo += [a for a, f in zip(batch, flights) if not f.measured]  # a lost flight is flown again
+            for a, cost in zip(*Strategy.measured(batch + spare, flights)):  # repeats of a point: the run's noise
+                self.pool.add((SURFACE, tuple(a[n] for n in names)), cost)
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
         best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool), self.pool)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
@@ -516,6 +558,8 @@ class Tuner:
             if names[i] in last:
                 last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
         self.designed = dict(self.gains)
+        self._design_answers.append(dict(self.gains))
+        return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
 
     def _same_point(self, earlier: Gains) -> bool:
         """True when the latest gains are within the search's tolerance ε·(hi − lo) of `earlier` in every gain:

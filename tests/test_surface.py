@@ -129,6 +129,70 @@ def test_the_plan_expects_exactly_the_flights_flown_with_a_fixed_design(strategy
         assert result.flights <= plan.rounds_max * vehicles
 
 
+DESIGNS = dict(bootstraps=0, design_width=0.5, design_steps=3, design_shrink=0.5, design_split="auto", draws=0)
+
+
+@given(st.integers(1, 4), st.sampled_from([False, True, "auto"]), st.integers(1, 3), st.integers(1, 3),
+       st.integers(0, 5))
+@settings(max_examples=15, deadline=None)
+def test_designs_only_fly_exactly_the_planned_flights_and_answer_a_flown_safe_neighbourhood(gains, split, steps,
+                                                                                           vehicles, seed):
+    """No passes (bootstraps = 0): every round is a design, their number known before take-off whatever the costs."""
+    space = {name: (0.0, 1.0) for name in ["kp", "kd", "ki", "kf"][:gains]}
+    options = {**DESIGNS, "design_split": split, "design_steps": steps}
+    settings_ = Settings(space=space, vehicles=vehicles, design=True, adaptive=True, confidence=0.85, cap=6,
+                         **{k: v for k, v in options.items() if k != "draws"})
+    plan = make_plan(settings_)
+    draw = random.Random(seed)
+    result = mavtune.tune(lambda gs: [(1 + sum((v - 0.3) ** 2 for v in g.values())) * (1 + 0.1 * draw.gauss(0, 1))
+                                      for g in gs], space=space, vehicles=vehicles, **options)
+    assert {r.gain for r in result.rounds} == {"design"}
+    assert result.flights == plan.flights == plan.rounds_max * vehicles
+    assert len(result.rounds) == settings_.design_rounds()
+    every = {tuple(a[n] for n in space) for r in result.rounds for a in r.assignments}
+    got = tuple(result.gains[n] for n in space)
+    assert all(min(p[i] for p in every) <= got[i] <= max(p[i] for p in every) for i in range(gains))
+
+
+def test_designs_only_answer_a_corner_optimum_on_the_corner():
+    result = mavtune.tune(bowl((1.2, 1.3)), space=SPACE, vehicles=2, **DESIGNS)
+    assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((1.0, 1.0), abs=1e-6)
+    assert (1.0, 1.0) in flown(result)
+
+
+@pytest.mark.parametrize("optimum, halves", [((0.95, 0.95), [0.15, 0.15, 0.15]),  # on the box's face: it moves
+                                             ((0.5, 0.25), [0.15, 0.075, 0.0375])])  # inside: it narrows in
+def test_a_design_narrows_only_around_an_answer_it_surrounds(optimum, halves):
+    """A trust region: the next design shrinks when the fit's minimiser lies inside the design's box (or on a
+    range's bound), and keeps its width, re-centred, when it lies on a face of the box inside the ranges."""
+    result = mavtune.tune(bowl(optimum), space=SPACE, vehicles=2, bootstraps=0, design_width=0.15, design_steps=3,
+                          design_shrink=0.5, initial={"kd": 0.2}, draws=0)
+    assert len(result.rounds) == 27  # 9 points on 2 vehicles a design
+    assert [r.bracket[1] for r in result.rounds[::9]] == pytest.approx(halves)
+
+
+def test_no_passes_without_a_design_is_refused():
+    from mavtune.config import Tuning
+    from mavtune.errors import MavtuneError
+
+    with pytest.raises(MavtuneError, match="bootstraps"):
+        Settings(space=SPACE, bootstraps=0)
+    with pytest.raises(MavtuneError, match="bootstraps"):
+        Tuning(bootstraps=0, design=False).settings()
+
+
+@pytest.mark.parametrize("gains, flights", [(2, 54), (4, 78)])
+def test_the_budget_preset_plans_its_flights_exactly(gains, flights):
+    """`BUDGET_TUNING`: three designs, the plan exact before take-off (2 gains: 9 points on both vehicles; 4 gains:
+    25 points once each)."""
+    from mavtune.config import BUDGET_TUNING, Tuning
+
+    space = {name: (0.0, 1.0) for name in ["kp", "kd", "ki", "kf"][:gains]}
+    settings_ = Tuning(**{k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}).settings(space=space)
+    plan = make_plan(settings_)
+    assert plan.flights == plan.rounds_max * 2 == flights and not plan.adaptive
+
+
 def test_no_answer_beside_a_wall_while_a_point_off_it_is_as_good():
     """As on Crazyflow (kp at its bound, kd flat above a wall at 0.2 that diverges 88 % of flights, 2 % at 0.3):
     the first safe point off a failed one is not answered while the flights cannot tell a point farther from the

@@ -117,11 +117,11 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
     (dict(strategy="fastest"), "unknown strategy"),
     (dict(initial={"ki": 0.1}), "'ki', which is not in the space"),
     (dict(initial={"kd": 2.0}), "outside its range"),
-    (dict(bootstraps=0), "bootstraps must be from 1 to"),
+    (dict(bootstraps=0, design=False), "bootstraps must be from 1 to"),  # no passes: only with a design
     (dict(epsilon=1e-5), r"epsilon 1e-05 is outside \[0.0001, 0.5\)"),
     (dict(vehicles=10_001), "vehicles must be from 1 to 10000"),
     (dict(method="nsection", points=1_001), "points must be from 2 to 1000"),
-    (dict(bootstraps=1_001), "bootstraps must be from 1 to 1000"),
+    (dict(bootstraps=1_001), "bootstraps must be from 0 to 1000"),
 ])
 def test_bad_input_is_one_line_naming_the_problem(kwargs, message):
     with pytest.raises(MavtuneError, match=message) as info:

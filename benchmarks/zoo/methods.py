@@ -150,7 +150,10 @@ def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str
 def candidates() -> list[Method]:
     """The configurations the default is chosen from (the first is today's default; `--half select`). The paper's
     setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
+    from mavtune.config import BUDGET_TUNING
+
     fixed = {"adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
+    designs = {k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}  # no passes: 3 designs, exact plan
     return [
         Method("default (config.Tuning())"),
         Method("previous default (no design)", {"design": False}),
@@ -158,6 +161,9 @@ def candidates() -> list[Method]:
         Method("design ±0.1", {"design_width": 0.1}),
         Method("fixed budget: 1 pass, not adaptive, 3 designs", {**fixed, "design_steps": 3}),
         Method("valley answer, directions, no design", {"answer": "valley", "directions": True, "design": False}),
+        Method("fixed budget: 3 designs from the whole box (BUDGET_TUNING)", designs),
+        Method("3 designs from the whole box shrink 0.5", {**designs, "design_shrink": 0.5}),
+        Method("3 designs from the whole box shrink 0.3", {**designs, "design_shrink": 0.3}),
     ]
 
 
