@@ -22,13 +22,15 @@ from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.flown import by_gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
-from mavtune.search.interval import DRAWS, Interval, edge_reach, held_elsewhere, joint, plausible_region, resample, resolution, \
-    stale
+from mavtune.search.interval import (
+    DRAWS, Interval, edge_reach, held_elsewhere, joint, plausible_region, resample, resolution, stale,
+)
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
-from mavtune.search.surface import answer as surface_answer, beside_wall, coefficients as surface_coefficients, \
-    design as surface_design, \
-    ruled_out as surface_ruled_out
+from mavtune.search.surface import (
+    answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
+    ruled_out as surface_ruled_out,
+)
 from mavtune.strategy import Strategy
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
