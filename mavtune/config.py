@@ -165,6 +165,14 @@ class Tuning(_Section):
         return self
 
     @model_validator(mode="after")
+    def _designs_only_with_a_design(self) -> "Tuning":
+        """No passes over the gains (`bootstraps = 0`) leaves the designs alone to fly: without one, nothing would."""
+        if self.bootstraps == 0 and not self.design:
+            raise ValueError("bootstraps = 0 (the designs only) needs design = true; with design = false, fly at "
+                             "least 1 pass")
+        return self
+
+    @model_validator(mode="after")
     def _ranges_resolvable(self) -> "Tuning":
         """A range so narrow that the search's tolerance (ε of it) is below MIN_EPSILON of the normalised gain
         cannot be told apart by any flight: refused, not flown for nothing."""

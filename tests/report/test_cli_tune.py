@@ -30,7 +30,8 @@ def test_bad_config_file_exits_2_with_one_line(tmp_path):
 
 @pytest.mark.parametrize("toml, args, field", [
     ("[tuning]\nfoo = 1\n", [], "tuning.foo"),
-    ("[tuning]\nbootstraps = 0\n", [], "tuning.bootstraps"),
+    ("[tuning]\nbootstraps = -1\n", [], "tuning.bootstraps"),
+    ("[tuning]\nbootstraps = 0\ndesign = false\n", [], "bootstraps = 0 (the designs only) needs design = true"),
     ("[tuning]\nspace = { kp = [0.0, 1.0] }\ninitial = { kd = 0.2 }\n", [], "kd"),
     ("[flight]\nprimitive = \"square\"\n", [], "flight.primitive"),
     ("", ["--strategy", "sideways"], "tuning.strategy"),
