@@ -92,9 +92,9 @@ def beside_wall(points: Mapping[tuple[float, ...], Sequence[float]], x: Sequence
 def at_wall(points: Mapping[tuple[float, ...], Sequence[float]]) -> set[tuple[float, ...]]:
     """The points flown without failure next to a failed point: no other flown point lies in the ball whose
     diameter joins them, its sphere included (Gabriel neighbours: nothing flown between them). Their flights
-    cannot tell a rare fly-away (a few in a hundred flights: on Crazyflow 2 % of flights at kd 0.3 diverge, 88 % at 0.2), so an
-    answer is not given where they are the nearest flown point while a point flown off the walls is not told
-    apart from the best."""
+    cannot tell a rare fly-away (a few in a hundred flights: on Crazyflow 2 % of flights at kd 0.3 diverge, 88 %
+    at 0.2), so an answer is not given where they are the nearest flown point while a point flown off the walls
+    is not told apart from the best."""
     flown = [k for k, c in points.items() if c]
     safe = [k for k in flown if all(map(math.isfinite, points[k]))]
     failed = [k for k in flown if not all(map(math.isfinite, points[k]))]
