@@ -6,7 +6,8 @@ gusts x2.5 with divergent gains near the optimum, a box with the optimum on an e
 mavsim's PX4 and ArduPilot cascades in-process; Crazyflow; analytic valley / edge / 4-gain costs.
 Truth (benchmarks/zoo/truth.py): grid map, descent, paired judging of every answer.
 Seeds: run i flies vehicles 10000 + 100 i + j. The default is chosen on the even runs (`--half select`) and
-reported on the odd runs (`--half report`), so the numbers reported were not used to choose it.
+reported on the odd runs (`--half report`), so the numbers reported were not used to choose it. The report half
+reports config.Tuning() (what ships) unless --default names another, and says when the selection chose otherwise.
 
     python benchmarks/quality.py --half select --runs 20 [--plants ...] [--workers 2]
     python benchmarks/quality.py --half report --runs 40 [--workers 2]
@@ -286,7 +287,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--plants", default="", help="comma-separated plant names (default: the whole zoo)")
     ap.add_argument("--methods", default="", help="comma-separated method labels (default: all)")
     ap.add_argument("--default", default=None, help="label of the method to report as the default (default: the "
-                    "selection's choice when it exists, else the first candidate)")
+                    "first candidate, config.Tuning(): what ships, whatever the selection chose)")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes (1: in-process)")
     ap.add_argument("--no-peers", action="store_true", help="leave CMA-ES and TPE out (a selection among mavtune's "
                     "configurations only)")
@@ -306,11 +307,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         methods = [m for m in methods if m.label in want or m.peer]
     seeds = [2 * i + (0 if args.half == "select" else 1) for i in range(runs_n)]
     sel_path = args.out / "selection.json"
-    default_label = args.default
-    if default_label is None and args.half == "report" and sel_path.exists():
-        default_label = json.loads(sel_path.read_text())["selection"]["chosen"]
     by_label = {m.label: m for m in methods}
-    default = by_label.get(default_label) or methods[0]
+    default = by_label.get(args.default) or methods[0]  # what ships (config.Tuning()) unless told otherwise
     started, wall0, load0 = datetime.now(timezone.utc), time.perf_counter(), os.getloadavg()
     engine, commit = engine_hash(), _git_commit()  # what flies: the code at the start
     runs = Runs(None if args.quick else CACHE / "runs.jsonl")
@@ -330,8 +328,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         doc["selection"] = {"chosen": chosen, "scores": scores}
         doc["choice_note"] = f"This is the selection half; the configuration chosen here is {chosen}."
     else:
-        doc["choice_note"] = ("Chosen on the even runs (selection.json)." if sel_path.exists() and args.default is None
-                              else "")
+        chosen = json.loads(sel_path.read_text())["selection"]["chosen"] if sel_path.exists() else None
+        doc["choice_note"] = ("" if chosen is None else "Chosen on the even runs (selection.json)." if
+                              chosen == default.label else f"The selection half (selection.json) chose {chosen}; "
+                              f"reported here is {default.label}.")
     doc["paired"] = paired_tests(res["rows"], default.label, [lb for lb in labels if lb != default.label])
     doc["goals"] = stats.goals(res["table"], default.label, doc["paired"])
     doc["meta"] = {"command": "python benchmarks/quality.py " + " ".join(argv if argv is not None else sys.argv[1:]),
