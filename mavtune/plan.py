@@ -22,7 +22,6 @@ from typing import Callable
 
 from mavtune.errors import MavtuneError
 from mavtune.search.base import P_BEST_STEPS
-from mavtune.search.surface import design as surface_design
 from mavtune.tuner import Settings
 
 MINIMISER_PROBES = 64  # minimiser positions rehearsed per line search (unimodal costs)
@@ -236,8 +235,7 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
     evaluations = settings.search(lo, hi).budget() * searches
     surface = settings.design_rounds()  # the design's rounds: the same whatever the costs
     if surface:
-        evaluations += (len(surface_design([0.5] * len(settings.space), settings.design_width))
-                        * settings.design_repeats * settings.design_count())
+        evaluations += settings.design_points() * settings.design_repeats * settings.design_count()
         rounds, clear = rounds + surface, None if clear is None else clear + surface
     return Plan(rounds, per_search_max * searches + surface, settings.vehicles, evaluations,
                 bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None,

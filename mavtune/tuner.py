@@ -304,8 +304,11 @@ class Settings:
     def design_flights(self) -> int:
         """Flights of one design: its points, each flown `design_repeats` times by as many vehicles as the strategy
         puts on a point (by one vehicle each with `design_split`: the vehicles fly distinct points)."""
-        n = len(surface_design([0.5] * len(self.space), self.design_width))
-        return n * self.design_per_point() * int(self.design_repeats)
+        return self.design_points() * self.design_per_point() * int(self.design_repeats)
+
+    def design_points(self) -> int:
+        """Points of one design (`surface.design`: 3^d, or a composite design above 3 gains)."""
+        return len(surface_design([0.5] * len(self.space), self.design_width))
 
     def design_per_point(self) -> int:
         """Vehicles that fly each design point in a repeat: as many as the strategy puts on a point; one with
@@ -313,8 +316,7 @@ class Settings:
         coefficient of the quadratic fitted (2 gains: 9 points on two vehicles each; 3 or more: each point once)."""
         rule = self.strategy_rule.per_point(int(self.vehicles))
         if self.design_split == "auto":
-            n = len(surface_design([0.5] * len(self.space), self.design_width))
-            return max(1, min(rule, 3 * surface_coefficients(len(self.space)) // n))
+            return max(1, min(rule, 3 * surface_coefficients(len(self.space)) // self.design_points()))
         return 1 if self.design_split else rule
 
     def design_count(self) -> int:
@@ -400,9 +402,13 @@ class Tuner:
         self.pool = NoisePool()  # the run's flight-to-flight noise, pooled over every line search
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
-        self.designed: Gains = {}  # the response surface's answer (`_surface`)
-        self._design_answers: list[Gains] = []  # each design's answer in turn
+        self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
+
+    @property
+    def designed(self) -> Gains:
+        """The response surface's answer: the last design's (empty before one was flown)."""
+        return dict(self._design_answers[-1]) if self._design_answers else {}
 
     def snapshot(self) -> TuningResult:
         """The run so far: final once `run()` has returned; else with the search under way as it stands after
@@ -418,7 +424,7 @@ class Tuner:
                             bootstraps=self.bootstrap, stop_reason=stop_reason,
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
-                            designed=dict(self.designed))
+                            designed=self.designed)
 
     @staticmethod
     def _record(bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
@@ -559,7 +565,6 @@ class Tuner:
             i = max(range(len(names)), key=lambda k: abs(wall[k] - best[k]))
             if names[i] in last:
                 last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
-        self.designed = dict(self.gains)
         self._design_answers.append(dict(self.gains))
         return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
 
