@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -28,10 +27,10 @@ def allowed_modes(profile: AutopilotProfile, safety: SafetyConfig) -> tuple[str,
 
 def preflight_problem(
     st: VehicleState, heartbeat_age_s: float, profile: AutopilotProfile, safety: SafetyConfig, in_control: bool,
-    position_age_s: float | None = None,
+    position_age_s: float | None,
 ) -> str | None:
     """Why this vehicle must not be tuned now (one line), or None when it is armed, airborne and in a fit mode;
-    `position_age_s`: how long the last position has been listened for (default: the wall time since it came)."""
+    `position_age_s`: how long the ground station has listened since the last position (None before the first)."""
     if heartbeat_age_s > safety.heartbeat_timeout_s:
         return f"no HEARTBEAT for {heartbeat_age_s:.1f} s"
     if safety.require_armed and not st.armed:
@@ -40,8 +39,6 @@ def preflight_problem(
         return f"not airborne (landed state {st.landed_state})"
     if st.position is None:
         return "no LOCAL_POSITION_NED received"
-    if position_age_s is None:
-        position_age_s = time.monotonic() - st.position.wall_s
     if position_age_s > safety.position_timeout_s:
         return f"no LOCAL_POSITION_NED for {position_age_s:.1f} s"
     altitude = -st.position.z_m

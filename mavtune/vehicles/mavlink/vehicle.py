@@ -183,7 +183,6 @@ class MavlinkVehicle:
             st, self.link.heartbeat_age_s(), self.profile, self.config.safety, self._in_control,
             None if st.position is None else self.link.listened_since(st.position.wall_s))
         if problem is None and self.config.altitude_source == "distance_sensor":
-            st = self.link.snapshot()
             what = "a downward rangefinder (DISTANCE_SENSOR, orientation PITCH_270)"
             if st.distance_t_s is None:
                 return f"no reading from {what}; altitude_source = \"distance_sensor\" needs one"
