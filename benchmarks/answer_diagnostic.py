@@ -46,6 +46,15 @@ from zoo.truth import WITHIN_PCT, Truth, key  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 CACHE = HERE / ".cache" / "answer"
+VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options), each on the runs' own flights
+    "the quadratic alone (no cubic)": {"cubic_level": 0.0},
+    "cubic at the 1 % level": {"cubic_level": 0.01},
+    "log-cost fit": {"log": True},
+    "weights flights / cost^3": {"power": 3.0},
+    "weights flights / cost^4": {"power": 4.0},
+    "kernel reach 1.5 half-widths": {"reach": 1.5},
+    "kernel reach 3 half-widths": {"reach": 3.0},
+}
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from the whole box (BUDGET_TUNING)"]
 
@@ -178,6 +187,39 @@ def summary(scores: list[dict[str, Any]]) -> dict[str, Any]:
             "fly_away_answers": sum(1 for s in scores if s["answer_fly_away"] > 0)}
 
 
+def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) -> list[dict[str, Any]]:
+    """Each run's last surface answer again, with the fit's `options`, on the same flights, judged on the truth
+    (exact for a configuration with one design, whose answer flies nothing after it; with more designs only
+    the last is replayed, the earlier ones' answers having chosen what was flown after them)."""
+    from mavtune.search import surface
+    from mavtune.search.evidence import NoisePool
+
+    out = []
+    for row in rows:
+        x = row["x"]
+        if row["surface_calls"]:
+            c = row["surface_calls"][-1]
+            points = costs_of(c["points"])
+            pool = NoisePool.prior(c["cv"], c["dof"]) if c["cv"] is not None and math.isfinite(c["cv"]) else None
+            x = list(surface.answer(points, [tuple(b) for b in c["box"]], surface.ruled_out(points, pool or
+                                                                                             NoisePool()), pool,
+                                    **options)[0])
+        out.append({"plant": row["plant"], "run": row["run"], "x": x})
+    judged(t, [tuple(r["x"]) for r in out], pm)
+    for r in out:
+        r["excess_pct"], r["fly_away"] = t.excess(r["x"])[0], t.fly_away(r["x"])
+    return out
+
+
+def replay_summary(base: list[dict[str, Any]], rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """A variant against the answer as flown: within 2 %, median excess, the paired sign test, fly-aways."""
+    from zoo.stats import sign_test
+
+    e = np.array([r["excess_pct"] for r in rows])
+    return {"within": float(np.mean(e <= WITHIN_PCT)), "median_excess_pct": float(np.median(e)),
+            "fly_away_answers": sum(1 for r in rows if r["fly_away"] > 0), "vs_flown": sign_test(rows, base)}
+
+
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["meta"]
     lines = ["# Whose fault is a bad answer: the flights or the answer? (issue 20)", "",
@@ -204,6 +246,27 @@ def markdown(doc: dict[str, Any]) -> str:
                          f"{s['median_answer_pct']:.2f} / {s['median_best_flown_pct']:.2f} / "
                          f"{s['median_best_in_box_pct']:.2f} / {s['median_lowest_mean_pct']:.2f} | "
                          f"{s['fly_away_answers']} |")
+    if doc.get("replay"):
+        names = list(next(iter(next(iter(doc["replay"].values())).values())))
+        lines += ["", "## The surface fit's variants replayed on the same flights", "",
+                  "Each run's last response-surface answer recomputed with `surface.answer`'s options on the run's "
+                  "own flights (exact for the default, whose one design's answer flies nothing after it; for "
+                  "BUDGET_TUNING only the last of its three designs is replayed). Per cell: within 2 % (median "
+                  "excess %), and the paired sign test against the answer as flown: runs better–worse (p).", "",
+                  "| plant | configuration | as flown | " + " | ".join(names) + " |",
+                  "| --- | --- | --- | " + " | ".join("---" for _ in names) + " |"]
+        for p, per in doc["replay"].items():
+            for lb, variants in per.items():
+                s = doc["table"][p][lb]
+                cells = []
+                for n in names:
+                    v = variants[n]
+                    st = v["vs_flown"]
+                    fa = f", {v['fly_away_answers']} fly-away" if v["fly_away_answers"] else ""
+                    cells.append(f"{v['within']:.0%} ({v['median_excess_pct']:.2f}) {st['a_better']}–"
+                                 f"{st['b_better']} (p {st['p']:.2g}){fa}")
+                lines.append(f"| {p} | {lb} | {s['answer_within']:.0%} ({s['median_answer_pct']:.2f}) | "
+                             + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -216,6 +279,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     ap.add_argument("--out", type=Path, default=HERE / "results")
     ap.add_argument("--name", default="answer_diagnostic", help="results file name (markdown + json)")
+    ap.add_argument("--replay", action="store_true", help="also replay each run's last surface answer with the "
+                    "fit's variants (VARIANTS) on the same flights")
     args = ap.parse_args(argv)
     plants = [p.strip() for p in args.plants.split(",") if p.strip()]
     unknown = [p for p in plants if p not in PLANTS]
@@ -237,6 +302,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     pm = (lambda fn, *a: list(map(fn, *a))) if ex is None else (lambda fn, *a: list(ex.map(fn, *a)))
     table: dict[str, dict[str, Any]] = {}
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    replays: dict[str, dict[str, dict[str, Any]]] = {}
     try:
         for p in plants:
             t = truth_for(p)
@@ -254,6 +320,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             judged(t, points, pm)
             runs[p] = {lb: [score(t, r) for r in rs] for lb, rs in rows.items()}
             table[p] = {lb: summary(sc) for lb, sc in runs[p].items()}
+            if args.replay:
+                flown = {lb: [{"plant": p, "run": sc["run"], "excess_pct": sc["answer_excess_pct"]} for sc in scs]
+                         for lb, scs in runs[p].items()}
+                replays[p] = {lb: {n: replay_summary(flown[lb], replay(t, rs, o, pm)) for n, o in VARIANTS.items()}
+                              for lb, rs in rows.items()}
             for lb, s in table[p].items():
                 _progress(f"{p} / {lb}: answer {s['answer_within']:.0%}, flown {s['flown_within']:.0%}, "
                           f"missed {s['answer_missed']:.0%}")
@@ -265,7 +336,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "engine": engine, "started_utc": started.isoformat(timespec="seconds"),
         "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "cpu_model": cpu_model(),
         "cpus": os.cpu_count(), "workers": args.workers, "load_start": load0, "load_end": os.getloadavg()},
-        "table": table, "runs": runs}
+        "table": table, "runs": runs, "replay": replays}
     args.out.mkdir(parents=True, exist_ok=True)
     text = json.dumps(_clean(doc), indent=1)
     (args.out / f"{args.name}.json").write_text(text)
