@@ -276,8 +276,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         return u if ok else best
 
     u = lowest(value, slope)
-    skewed = cubic(x, y, w * np.maximum(np.abs(y), 1e-6) ** 2 if not log else w,
-                   pool.cv if pool is not None else math.nan, cubic_level)
+    skewed = None if log else cubic(x, y, w * np.maximum(np.abs(y), 1e-6) ** power,  # (flights x kernel)
+                                    pool.cv if pool is not None else math.nan, cubic_level)
     if skewed is not None:  # the flights reject the quadratic: the cubic's minimum, where it lies inside the box
         v = lowest(skewed, None)  # (on a face the cubic terms extrapolate: a cubic falls away towards one side)
         if np.all(np.abs(v) < 1.0 - 1e-6):
