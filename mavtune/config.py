@@ -45,13 +45,14 @@ BUDGET_TUNING: dict[str, Any] = {  # a fixed budget of flights, exact before tak
 """No passes over the gains: three response-surface designs, the first a map of the whole box (its corners, face
 centres, centre and the corners of the box half as wide, each point flown once), each next one around the fit's
 answer and half as wide once it surrounds that answer; 50 flights for 2 gains on 2 vehicles (13 + 18 + 18 and a
-spare), 94 for 4 gains, exact before take-off. Chosen on the zoo's selection half (benchmarks/results/selection_fly.md,
-10 even runs a plant): mean 53.7 flights (worst 94) against the default's 121 (worst 262); better than CMA-ES
-(82 runs to 38) and TPE (73 to 47) at the same flights; over the zoo 67 runs better than the default and 52 worse
-(a tie, p 0.2), significantly better on the corner box and significantly worse on 60 ms more latency, where its
-flights hold a point within 2 % of the optimum that the fit's answer misses. The first such preset (the whole box's
-3^d design, each point by both vehicles, shrink 0.4: 54 flights) lost to it on gusts (10 runs of 10) and the valley
-(9 of 10) and beat it in none."""
+spare), 94 for 4 gains, exact before take-off: mean 53.7 flights over the zoo (worst 94) against the default's 121
+(worst 262). Chosen on the zoo's selection half (benchmarks/results/selection_fly.md, 10 even runs a plant): better
+than CMA-ES (82 runs to 38) and TPE (73 to 47) at the same flights, a tie with the default (67 to 52), significantly
+worse than it on 60 ms more latency (1 to 9; its flights hold a point within 2 % of the optimum there that the
+fitted answer misses). Reported on the odd runs (quality_fly.md, 40 a plant): better than the default over the zoo
+(263 to 213, p 0.025) but significantly worse on 4 gains (7 to 33), better than CMA-ES (337 to 143) and TPE (286 to
+194). The first such preset (the whole box's 3^d design first, each point by both vehicles, shrink 0.4: 54 flights)
+lost to it on gusts (39 runs to 1), the valley and 4 gains and beat it on no plant."""
 
 
 GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
@@ -98,8 +99,8 @@ class Tuning(_Section):
     of its quality. This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options
     both take it (`settings()`). `PAPER_TUNING` restores the paper's exact setting. `BUDGET_TUNING` is a fixed
     budget (no passes, three designs from a map of the whole box: 50 flights for 2 gains, exact before take-off),
-    measured in benchmarks/results/selection_fly.md; not the default (significantly worse on one zoo plant, 60 ms
-    more latency, on 10 selection runs).
+    measured in benchmarks/results/selection_fly.md and quality_fly.md; not the default (significantly worse than it
+    on one zoo plant of each half: 60 ms more latency on the selection runs, 4 gains on the report runs).
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
