@@ -292,9 +292,19 @@ def crazyflow_fly(x, seeds, rounds):
     """Crazyflow 0.4 (its default Crazyflie, first-principles dynamics, Mellinger state controller at 100 Hz)
     tracking mavtune's climbing circle (2 m diameter, 1 m climb) with OU gust forces; the z gains (kp, kd) of
     its state controller over CF_BOX; cost: IAE of z over the primitive, a flight leaving by 2 m diverged."""
+    return _crazyflow(x, seeds, rounds, {}, 0.0)
+
+
+def crazyflow_variant(changes: dict[str, Any], payload_n: float):
+    """Crazyflow as `crazyflow_fly` on Scenario(**changes)'s primitive, with a constant downward force `payload_n`
+    (N) the controller does not know: an unknown payload's weight (its inertia left out)."""
+    return lambda x, seeds, rounds: _crazyflow(x, seeds, rounds, changes, payload_n)
+
+
+def _crazyflow(x, seeds, rounds, changes: dict[str, Any], payload_n: float):
     from mavtune.sim import batch
 
-    sc = _scenario({})
+    sc = _scenario(changes)
     ref = batch.reference_for(sc)
     settle = batch.settle_steps(sc)
     steps, n = ref.shape[0], len(seeds)
@@ -305,6 +315,8 @@ def crazyflow_fly(x, seeds, rounds):
     cmd[:, :, 0, 12] = 1.0
     gust = np.zeros((steps * up, size, 3), dtype=np.float32)
     gust[:, :n] = np.repeat(_gusts(seeds, rounds, steps, 0.01), up, axis=0)
+    if payload_n:
+        gust[:, :n, 2] -= np.float32(payload_n)
     kp = np.full(size, 1.25, dtype=np.float32)
     kd = np.full(size, 0.5, dtype=np.float32)
     kp[:n] = CF_BOX["kp"][0] + x[:, 0] * (CF_BOX["kp"][1] - CF_BOX["kp"][0])
@@ -439,10 +451,11 @@ PLANTS = _plants()
 # ----- the unseen set: plants the defaults were never chosen on ---------------------------------------------------
 
 HEAVY_LIFT = {"mass_kg": 3.0, "motor_tau_s": 0.06, "drag_scale": 1.5}
-"""A heavy-lift hexarotor on the F550's rotors and arms: 3.5 kg (thrust/weight 1.75 instead of 2.66), larger slower
-propellers (rotor lag 75 ms instead of 30), a bigger frame's drag."""
+"""A heavy-lift hexarotor on the F550's rotors and arms: 3 kg (thrust/weight 2.05 instead of 2.67), larger slower
+propellers (rotor lag 60 ms instead of 30), a bigger frame's drag."""
 LIGHT = {"mass_kg": 1.4, "motor_tau_s": 0.015, "drag_scale": 2.5}
 """A light frame on the same rotors: 1.4 kg (thrust/weight 4.4), quick small motors (15 ms), a camera fairing's drag."""
+CF_PAYLOAD_N = 0.006 * 9.81  # a 6 g payload's weight on the Crazyflie (0.29 N), N
 PX4_STOCK_HOVER_PAYLOAD_KG = 0.46  # 20 % of 2.3 kg the mass estimate does not know: the integrator carries it
 
 
@@ -450,7 +463,7 @@ def _unseen() -> dict[str, Plant]:
     """Plants of other kinds than the zoo's, never used to choose anything (`quality.py --zoo unseen`)."""
     inner = ("kp", "kd", "ki")
     out = [
-        Plant("unseen sim heavy-lift figure-8", "3.5 kg heavy-lift airframe (thrust/weight 1.75), 75 ms rotor lag, "
+        Plant("unseen sim heavy-lift figure-8", "3 kg heavy-lift airframe (thrust/weight 2.05), 60 ms rotor lag, "
               "1.5x drag, known to the controller, flying the figure-8: saturation and lag cap the gains",
               ("kp", "kd"), sim_fly({"primitive": "figure8"}, FULL, HEAVY_LIFT), _sim_units(FULL)),
         Plant("unseen sim light step", "1.4 kg light frame (thrust/weight 4.4), 15 ms rotor lag, 2.5x drag, known "
@@ -465,6 +478,10 @@ def _unseen() -> dict[str, Plant]:
               "MAVLink fleet's balanced cost (IAE + motor activity + oscillation)", inner,
               px4_cascade_fly(inner, {"payload_kg": PX4_STOCK_HOVER_PAYLOAD_KG}, "balanced"), px4_units(inner),
               judge_cap=128, chunk=256),
+        Plant("unseen crazyflow payload figure-8", "Crazyflow's Crazyflie with a 6 g payload (20 % of its 30 g) "
+              "its Mellinger controller does not know (its weight as a constant force), flying the figure-8 "
+              "with the zoo's OU gusts", ("kp", "kd"), crazyflow_variant({"primitive": "figure8"}, CF_PAYLOAD_N),
+              {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()}, judge_cap=128, chunk=1024),
         Plant("unseen analytic banana", "Rosenbrock-like curved valley (the floor bends through the box), "
               "multiplicative lognormal noise 10 %", ("kp", "kd"), banana_fly),
         Plant("unseen analytic cliff", "bowl whose minimum lies beyond a divergence cliff that moves with each "
