@@ -21,7 +21,8 @@ def test_the_unseen_set_is_apart_from_the_zoo():
         assert set(plant.units) <= set(plant.gains)
 
 
-@pytest.mark.parametrize("name", list(UNSEEN))
+# Crazyflow compiles its JAX program first (~15 s): slow
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if "crazyflow" in n else n for n in UNSEEN])
 def test_an_unseen_plant_is_deterministic_per_seed_and_round(name):
     plant = UNSEEN[name]
     d = len(plant.gains)
