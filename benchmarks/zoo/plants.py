@@ -4,14 +4,14 @@ vehicle, wind and noise at every gain vector (common random numbers for the trut
 
 - sim plants: mavtune's simulator (`mavtune.sim.batch.fly`) at a condition, over a box of its normalised gains;
 - mavsim PX4 / ArduPilot: the plant and controller code behind `mavtune mavsim`, in-process (no MAVLink):
-  PX4's cascade as mavsim maps it onto the simulator (k_x = MPC_Z_P · MPC_Z_VEL_P_ACC, k_v = MPC_Z_VEL_P_ACC),
+  PX4's altitude cascade (`mavsim.cascade.Px4Altitude`: MPC_Z_P into the MPC_Z_VEL_*_ACC PID) and
   ArduCopter's AC_PosControl up-axis cascade (`mavsim.cascade.ArduCopterAltitude`) driving `mavtune.sim.Plant`;
   the gain ranges are the MAVLink fleet's defaults (`vehicles.mavlink.config.DEFAULT_GAINS`);
 - Crazyflow: the Mellinger state controller's z gains of a Crazyflie on the climbing circle, gusts as a force;
 - analytic costs: asymmetric valleys, heteroscedastic noise, an edge optimum and 4 gains.
 
 PLANTS is the zoo the defaults are chosen on; UNSEEN are plants of other kinds that nothing is chosen on (other
-airframes and primitives, PX4's cascade as mavsim flies it today with 2 and 3 gains, a Crazyflie with a payload, a
+airframes and primitives, PX4's cascade with 3 gains and a payload picked up in flight, a Crazyflie with a payload, a
 banana valley, a divergence cliff: `quality.py --zoo unseen`); ALL_PLANTS finds either by name.
 """
 
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
@@ -98,22 +98,6 @@ def _airframe_constants(cp: np.ndarray, airframe: dict[str, float]) -> np.ndarra
     cp[K.C_E_HALF] = math.exp(-0.5 * DT_S / airframe.get("motor_tau_s", af.MOTOR_TAU_S))
     cp[K.C_DRAG] *= airframe.get("drag_scale", 1.0)
     return cp
-
-
-def px4_fly(x, seeds, rounds):
-    """mavsim's PX4 flavour: the simulator's SO(3) altitude loop with k_x = MPC_Z_P · MPC_Z_VEL_P_ACC and
-    k_v = MPC_Z_VEL_P_ACC (mavsim server._apply_gains), the gains over DEFAULT_GAINS' PX4 ranges."""
-    from mavtune.sim import batch
-    from mavtune.sim import kernel as K
-    from mavtune.vehicles.mavlink.config import DEFAULT_GAINS
-    from mavtune.vehicles.mavlink.profiles import Autopilot
-
-    g = DEFAULT_GAINS[Autopilot.PX4]
-    pos_p = g["kp"].min + x[:, 0] * (g["kp"].max - g["kp"].min)
-    vel_p = g["kd"].min + x[:, 1] * (g["kd"].max - g["kd"].min)
-    sc = _scenario({})
-    res = batch.fly(sc, pos_p * vel_p, vel_p, np.asarray(seeds, dtype=np.int64), np.asarray(rounds, dtype=np.int64))
-    return res.cost(sc.cost), res.status != K.OK
 
 
 def ardupilot_fly(x, seeds, rounds):
@@ -417,12 +401,11 @@ def _sim_units(box) -> dict[str, tuple[str, float, float]]:
 
 PX4_CASCADE = Plant(
     "mavsim PX4 cascade", "PX4's cascade as mavsim flies it today (Px4Altitude: MPC_Z_P into the MPC_Z_VEL_P/I/D_ACC "
-    "PID, velocity limits, anti-windup; I 2, D 0), MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15], IAE: the zoo's "
-    "'mavsim PX4' corrected", ("kp", "kd"), px4_cascade_fly(("kp", "kd"), {}), px4_units(("kp", "kd")),
+    "PID, velocity limits, anti-windup; I 2, D 0), MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15], IAE", ("kp", "kd"), px4_cascade_fly(("kp", "kd"), {}), px4_units(("kp", "kd")),
     judge_cap=128, chunk=256)
-"""The zoo's "mavsim PX4" as mavsim flies PX4 today (that plant still flies the old PD cascade k_x = MPC_Z_P ·
-MPC_Z_VEL_P_ACC, k_v = MPC_Z_VEL_P_ACC); in the unseen set until the zoo switches to it (another name, so that no
-cached truth or run of the old plant is taken for it)."""
+"""PX4's altitude cascade as mavsim flies it (replaced the zoo's "mavsim PX4", the old PD mapping k_x = MPC_Z_P ·
+MPC_Z_VEL_P_ACC, k_v = MPC_Z_VEL_P_ACC, on 2026-11-25; another name, so no cached truth or run of the old plant is
+taken for it)."""
 
 
 def _plants() -> dict[str, Plant]:
@@ -442,8 +425,7 @@ def _plants() -> dict[str, Plant]:
               ("kp", "kd"), sim_fly({}, edge_box), _sim_units(edge_box)),
         Plant("sim corner box", "nominal, box kp [0, 0.3] x kd [0, 0.4]: the optimum in the corner", ("kp", "kd"),
               sim_fly({}, corner_box), _sim_units(corner_box)),
-        Plant("mavsim PX4", "PX4 cascade as mavsim flies it, MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15]",
-              ("kp", "kd"), px4_fly, {"kp": ("MPC_Z_P", 0.1, 1.5), "kd": ("MPC_Z_VEL_P_ACC", 2.0, 15.0)}),
+        PX4_CASCADE,
         Plant("analytic valley", "curved asymmetric valley, heteroscedastic noise", ("kp", "kd"), valley_fly),
         Plant("analytic edge", "optimum on the kp edge, asymmetric kd valley, heteroscedastic noise", ("kp", "kd"),
               edge_fly),
@@ -483,7 +465,6 @@ def _unseen() -> dict[str, Plant]:
         Plant("unseen sim light step", "1.4 kg light frame (thrust/weight 4.4), 15 ms rotor lag, 2.5x drag, known "
               "to the controller, flying a 1 m step: the step's transient, not the circle's tracking, sets the cost",
               ("kp", "kd"), sim_fly({"primitive": "step"}, FULL, LIGHT), _sim_units(FULL)),
-        replace(PX4_CASCADE, name="unseen mavsim PX4 cascade"),
         Plant("unseen mavsim PX4 PID payload", "PX4's cascade, 3 gains MPC_Z_P x MPC_Z_VEL_P_ACC x MPC_Z_VEL_I_ACC "
               "[0.2, 3], a 0.46 kg (20 %) payload picked up as the settle hover starts (hover thrust and integrator "
               "start without it: MPC_Z_VEL_I_ACC must take it up within the flight), the MAVLink fleet's balanced "
