@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from zoo.plants import PLANTS, Plant
+from zoo.plants import ALL_PLANTS, Plant
 
 TUNE_SEED = 10_000
 SEED_STRIDE = 100
@@ -92,7 +92,7 @@ def tune_run(plant_name: str, method: Method, run: int) -> dict[str, Any]:
     """One mavtune tuning of a plant: the answer, flights, its interval per gain, the plan's expectation."""
     from mavtune.tuner import run_tuning
 
-    plant = PLANTS[plant_name]
+    plant = ALL_PLANTS[plant_name]
     cpu = time.process_time()
     settings = method.settings(plant, run)
     fleet = ZooFleet(plant, settings.vehicles, tune_seed(run))
@@ -107,7 +107,7 @@ def tune_run(plant_name: str, method: Method, run: int) -> dict[str, Any]:
 def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str, Any]:
     """CMA-ES or TPE on run `run`'s vehicles, PEER_VEHICLES points a round, until `budget` flights; its answer
     (TPE: the best trial; CMA-ES: its final mean, the estimate of the optimum under noise)."""
-    plant = PLANTS[plant_name]
+    plant = ALL_PLANTS[plant_name]
     cpu = time.process_time()
     d = len(plant.gains)
     fleet = ZooFleet(plant, PEER_VEHICLES, tune_seed(run))
