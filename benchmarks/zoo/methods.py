@@ -154,6 +154,7 @@ def candidates() -> list[Method]:
 
     fixed = {"adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
     designs = {k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}  # no passes: 3 designs, exact plan
+    first = {**designs, "design_inner": False, "design_shrink": 0.4}  # the first BUDGET_TUNING: the 3^d box first
     return [
         Method("default (config.Tuning())"),
         Method("previous default (no design)", {"design": False}),
@@ -161,9 +162,11 @@ def candidates() -> list[Method]:
         Method("design ±0.1", {"design_width": 0.1}),
         Method("fixed budget: 1 pass, not adaptive, 3 designs", {**fixed, "design_steps": 3}),
         Method("valley answer, directions, no design", {"answer": "valley", "directions": True, "design": False}),
-        Method("fixed budget: 3 designs from the whole box (BUDGET_TUNING)", designs),
-        Method("3 designs from the whole box shrink 0.5", {**designs, "design_shrink": 0.5}),
-        Method("3 designs from the whole box shrink 0.3", {**designs, "design_shrink": 0.3}),
+        Method("fixed budget: 3 designs from a map of the box (BUDGET_TUNING)", designs),
+        Method("3 designs from the whole box (the first BUDGET_TUNING)", first),
+        Method("3 designs from the whole box shrink 0.5", {**first, "design_shrink": 0.5}),
+        Method("3 designs from the whole box shrink 0.3", {**first, "design_shrink": 0.3}),
+        Method("3 designs: the first with inner corners (shrink 0.4)", {**designs, "design_shrink": 0.4}),
     ]
 
 
