@@ -281,13 +281,30 @@ def markdown(doc: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _labels(text: str, known: list[str]) -> set[str] | str:
+    """The labels a comma-separated `text` names (labels may hold commas: the longest known label wins), or the
+    first piece that names none."""
+    pieces, want, i = [p.strip() for p in text.split(",")], set(), 0
+    while i < len(pieces):
+        j = next((j for j in range(len(pieces), i, -1) if ", ".join(pieces[i:j]) in known), None)
+        if j is None:
+            if pieces[i]:
+                return pieces[i]
+            i += 1
+            continue
+        want.add(", ".join(pieces[i:j]))
+        i = j
+    return want
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--half", choices=("select", "report"), default="report",
                     help="select: even runs, choose the default; report: odd runs, report the chosen default")
     ap.add_argument("--runs", type=int, default=None, help="runs per plant and method (default 40; quick 2)")
     ap.add_argument("--plants", default="", help="comma-separated plant names (default: the whole zoo)")
-    ap.add_argument("--methods", default="", help="comma-separated method labels (default: all)")
+    ap.add_argument("--methods", default="", help="comma-separated method labels (default: all); a label that "
+                    "holds a comma is taken whole")
     ap.add_argument("--default", default=None, help="label of the method to report as the default (default: the "
                     "first candidate, config.Tuning(): what ships, whatever the selection chose)")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes (1: in-process)")
@@ -310,12 +327,16 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         ap.error(f"unknown plant(s) {unknown}; the {args.zoo} set: {', '.join(zoo)}")
     methods = candidates() + ([] if args.no_peers else PEERS)
     if args.methods:
-        want = {s.strip() for s in args.methods.split(",")}
+        want = _labels(args.methods, [m.label for m in methods])
+        if isinstance(want, str):
+            ap.error(f"--methods: no method labelled {want!r}; the methods: {'; '.join(m.label for m in methods)}")
         methods = [m for m in methods if m.label in want or m.peer]
+    if args.default is not None and args.default not in {m.label for m in methods}:
+        ap.error(f"--default {args.default!r} is not among the methods run: {'; '.join(m.label for m in methods)}")
     seeds = [2 * i + (0 if args.half == "select" else 1) for i in range(runs_n)]
     sel_path = args.out / "selection.json"
     by_label = {m.label: m for m in methods}
-    default = by_label.get(args.default) or methods[0]  # what ships (config.Tuning()) unless told otherwise
+    default = by_label[args.default] if args.default else methods[0]  # what ships (config.Tuning()) unless told otherwise
     started, wall0, load0 = datetime.now(timezone.utc), time.perf_counter(), os.getloadavg()
     engine, commit = engine_hash(), _git_commit()  # what flies: the code at the start
     runs = Runs(None if args.quick else CACHE / "runs.jsonl")
