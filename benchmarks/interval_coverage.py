@@ -39,7 +39,7 @@ from zoo.plants import PLANTS  # noqa: E402
 from zoo.stats import wilson  # noqa: E402
 from zoo.truth import Truth  # noqa: E402
 
-SLOW = ("mavsim PX4", "mavsim ArduPilot", "crazyflow")
+SLOW = ("mavsim PX4 cascade", "mavsim ArduPilot", "crazyflow")
 DEFAULT = Method("default (config.Tuning())")
 
 

@@ -12,6 +12,7 @@ reports config.Tuning() (what ships) unless --default names another, and says wh
     python benchmarks/quality.py --half select --runs 20 [--plants ...] [--workers 2]
     python benchmarks/quality.py --half report --runs 40 [--workers 2]
     python benchmarks/quality.py --quick            # a smoke run: 2 plants, tiny truth, 2 runs
+    python benchmarks/quality.py --zoo unseen --half report --runs 40   # plants never chosen on: quality_unseen.*
 
 Everything flown is cached (benchmarks/.cache/zoo: truth flights per plant, every run keyed by plant,
 configuration, run and a hash of mavtune's source), so an interrupted run resumes and a rerun re-scores.
@@ -44,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model  # noqa: E402
 from zoo import stats  # noqa: E402
 from zoo.methods import PEERS, Method, candidates, peer_run, tune_run  # noqa: E402
-from zoo.plants import PLANTS  # noqa: E402
+from zoo.plants import ALL_PLANTS, PLANTS, UNSEEN  # noqa: E402
 from zoo.truth import Truth  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -150,7 +151,7 @@ def evaluate(plants: list[str], methods: list[Method], seeds: list[int], sizes: 
         fly_runs(ex, runs, [(p, m, s, None) for m in mavtune_methods for s in seeds], engine)
         rows[p] = {}
         for m in mavtune_methods:
-            expected = make_plan(m.settings(PLANTS[p], 0)).flights
+            expected = make_plan(m.settings(ALL_PLANTS[p], 0)).flights
             rows[p][m.label] = [{**runs.rows[Runs.key(p, m, s, None, engine)], "expected_flights": expected}
                                 for s in seeds]
         budgets = {s: r["flights"] for r, s in zip(rows[p][default.label], seeds)} if peers else {}
@@ -164,10 +165,10 @@ def evaluate(plants: list[str], methods: list[Method], seeds: list[int], sizes: 
             for r in rs:
                 r["excess_pct"], r["excess_se_pct"], r["judge_repeats"] = t.excess(r["x"])
                 r["fly_away"] = t.fly_away(r["x"])
-        table[p] = {lb: stats.summarise(rs, list(t.optimum), PLANTS[p].gains) for lb, rs in rows[p].items()}
+        table[p] = {lb: stats.summarise(rs, list(t.optimum), ALL_PLANTS[p].gains) for lb, rs in rows[p].items()}
         truth_info[p] = {**t.info, "cpu_s": t.cpu_s, "flights": int(sum(c.size for c in t.costs.values())),
-                         "gains": list(PLANTS[p].gains), "units": PLANTS[p].units,
-                         "description": PLANTS[p].description}
+                         "gains": list(ALL_PLANTS[p].gains), "units": ALL_PLANTS[p].units,
+                         "description": ALL_PLANTS[p].description}
         d = table[p][default.label]
         _progress(f"{p}: default within 2 % {d['within']:.0%}, flights {d['flights_mean']:.0f}, coverage "
                   f"{d['coverage']}, fly-away answers {d['fly_away_answers']}")
@@ -218,7 +219,8 @@ def _width(s: dict[str, Any]) -> str:
 
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["meta"]
-    lines = [f"# Quality of the tuned gains on the plant zoo (issue 20) — {m['half']} half", "",
+    lines = [f"# Quality of the tuned gains on the {'unseen plants (never chosen on)' if m.get('zoo') == 'unseen' else 'plant zoo'}"
+             f" (issue 20) — {m['half']} half", "",
              f"Command: `{m['command']}` at commit `{m['commit']}` (mavtune source hash `{m['engine']}`), "
              f"{m['started_utc']} to {m['finished_utc']}; machine: {m['cpu_model']}, {m['cpus']} cores shared with "
              f"other jobs, {m['workers']} worker processes; load average {m['load_start'][0]:.2f} at the start, "
@@ -279,13 +281,30 @@ def markdown(doc: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _labels(text: str, known: list[str]) -> set[str] | str:
+    """The labels a comma-separated `text` names (labels may hold commas: the longest known label wins), or the
+    first piece that names none."""
+    pieces, want, i = [p.strip() for p in text.split(",")], set(), 0
+    while i < len(pieces):
+        j = next((j for j in range(len(pieces), i, -1) if ", ".join(pieces[i:j]) in known), None)
+        if j is None:
+            if pieces[i]:
+                return pieces[i]
+            i += 1
+            continue
+        want.add(", ".join(pieces[i:j]))
+        i = j
+    return want
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--half", choices=("select", "report"), default="report",
                     help="select: even runs, choose the default; report: odd runs, report the chosen default")
     ap.add_argument("--runs", type=int, default=None, help="runs per plant and method (default 40; quick 2)")
     ap.add_argument("--plants", default="", help="comma-separated plant names (default: the whole zoo)")
-    ap.add_argument("--methods", default="", help="comma-separated method labels (default: all)")
+    ap.add_argument("--methods", default="", help="comma-separated method labels (default: all); a label that "
+                    "holds a comma is taken whole")
     ap.add_argument("--default", default=None, help="label of the method to report as the default (default: the "
                     "first candidate, config.Tuning(): what ships, whatever the selection chose)")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes (1: in-process)")
@@ -293,22 +312,31 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                     "configurations only)")
     ap.add_argument("--quick", action="store_true", help="a smoke run: 2 plants, tiny truth, 2 runs, no cache")
     ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--zoo", choices=("zoo", "unseen"), default="zoo", help="the plants: the zoo the defaults are "
+                    "chosen on, or the unseen set they never were (report only; writes quality_unseen.*)")
     args = ap.parse_args(argv)
+    if args.zoo == "unseen" and args.half == "select":
+        ap.error("--zoo unseen: nothing is chosen on the unseen plants; use --half report")
+    zoo = PLANTS if args.zoo == "zoo" else UNSEEN
     runs_n = args.runs if args.runs is not None else (2 if args.quick else 40)
     sizes = QUICK if args.quick else FULL
     plants = [p.strip() for p in args.plants.split(",") if p.strip()] or (
-        ["sim nominal", "analytic valley"] if args.quick else list(PLANTS))
-    unknown = [p for p in plants if p not in PLANTS]
+        ["sim nominal", "analytic valley"] if args.quick and args.zoo == "zoo" else list(zoo))
+    unknown = [p for p in plants if p not in zoo]
     if unknown:
-        ap.error(f"unknown plant(s) {unknown}; the zoo: {', '.join(PLANTS)}")
+        ap.error(f"unknown plant(s) {unknown}; the {args.zoo} set: {', '.join(zoo)}")
     methods = candidates() + ([] if args.no_peers else PEERS)
     if args.methods:
-        want = {s.strip() for s in args.methods.split(",")}
+        want = _labels(args.methods, [m.label for m in methods])
+        if isinstance(want, str):
+            ap.error(f"--methods: no method labelled {want!r}; the methods: {'; '.join(m.label for m in methods)}")
         methods = [m for m in methods if m.label in want or m.peer]
+    if args.default is not None and args.default not in {m.label for m in methods}:
+        ap.error(f"--default {args.default!r} is not among the methods run: {'; '.join(m.label for m in methods)}")
     seeds = [2 * i + (0 if args.half == "select" else 1) for i in range(runs_n)]
     sel_path = args.out / "selection.json"
     by_label = {m.label: m for m in methods}
-    default = by_label.get(args.default) or methods[0]  # what ships (config.Tuning()) unless told otherwise
+    default = by_label[args.default] if args.default else methods[0]  # what ships (config.Tuning()) unless told otherwise
     started, wall0, load0 = datetime.now(timezone.utc), time.perf_counter(), os.getloadavg()
     engine, commit = engine_hash(), _git_commit()  # what flies: the code at the start
     runs = Runs(None if args.quick else CACHE / "runs.jsonl")
@@ -335,7 +363,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     doc["paired"] = paired_tests(res["rows"], default.label, [lb for lb in labels if lb != default.label])
     doc["goals"] = stats.goals(res["table"], default.label, doc["paired"])
     doc["meta"] = {"command": "python benchmarks/quality.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-                   "half": args.half, "started_utc": started.isoformat(timespec="seconds"),
+                   "half": args.half, "zoo": args.zoo, "started_utc": started.isoformat(timespec="seconds"),
                    "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                    "commit": commit, "engine": engine, "cpu_model": cpu_model(), "cpus": os.cpu_count(),
                    "workers": args.workers, "load_start": load0, "load_end": os.getloadavg(),
@@ -343,7 +371,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                    "python": platform.python_version()}
     doc |= {"truth": res["truth"], "table": res["table"], "runs": res["rows"]}
     args.out.mkdir(parents=True, exist_ok=True)
-    name = "selection" if args.half == "select" else "quality"
+    name = ("selection" if args.half == "select" else "quality") + ("" if args.zoo == "zoo" else "_unseen")
     text = json.dumps(_clean(doc), indent=1)
     (args.out / f"{name}.json").write_text(text)
     (args.out / f"{name}.md").write_text(markdown(json.loads(text)))

@@ -40,14 +40,22 @@ PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`
 
 
 BUDGET_TUNING: dict[str, Any] = {  # a fixed budget of flights, exact before take-off (issue 20; not the default)
-    "tuning.bootstraps": 0, "tuning.design_width": 0.5, "tuning.design_steps": 3, "tuning.design_shrink": 0.4,
-    "tuning.design_split": "auto"}
-"""No passes over the gains: three response-surface designs, the first over the whole box, each next one around the
-fit's answer and 0.4 times as wide once it surrounds that answer; 54 flights for 2 gains on 2 vehicles, 78 for 4
-gains (each point of their 25-point designs flown once). Measured on the zoo's selection half
-(benchmarks/results/selection_budget.md) and reported on the other half (quality_budget.md): mean 56 flights
-(worst 78) against the default's 121 (worst 262), tied with the default in the paired sign test over the zoo on both
-halves, but significantly worse on gusts, an asymmetric valley and 4 gains."""
+    "tuning.bootstraps": 0, "tuning.design_width": 0.5, "tuning.design_steps": 3, "tuning.design_shrink": 0.5,
+    "tuning.design_split": "auto", "tuning.design_inner": True}
+"""No passes over the gains: three response-surface designs, the first a map of the whole box (its corners, face
+centres, centre and the corners of the box half as wide, each point flown once), each next one around the fit's
+answer and half as wide once it surrounds that answer; 50 flights for 2 gains on 2 vehicles (13 + 18 + 18 and a
+spare), 94 for 4 gains, exact before take-off: mean 53.7 flights over the zoo (worst 94) against the default's 121
+(worst 262). Chosen on the zoo's selection half (benchmarks/results/selection_fly.md, 10 even runs a plant): better
+than CMA-ES (82 runs to 38) and TPE (73 to 47) at the same flights, a tie with the default (67 to 52), significantly
+worse than it on 60 ms more latency (1 to 9; its flights hold a point within 2 % of the optimum there that the
+fitted answer misses). Reported on the odd runs (quality_fly.md, 40 a plant): better than the default over the zoo
+(263 to 213, p 0.025) but significantly worse on 4 gains (7 to 33), better than CMA-ES (337 to 143) and TPE (286 to
+194). The first such preset (the whole box's 3^d design first, each point by both vehicles, shrink 0.4: 54 flights)
+lost to it on the zoo's gusts (39 runs to 1), the valley and 4 gains and beat it on no zoo plant, but beat it on the
+unseen plants (quality_unseen_fly.md: 132 runs to 100; the heavy-lift figure-8 and the banana valley): the map
+mends an optimum beside fly-away gains (gusts, the cliff) and loses precision on smooth costs (each point of its
+first design is flown once); `design_inner = false, design_shrink = 0.4` restores the first preset."""
 
 
 GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
@@ -74,7 +82,7 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
-                   "design_steps", "design_shrink", "design_split")  # what [tuning] gives the engine's Settings
+                   "design_steps", "design_shrink", "design_split", "design_inner")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -93,8 +101,9 @@ class Tuning(_Section):
     36 % with 2 fly-away answers. No configuration met the zoo's flight goals without losing most
     of its quality. This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options
     both take it (`settings()`). `PAPER_TUNING` restores the paper's exact setting. `BUDGET_TUNING` is a fixed
-    budget (no passes, three designs from the whole box: 54 flights for 2 gains, exact before take-off), measured
-    in benchmarks/results/selection_budget.md and quality_budget.md; not the default (worse on three zoo plants).
+    budget (no passes, three designs from a map of the whole box: 50 flights for 2 gains, exact before take-off),
+    measured in benchmarks/results/selection_fly.md and quality_fly.md; not the default (significantly worse than it
+    on one zoo plant of each half: 60 ms more latency on the selection runs, 4 gains on the report runs).
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
@@ -148,6 +157,10 @@ class Tuning(_Section):
                                      "points averages the noise as well as repeats of fewer), instead of every vehicle "
                                      "the strategy puts on a point; \"auto\": so while a design has more than about "
                                      "three flights per coefficient of its quadratic (3 gains or more)")
+    design_inner: StrictBool = Field(False, description="design: the first design also flies the corners of the "
+                                     "box half as wide (2^d points more), each of its points once (a map of the "
+                                     "box: a wide first design's corners and faces miss a narrow valley, or an "
+                                     "optimum beside a fly-away region)")
     pick: Literal["best", "near-stock"] | None = Field(None, description="the answer among the run's flown points: "
                                                        "the search's optimum (best), or the flown point nearest the "
                                                        "vehicles' stock gains whose cost is within one standard error "

@@ -232,6 +232,7 @@ class Settings:
     design_steps: int = 1
     design_shrink: float = 1.0
     design_split: bool | str = False
+    design_inner: bool = False
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -283,6 +284,8 @@ class Settings:
                                "over the one before")
         if not 1 <= int(self.design_steps) <= MAX_DESIGN_REPEATS:
             raise MavtuneError(f"design_steps must be from 1 to {MAX_DESIGN_REPEATS}, got {self.design_steps}")
+        if self.design_inner not in (True, False):
+            raise MavtuneError(f"design_inner must be true or false, got {self.design_inner!r}")
         if self.design_split not in (True, False, "auto"):
             raise MavtuneError(f"design_split must be true, false or \"auto\", got {self.design_split!r}")
         self.search(0.0, 1.0)  # validates
@@ -301,35 +304,40 @@ class Settings:
         passes = self.bootstraps if self.bootstraps is not None else 1
         return rounds * len(self.space) * passes + self.design_rounds()  # (a line search across the gains may be skipped)
 
-    def design_flights(self) -> int:
-        """Flights of one design: its points, each flown `design_repeats` times by as many vehicles as the strategy
-        puts on a point (by one vehicle each with `design_split`: the vehicles fly distinct points)."""
-        return self.design_points() * self.design_per_point() * int(self.design_repeats)
+    def design_flights(self, step: int = 0) -> int:
+        """Flights of design `step` (0: the first): its points, each flown `design_repeats` times by as many vehicles
+        as the strategy puts on a point (by one vehicle each with `design_split`: the vehicles fly distinct
+        points)."""
+        return self.design_points(step) * self.design_per_point(step) * int(self.design_repeats)
 
-    def design_points(self) -> int:
-        """Points of one design (`surface.design`: 3^d, or a composite design above 3 gains)."""
-        return len(surface_design([0.5] * len(self.space), self.design_width))
+    def design_inner_at(self, step: int) -> bool:
+        """Whether design `step` adds the inner corners (`design_inner`: the first design only)."""
+        return bool(self.design_inner) and step == 0
 
-    def design_per_point(self) -> int:
-        """Vehicles that fly each design point in a repeat: as many as the strategy puts on a point; one with
-        `design_split` (distinct points on the vehicles); with "auto", no more than about three flights per
-        coefficient of the quadratic fitted (2 gains: 9 points on two vehicles each; 3 or more: each point once)."""
+    def design_points(self, step: int = 0) -> int:
+        """Points of design `step` (`surface.design`: 3^d, or a composite design above 3 gains; the first with the
+        corners of the box half as wide under `design_inner`)."""
+        return len(surface_design([0.5] * len(self.space), self.design_width, self.design_inner_at(step)))
+
+    def design_per_point(self, step: int = 0) -> int:
+        """Vehicles that fly each point of design `step` in a repeat: as many as the strategy puts on a point; one
+        with `design_split` (distinct points on the vehicles) and in the first design under `design_inner` (a map of
+        the box: as many points as flights); with "auto", no more than about three flights per coefficient of the
+        quadratic fitted (2 gains: 9 points on two vehicles each; 3 or more: each point once)."""
         rule = self.strategy_rule.per_point(int(self.vehicles))
+        if self.design_inner_at(step):
+            return 1
         if self.design_split == "auto":
-            return max(1, min(rule, 3 * surface_coefficients(len(self.space)) // self.design_points()))
+            return max(1, min(rule, 3 * surface_coefficients(len(self.space)) // self.design_points(step)))
         return 1 if self.design_split else rule
 
     def design_count(self) -> int:
         """Designs flown in turn (`design_steps`; 0 without a design)."""
         return int(self.design_steps) if self.design else 0
 
-    def design_rounds(self, vehicles: int | None = None, per_design: bool = False) -> int:
-        """Rounds of `vehicles` (the settings' by default) the response surface's designs take (0 without; one
-        design's with `per_design`)."""
-        if not self.design:
-            return 0
-        one = math.ceil(self.design_flights() / int(vehicles or self.vehicles))
-        return one if per_design else one * self.design_count()
+    def design_rounds(self, vehicles: int | None = None) -> int:
+        """Rounds of `vehicles` (the settings' by default) the response surface's designs take (0 without)."""
+        return sum(math.ceil(self.design_flights(k) / int(vehicles or self.vehicles)) for k in range(self.design_count()))
 
     def direction_searches(self, bootstraps: int) -> int:
         """Line searches across the gains a run of `bootstraps` passes may fly (`directions`: one after every pass
@@ -362,7 +370,8 @@ class Settings:
             {"directions": True} if self.directions else {}) | (
             {"design": {"width": float(self.design_width), "repeats": int(self.design_repeats),
                          "steps": self.design_count(), "shrink": float(self.design_shrink)}
-                        | ({"split": self.design_split} if self.design_split else {})}
+                        | ({"split": self.design_split} if self.design_split else {})
+                        | ({"inner": True} if self.design_inner else {})}
             if self.design else {})
 
 
@@ -535,8 +544,10 @@ class Tuner:
         names = list(s.space)
         lo = [s.space[n][0] for n in names]
         width = [s.space[n][1] - s.space[n][0] for n in names]
-        points = surface_design([(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)], half)
-        per_point = s.design_per_point()
+        step = len(self._design_answers)
+        points = surface_design([(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)], half,
+                                s.design_inner_at(step))
+        per_point = s.design_per_point(step)
         queue = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, p)}
                  for _ in range(int(s.design_repeats)) for p in points for _ in range(per_point)]
         box = [(min(p[i] for p in points), max(p[i] for p in points)) for i in range(len(names))]

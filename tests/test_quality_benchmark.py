@@ -56,3 +56,12 @@ def test_excess_is_paired_over_common_repeats(quality):
     assert n == 6 and se > 0 and math.isfinite(e)
     truth.ensure([(0.25, 0.75)], 8, pm)  # more repeats of one point: compared on the repeats both have
     assert truth.excess((0.25, 0.75))[2] == 6 and truth.costs[(0.25, 0.75)].size == 8
+
+
+def test_method_labels_holding_commas_are_taken_whole_and_an_unknown_one_is_named(quality):
+    known = ["default (config.Tuning())", "two designs, the second half as wide", "CMA-ES"]
+    assert quality._labels("two designs, the second half as wide,CMA-ES", known) == {
+        "two designs, the second half as wide", "CMA-ES"}
+    assert quality._labels("CMA-ES, two designs", known) == "two designs"
+    with pytest.raises(SystemExit):
+        quality.main(["--quick", "--methods", "no such method"])

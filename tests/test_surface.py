@@ -133,13 +133,14 @@ DESIGNS = dict(bootstraps=0, design_width=0.5, design_steps=3, design_shrink=0.5
 
 
 @given(st.integers(1, 4), st.sampled_from([False, True, "auto"]), st.integers(1, 3), st.integers(1, 3),
-       st.integers(0, 5))
+       st.integers(0, 5), st.booleans())
 @settings(max_examples=15, deadline=None)
 def test_designs_only_fly_exactly_the_planned_flights_and_answer_a_flown_safe_neighbourhood(gains, split, steps,
-                                                                                           vehicles, seed):
-    """No passes (bootstraps = 0): every round is a design, their number known before take-off whatever the costs."""
+                                                                                           vehicles, seed, inner):
+    """No passes (bootstraps = 0): every round is a design, their number known before take-off whatever the costs
+    (with or without the first design's inner corners)."""
     space = {name: (0.0, 1.0) for name in ["kp", "kd", "ki", "kf"][:gains]}
-    options = {**DESIGNS, "design_split": split, "design_steps": steps}
+    options = {**DESIGNS, "design_split": split, "design_steps": steps, "design_inner": inner}
     settings_ = Settings(space=space, vehicles=vehicles, design=True, adaptive=True, confidence=0.85, cap=6,
                          **{k: v for k, v in options.items() if k != "draws"})
     plan = make_plan(settings_)
@@ -152,6 +153,16 @@ def test_designs_only_fly_exactly_the_planned_flights_and_answer_a_flown_safe_ne
     every = {tuple(a[n] for n in space) for r in result.rounds for a in r.assignments}
     got = tuple(result.gains[n] for n in space)
     assert all(min(p[i] for p in every) <= got[i] <= max(p[i] for p in every) for i in range(gains))
+
+
+def test_the_first_design_with_its_inner_corners_flies_a_map_of_the_box_each_point_once():
+    """`design_inner`: the first design over the whole box adds the corners of the box half as wide (13 points for
+    2 gains, each flown once); the later designs are the usual 3^d, two vehicles a point."""
+    result = mavtune.tune(bowl((0.3, 0.6)), space=SPACE, vehicles=2, **DESIGNS, design_inner=True)
+    first = [tuple(a.values()) for r in result.rounds if r.bracket[1] == pytest.approx(0.5) for a in r.assignments]
+    inner = {(x, y) for x in (0.25, 0.75) for y in (0.25, 0.75)}
+    assert inner <= set(first) and len(set(first)) == 13 and len(first) == 14  # 13 points on 2 vehicles: 1 spare
+    assert result.flights == 14 + 18 + 18
 
 
 def test_designs_only_answer_a_corner_optimum_on_the_corner():
@@ -181,10 +192,10 @@ def test_no_passes_without_a_design_is_refused():
         Tuning(bootstraps=0, design=False)  # the config refuses it, naming both fields
 
 
-@pytest.mark.parametrize("gains, flights", [(2, 54), (4, 78)])
+@pytest.mark.parametrize("gains, flights", [(2, 50), (4, 94)])
 def test_the_budget_preset_plans_its_flights_exactly(gains, flights):
-    """`BUDGET_TUNING`: three designs, the plan exact before take-off (2 gains: 9 points on both vehicles; 4 gains:
-    25 points once each)."""
+    """`BUDGET_TUNING`: three designs, the plan exact before take-off (2 gains: a first map of 13 points once each
+    and a spare, then 9 points on both vehicles twice; 4 gains: 41 points once and a spare, then 25 once each)."""
     from mavtune.config import BUDGET_TUNING, Tuning
 
     space = {name: (0.0, 1.0) for name in ["kp", "kd", "ki", "kf"][:gains]}

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from zoo.plants import PLANTS, Plant
+from zoo.plants import ALL_PLANTS, Plant
 
 TUNE_SEED = 10_000
 SEED_STRIDE = 100
@@ -92,7 +92,7 @@ def tune_run(plant_name: str, method: Method, run: int) -> dict[str, Any]:
     """One mavtune tuning of a plant: the answer, flights, its interval per gain, the plan's expectation."""
     from mavtune.tuner import run_tuning
 
-    plant = PLANTS[plant_name]
+    plant = ALL_PLANTS[plant_name]
     cpu = time.process_time()
     settings = method.settings(plant, run)
     fleet = ZooFleet(plant, settings.vehicles, tune_seed(run))
@@ -107,7 +107,7 @@ def tune_run(plant_name: str, method: Method, run: int) -> dict[str, Any]:
 def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str, Any]:
     """CMA-ES or TPE on run `run`'s vehicles, PEER_VEHICLES points a round, until `budget` flights; its answer
     (TPE: the best trial; CMA-ES: its final mean, the estimate of the optimum under noise)."""
-    plant = PLANTS[plant_name]
+    plant = ALL_PLANTS[plant_name]
     cpu = time.process_time()
     d = len(plant.gains)
     fleet = ZooFleet(plant, PEER_VEHICLES, tune_seed(run))
@@ -154,6 +154,7 @@ def candidates() -> list[Method]:
 
     fixed = {"adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
     designs = {k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}  # no passes: 3 designs, exact plan
+    first = {**designs, "design_inner": False, "design_shrink": 0.4}  # the first BUDGET_TUNING: the 3^d box first
     return [
         Method("default (config.Tuning())"),
         Method("previous default (no design)", {"design": False}),
@@ -161,9 +162,11 @@ def candidates() -> list[Method]:
         Method("design ±0.1", {"design_width": 0.1}),
         Method("fixed budget: 1 pass, not adaptive, 3 designs", {**fixed, "design_steps": 3}),
         Method("valley answer, directions, no design", {"answer": "valley", "directions": True, "design": False}),
-        Method("fixed budget: 3 designs from the whole box (BUDGET_TUNING)", designs),
-        Method("3 designs from the whole box shrink 0.5", {**designs, "design_shrink": 0.5}),
-        Method("3 designs from the whole box shrink 0.3", {**designs, "design_shrink": 0.3}),
+        Method("fixed budget: 3 designs from a map of the box (BUDGET_TUNING)", designs),
+        Method("3 designs from the whole box (the first BUDGET_TUNING)", first),
+        Method("3 designs from the whole box shrink 0.5", {**first, "design_shrink": 0.5}),
+        Method("3 designs from the whole box shrink 0.3", {**first, "design_shrink": 0.3}),
+        Method("3 designs: the first with inner corners (shrink 0.4)", {**designs, "design_shrink": 0.4}),
     ]
 
 

@@ -4,11 +4,15 @@ vehicle, wind and noise at every gain vector (common random numbers for the trut
 
 - sim plants: mavtune's simulator (`mavtune.sim.batch.fly`) at a condition, over a box of its normalised gains;
 - mavsim PX4 / ArduPilot: the plant and controller code behind `mavtune mavsim`, in-process (no MAVLink):
-  PX4's cascade as mavsim maps it onto the simulator (k_x = MPC_Z_P · MPC_Z_VEL_P_ACC, k_v = MPC_Z_VEL_P_ACC),
+  PX4's altitude cascade (`mavsim.cascade.Px4Altitude`: MPC_Z_P into the MPC_Z_VEL_*_ACC PID) and
   ArduCopter's AC_PosControl up-axis cascade (`mavsim.cascade.ArduCopterAltitude`) driving `mavtune.sim.Plant`;
   the gain ranges are the MAVLink fleet's defaults (`vehicles.mavlink.config.DEFAULT_GAINS`);
 - Crazyflow: the Mellinger state controller's z gains of a Crazyflie on the climbing circle, gusts as a force;
 - analytic costs: asymmetric valleys, heteroscedastic noise, an edge optimum and 4 gains.
+
+PLANTS is the zoo the defaults are chosen on; UNSEEN are plants of other kinds that nothing is chosen on (other
+airframes and primitives, PX4's cascade with 3 gains and a payload picked up in flight, a Crazyflie with a payload, a
+banana valley, a divergence cliff: `quality.py --zoo unseen`); ALL_PLANTS finds either by name.
 """
 
 from __future__ import annotations
@@ -51,37 +55,49 @@ def _scenario(changes: dict[str, Any]):
     return Scenario.model_validate(changes)
 
 
-def sim_fly(changes: dict[str, Any], box: tuple[tuple[float, float], tuple[float, float]]):
-    """The simulator under Scenario(**changes), its normalised (kp, kd) box `box` mapped onto [0, 1]²."""
+def sim_fly(changes: dict[str, Any], box: tuple[tuple[float, float], tuple[float, float]],
+            airframe: dict[str, float] | None = None):
+    """The simulator under Scenario(**changes), its normalised (kp, kd) box `box` mapped onto [0, 1]²; `airframe`
+    (see `_airframe_constants`) flies another vehicle than the F550."""
     (p0, p1), (d0, d1) = box
 
     def fly(x, seeds, rounds):
+        from unittest import mock
+
         from mavtune.sim import batch
         from mavtune.sim import kernel as K
         from mavtune.sim.gains import to_physical
 
         sc = _scenario(changes)
         kx, kv = to_physical(p0 + x[:, 0] * (p1 - p0), d0 + x[:, 1] * (d1 - d0))
-        res = batch.fly(sc, kx, kv, np.asarray(seeds, dtype=np.int64), np.asarray(rounds, dtype=np.int64))
+        args = (sc, kx, kv, np.asarray(seeds, dtype=np.int64), np.asarray(rounds, dtype=np.int64))
+        if airframe is None:
+            res = batch.fly(*args)
+        else:  # the kernel reads the airframe from batch.constants: the same flight with another vehicle's figures
+            cp = _airframe_constants(batch.constants(sc), airframe)
+            with mock.patch.object(batch, "constants", lambda _: cp):
+                res = batch.fly(*args)
         return res.cost(sc.cost), res.status != K.OK
 
     return fly
 
 
-def px4_fly(x, seeds, rounds):
-    """mavsim's PX4 flavour: the simulator's SO(3) altitude loop with k_x = MPC_Z_P · MPC_Z_VEL_P_ACC and
-    k_v = MPC_Z_VEL_P_ACC (mavsim server._apply_gains), the gains over DEFAULT_GAINS' PX4 ranges."""
-    from mavtune.sim import batch
+def _airframe_constants(cp: np.ndarray, airframe: dict[str, float]) -> np.ndarray:
+    """The kernel's constants with another airframe: `mass_kg` (take-off mass, known to the controller as the F550's
+    2.3 kg is; the inertia scales with it, the same geometry), `motor_tau_s` (rotor time constant) and
+    `drag_scale` (body drag relative to the F550's)."""
+    from mavtune.sim import airframe as af
     from mavtune.sim import kernel as K
-    from mavtune.vehicles.mavlink.config import DEFAULT_GAINS
-    from mavtune.vehicles.mavlink.profiles import Autopilot
+    from mavtune.sim.batch import DT_S
 
-    g = DEFAULT_GAINS[Autopilot.PX4]
-    pos_p = g["kp"].min + x[:, 0] * (g["kp"].max - g["kp"].min)
-    vel_p = g["kd"].min + x[:, 1] * (g["kd"].max - g["kd"].min)
-    sc = _scenario({})
-    res = batch.fly(sc, pos_p * vel_p, vel_p, np.asarray(seeds, dtype=np.int64), np.asarray(rounds, dtype=np.int64))
-    return res.cost(sc.cost), res.status != K.OK
+    cp = cp.copy()
+    scale = airframe.get("mass_kg", af.MASS_KG) / af.MASS_KG
+    cp[K.C_MNOM] = af.MASS_KG * scale
+    for c in (K.C_JX, K.C_JY, K.C_JZ, K.C_JPX, K.C_JPY, K.C_JPZ):
+        cp[c] *= scale
+    cp[K.C_E_HALF] = math.exp(-0.5 * DT_S / airframe.get("motor_tau_s", af.MOTOR_TAU_S))
+    cp[K.C_DRAG] *= airframe.get("drag_scale", 1.0)
+    return cp
 
 
 def ardupilot_fly(x, seeds, rounds):
@@ -89,29 +105,67 @@ def ardupilot_fly(x, seeds, rounds):
     ranges, the rest at mavsim's defaults) commanding the vertical acceleration of mavtune.sim.Plant, whose own
     altitude PD is off, as mavsim's server steps them; cost: IAE of the fed-back altitude against the reference
     over the primitive (after the settle hover), a diverged flight's remaining time at FAIL_PENALTY_M."""
-    from mavtune.sim import Plant, batch
     from mavtune.vehicles.mavlink.config import DEFAULT_GAINS
     from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude
     from mavtune.vehicles.mavlink.profiles import Autopilot
 
-    g = DEFAULT_GAINS[Autopilot.ARDUPILOT]
-    pos_p = g["kp"].min + x[:, 0] * (g["kp"].max - g["kp"].min)
-    vel_p = g["kd"].min + x[:, 1] * (g["kd"].max - g["kd"].min)
-    sc = _scenario({})
+    params = _params(DEFAULT_GAINS[Autopilot.ARDUPILOT], x)
+    return _cascade_batch(ArduCopterAltitude, params, _scenario({}), seeds, rounds)
+
+
+def _params(gain_map, x) -> dict[str, np.ndarray]:
+    """Autopilot parameter values (n,) per parameter of a gain map {gain: GainParam}, from normalised x (n, d)."""
+    return {c.param: c.min + x[:, i] * (c.max - c.min) for i, c in enumerate(gain_map.values())}
+
+
+def px4_cascade_fly(gains: tuple[str, ...], changes: dict[str, Any], cost: str = "iae"):
+    """mavsim's PX4 flavour as it flies today: `Px4Altitude` (mc_pos_control's up axis: MPC_Z_P into the velocity
+    PID MPC_Z_VEL_P_ACC / _I_ACC / _D_ACC, velocity limits, anti-windup) commanding mavtune.sim.Plant under
+    Scenario(**changes); `gains` of the MAVLink gain set "altitude-inner" (kp MPC_Z_P, kd MPC_Z_VEL_P_ACC, ka
+    MPC_Z_VEL_D_ACC, ki MPC_Z_VEL_I_ACC) over their PX4 ranges, the rest at mavsim's defaults. cost "iae" as the
+    ArduPilot plant's; "balanced" as the MAVLink fleet scores a flight by default."""
+
+    def fly(x, seeds, rounds):
+        from mavtune.vehicles.mavlink.config import gain_set_map
+        from mavtune.vehicles.mavlink.mavsim.cascade import Px4Altitude
+        from mavtune.vehicles.mavlink.profiles import Autopilot
+
+        inner = gain_set_map("altitude-inner", Autopilot.PX4)
+        params = _params({g: inner[g] for g in gains}, x)
+        return _cascade_batch(Px4Altitude, params, _scenario(changes), seeds, rounds, cost)
+
+    return fly
+
+
+def px4_units(gains: tuple[str, ...]) -> dict[str, tuple[str, float, float]]:
+    """The box of PX4 gains in autopilot units (the "altitude-inner" gain set's ranges)."""
+    from mavtune.vehicles.mavlink.config import gain_set_map
+    from mavtune.vehicles.mavlink.profiles import Autopilot
+
+    inner = gain_set_map("altitude-inner", Autopilot.PX4)
+    return {g: (inner[g].param, inner[g].min, inner[g].max) for g in gains}
+
+
+MOTOR_HZ = 50.0  # motor outputs the MAVLink fleet asks for during a primitive (MavlinkConfig.motor_hz)
+POSITION_HZ = 50.0  # LOCAL_POSITION_NED rate it asks for (vehicle.POSITION_HZ)
+
+
+def _cascade_batch(Cascade, params: dict[str, np.ndarray], sc, seeds, rnd, cost: str = "iae"):
+    """len(seeds) vehicles in one Plant, lane i drawn from (seeds[i], rnd[i]) as its own vehicle would be, each
+    flown by its own autopilot cascade `Cascade()` with `params` (parameter -> (n,) values) as mavsim's server steps
+    them. cost "iae": the fed-back altitude's IAE over the primitive; "balanced": the MAVLink fleet's default cost
+    (`flight_measures` of the true altitude at POSITION_HZ and the motor outputs at MOTOR_HZ, as mavsim sends them).
+    A diverged flight costs its IAE so far plus its remaining time at FAIL_PENALTY_M (balanced: per sample, as the
+    measures sum)."""
+    from mavtune.sim import Plant, batch
+    from mavtune.sim import kernel as K
+
     ref = batch.reference_for(sc)
     settle = batch.settle_steps(sc)
     seeds = np.asarray(seeds, dtype=np.int64)
-    rounds = np.asarray(rounds, dtype=np.int64)
-    return _ardupilot_batch(Plant, ArduCopterAltitude, sc, ref, settle, seeds, rounds, pos_p, vel_p)
-
-
-def _ardupilot_batch(Plant, Cascade, sc, ref, settle, seeds, rnd, pos_p, vel_p):
-    """len(seeds) vehicles in one Plant, lane i drawn from (seeds[i], rnd[i]) as its own vehicle would be."""
-    from mavtune.sim import batch
-    from mavtune.sim import kernel as K
-
+    rnd = np.asarray(rnd, dtype=np.int64)
     n = len(seeds)
-    cost = np.zeros(n)
+    cost_iae = np.zeros(n)
     failed = np.zeros(n, dtype=bool)
     p = Plant(vehicles=n, scenario=sc, seed=0)
     p.set_gains(0.0, 0.0)
@@ -119,9 +173,12 @@ def _ardupilot_batch(Plant, Cascade, sc, ref, settle, seeds, rnd, pos_p, vel_p):
     K.init_batch(batch.seed_array(seeds), np.ascontiguousarray(rnd, dtype=np.int64), p._kx, p._kv, pos0, p._cp, p._X, p._L,
                  p._RS)  # Plant.reset with these seeds instead of seed + j
     cascades = [Cascade() for _ in range(n)]
-    for c, pp, vp in zip(cascades, pos_p, vel_p):
-        c.gains["PSC_POSZ_P"], c.gains["PSC_VELZ_P"] = float(pp), float(vp)
+    for i, c in enumerate(cascades):
+        for name, v in params.items():
+            c.gains[name] = float(v[i])
     dt = p.dt_s
+    pos_every, motor_every = round(1 / (POSITION_HZ * dt)), round(1 / (MOTOR_HZ * dt))
+    z_log, u_log = [], []
     pos_ref, vel_ref = np.zeros((n, 3)), np.zeros((n, 3))
     for k in range(ref.shape[0]):
         r = ref[k]
@@ -135,11 +192,26 @@ def _ardupilot_batch(Plant, Cascade, sc, ref, settle, seeds, rnd, pos_p, vel_p):
         p.step(pos_ref, vel_ref, acc)
         err = np.abs(p.altitude_feedback_m - r[2])
         now = ~failed & (p.failed | ~np.isfinite(err) | (err > FAIL_PENALTY_M))
-        cost[now] += FAIL_PENALTY_M * dt * (ref.shape[0] - max(k, settle))
+        cost_iae[now] += FAIL_PENALTY_M * dt * (ref.shape[0] - max(k, settle))
         failed |= now
         if k >= settle:
-            cost[~failed] += err[~failed] * dt
-    return cost, failed
+            cost_iae[~failed] += err[~failed] * dt
+            if cost == "balanced" and (k - settle) % pos_every == 0:
+                z_log.append(p.position_m[:, 2].copy())
+            if cost == "balanced" and (k - settle) % motor_every == 0:
+                u_log.append(p.motor_command.copy())
+    if cost == "iae":
+        return cost_iae, failed
+    from mavtune.sim.balance import Balance
+    from mavtune.vehicles.mavlink.primitive import flight_measures
+
+    t_z = settle * dt + np.arange(len(z_log)) * pos_every * dt
+    t_u = settle * dt + np.arange(len(u_log)) * motor_every * dt
+    z_ref = np.interp(t_z, np.arange(ref.shape[0]) * dt, ref[:, 2])
+    z, u, bal = np.array(z_log), np.array(u_log), Balance()
+    out = np.array([cost_iae[i] / dt if failed[i] else flight_measures(t_z, z_ref, z[:, i], t_u, u[:, i]).balanced(bal)
+                    for i in range(n)])  # a diverged flight's IAE in the measures' units (summed samples)
+    return out, failed
 
 
 # ----- Crazyflow ----------------------------------------------------------------------------------------------
@@ -208,9 +280,19 @@ def crazyflow_fly(x, seeds, rounds):
     """Crazyflow 0.4 (its default Crazyflie, first-principles dynamics, Mellinger state controller at 100 Hz)
     tracking mavtune's climbing circle (2 m diameter, 1 m climb) with OU gust forces; the z gains (kp, kd) of
     its state controller over CF_BOX; cost: IAE of z over the primitive, a flight leaving by 2 m diverged."""
+    return _crazyflow(x, seeds, rounds, {}, 0.0)
+
+
+def crazyflow_variant(changes: dict[str, Any], payload_n: float):
+    """Crazyflow as `crazyflow_fly` on Scenario(**changes)'s primitive, with a constant downward force `payload_n`
+    (N) the controller does not know: an unknown payload's weight (its inertia left out)."""
+    return lambda x, seeds, rounds: _crazyflow(x, seeds, rounds, changes, payload_n)
+
+
+def _crazyflow(x, seeds, rounds, changes: dict[str, Any], payload_n: float):
     from mavtune.sim import batch
 
-    sc = _scenario({})
+    sc = _scenario(changes)
     ref = batch.reference_for(sc)
     settle = batch.settle_steps(sc)
     steps, n = ref.shape[0], len(seeds)
@@ -221,6 +303,8 @@ def crazyflow_fly(x, seeds, rounds):
     cmd[:, :, 0, 12] = 1.0
     gust = np.zeros((steps * up, size, 3), dtype=np.float32)
     gust[:, :n] = np.repeat(_gusts(seeds, rounds, steps, 0.01), up, axis=0)
+    if payload_n:
+        gust[:, :n, 2] -= np.float32(payload_n)
     kp = np.full(size, 1.25, dtype=np.float32)
     kd = np.full(size, 0.5, dtype=np.float32)
     kp[:n] = CF_BOX["kp"][0] + x[:, 0] * (CF_BOX["kp"][1] - CF_BOX["kp"][0])
@@ -283,6 +367,28 @@ def four_fly(x, seeds, rounds):
     return c * (1.0 + 0.05 * z[:, 0]) + 0.2 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
 
 
+def banana_fly(x, seeds, rounds):
+    """A Rosenbrock-like banana: the valley floor t = s² bends through the box (s, t: the gains rescaled so that the
+    optimum is s = t = 1), shallow along the floor, steep across it; lognormal (multiplicative) noise of 10 %."""
+    s, t = (x[:, 0] - 0.2) / 0.52, (x[:, 1] - 0.05) / 0.5
+    c = 1.0 + 0.5 * (1.0 - s) ** 2 + 5.0 * (t - s * s) ** 2
+    z = _normals(seeds, rounds, 1)
+    return c * np.exp(0.1 * z[:, 0] - 0.005), np.zeros(len(c), dtype=bool)
+
+
+CLIFF_COST = 10.0  # a diverged flight's cost (10 x the optimum's, as a crashed primitive's penalty)
+
+
+def cliff_fly(x, seeds, rounds):
+    """A bowl whose minimum (0.8, 0.45) lies beyond a divergence cliff: a flight diverges where kp − 0.5·kd exceeds
+    0.4 + 0.03·z (too much position gain for the damping; the margin moves with each flight's gusts) and then
+    costs CLIFF_COST; the optimum is inside, next to the cliff. Noise 5 % plus a share growing with the cost."""
+    c = 1.0 + 3.0 * (x[:, 0] - 0.8) ** 2 + 6.0 * (x[:, 1] - 0.45) ** 2
+    z = _normals(seeds, rounds, 3)
+    diverged = x[:, 0] - 0.5 * x[:, 1] > 0.4 + 0.03 * z[:, 2]
+    return np.where(diverged, CLIFF_COST, c * (1.0 + 0.05 * z[:, 0]) + 0.15 * (c - 1.0) * z[:, 1]), diverged
+
+
 # ----- the zoo ------------------------------------------------------------------------------------------------
 
 FULL = ((0.0, 1.0), (0.0, 1.0))
@@ -291,6 +397,15 @@ SIM_UNITS = {"kp": ("k_x(z), 1/s²", 0.0, 250.0), "kd": ("k_v(z), 1/s", 0.0, 40.
 
 def _sim_units(box) -> dict[str, tuple[str, float, float]]:
     return {g: (w, lo + b[0] * (hi - lo), lo + b[1] * (hi - lo)) for (g, (w, lo, hi)), b in zip(SIM_UNITS.items(), box)}
+
+
+PX4_CASCADE = Plant(
+    "mavsim PX4 cascade", "PX4's cascade as mavsim flies it today (Px4Altitude: MPC_Z_P into the MPC_Z_VEL_P/I/D_ACC "
+    "PID, velocity limits, anti-windup; I 2, D 0), MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15], IAE", ("kp", "kd"), px4_cascade_fly(("kp", "kd"), {}), px4_units(("kp", "kd")),
+    judge_cap=128, chunk=256)
+"""PX4's altitude cascade as mavsim flies it (replaced the zoo's "mavsim PX4", the old PD mapping k_x = MPC_Z_P ·
+MPC_Z_VEL_P_ACC, k_v = MPC_Z_VEL_P_ACC, on 2026-11-25; another name, so no cached truth or run of the old plant is
+taken for it)."""
 
 
 def _plants() -> dict[str, Plant]:
@@ -310,8 +425,7 @@ def _plants() -> dict[str, Plant]:
               ("kp", "kd"), sim_fly({}, edge_box), _sim_units(edge_box)),
         Plant("sim corner box", "nominal, box kp [0, 0.3] x kd [0, 0.4]: the optimum in the corner", ("kp", "kd"),
               sim_fly({}, corner_box), _sim_units(corner_box)),
-        Plant("mavsim PX4", "PX4 cascade as mavsim flies it, MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15]",
-              ("kp", "kd"), px4_fly, {"kp": ("MPC_Z_P", 0.1, 1.5), "kd": ("MPC_Z_VEL_P_ACC", 2.0, 15.0)}),
+        PX4_CASCADE,
         Plant("analytic valley", "curved asymmetric valley, heteroscedastic noise", ("kp", "kd"), valley_fly),
         Plant("analytic edge", "optimum on the kp edge, asymmetric kd valley, heteroscedastic noise", ("kp", "kd"),
               edge_fly),
@@ -328,3 +442,47 @@ def _plants() -> dict[str, Plant]:
 
 
 PLANTS = _plants()
+
+
+# ----- the unseen set: plants the defaults were never chosen on ---------------------------------------------------
+
+HEAVY_LIFT = {"mass_kg": 3.0, "motor_tau_s": 0.06, "drag_scale": 1.5}
+"""A heavy-lift hexarotor on the F550's rotors and arms: 3 kg (thrust/weight 2.05 instead of 2.67), larger slower
+propellers (rotor lag 60 ms instead of 30), a bigger frame's drag."""
+LIGHT = {"mass_kg": 1.4, "motor_tau_s": 0.015, "drag_scale": 2.5}
+"""A light frame on the same rotors: 1.4 kg (thrust/weight 4.4), quick small motors (15 ms), a camera fairing's drag."""
+CF_PAYLOAD_N = 0.006 * 9.81  # a 6 g payload's weight on the Crazyflie (0.29 N), N
+PX4_PICKUP_PAYLOAD_KG = 0.46  # 20 % of 2.3 kg, picked up as a flight starts: PX4's integrator must take it up
+
+
+def _unseen() -> dict[str, Plant]:
+    """Plants of other kinds than the zoo's, never used to choose anything (`quality.py --zoo unseen`)."""
+    inner = ("kp", "kd", "ki")
+    out = [
+        Plant("unseen sim heavy-lift figure-8", "3 kg heavy-lift airframe (thrust/weight 2.05), 60 ms rotor lag, "
+              "1.5x drag, known to the controller, flying the figure-8: saturation and lag cap the gains",
+              ("kp", "kd"), sim_fly({"primitive": "figure8"}, FULL, HEAVY_LIFT), _sim_units(FULL)),
+        Plant("unseen sim light step", "1.4 kg light frame (thrust/weight 4.4), 15 ms rotor lag, 2.5x drag, known "
+              "to the controller, flying a 1 m step: the step's transient, not the circle's tracking, sets the cost",
+              ("kp", "kd"), sim_fly({"primitive": "step"}, FULL, LIGHT), _sim_units(FULL)),
+        Plant("unseen mavsim PX4 PID payload", "PX4's cascade, 3 gains MPC_Z_P x MPC_Z_VEL_P_ACC x MPC_Z_VEL_I_ACC "
+              "[0.2, 3], a 0.46 kg (20 %) payload picked up as the settle hover starts (hover thrust and integrator "
+              "start without it: MPC_Z_VEL_I_ACC must take it up within the flight), the MAVLink fleet's balanced "
+              "cost (IAE + motor activity + oscillation)", inner,
+              px4_cascade_fly(inner, {"payload_kg": PX4_PICKUP_PAYLOAD_KG}, "balanced"), px4_units(inner),
+              judge_cap=128, chunk=256),
+        Plant("unseen crazyflow payload figure-8", "Crazyflow's Crazyflie with a 6 g payload (20 % of its 30 g) "
+              "its Mellinger controller does not know (its weight as a constant force), flying the figure-8 "
+              "with the zoo's OU gusts", ("kp", "kd"), crazyflow_variant({"primitive": "figure8"}, CF_PAYLOAD_N),
+              {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()}, judge_cap=128, chunk=1024),
+        Plant("unseen analytic banana", "Rosenbrock-like curved valley (the floor bends through the box), "
+              "multiplicative lognormal noise 10 %", ("kp", "kd"), banana_fly),
+        Plant("unseen analytic cliff", "bowl whose minimum lies beyond a divergence cliff that moves with each "
+              "flight: the optimum is inside, next to the cliff", ("kp", "kd"), cliff_fly),
+    ]
+    return {p.name: p for p in out}
+
+
+UNSEEN = _unseen()
+ALL_PLANTS = {**PLANTS, **UNSEEN}
+"""Every plant by name (the zoo's and the unseen set's): what the truth and the runs look a plant up in."""

@@ -21,7 +21,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from zoo.plants import PLANTS
+from zoo.plants import ALL_PLANTS
 
 MAP_SEED = 1_000_000
 WITHIN_PCT = 2.0
@@ -35,7 +35,7 @@ def key(p: Iterable[float]) -> Point:
 def fly_repeats(plant_name: str, points: list[Point], r0: int, r1: int) -> tuple[np.ndarray, np.ndarray, float]:
     """(costs, diverged) (len(points), r1 − r0) of repeats r0..r1−1 at each point, and the CPU seconds."""
     cpu = time.process_time()
-    plant = PLANTS[plant_name]
+    plant = ALL_PLANTS[plant_name]
     reps = np.arange(r0, r1)
     x = np.repeat(np.asarray(points, dtype=float), reps.size, axis=0)
     rounds = np.tile(reps, len(points))
@@ -48,7 +48,7 @@ class Truth:
     """Paired repeat costs per point of one plant, flown on demand through `pool_map` (a map over workers)."""
 
     def __init__(self, plant_name: str, cache: Path | None):
-        self.plant = PLANTS[plant_name]
+        self.plant = ALL_PLANTS[plant_name]
         self.path = cache / (plant_name.replace(" ", "_").replace("%", "pct").replace("+", "p") + ".pkl") if cache \
             else None
         self.costs: dict[Point, np.ndarray] = {}

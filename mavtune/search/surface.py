@@ -41,11 +41,12 @@ CUBIC_LEVEL = 0.05  # a cubic replaces the quadratic where the flights reject th
 GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the design's box (then polished)
 
 
-def design(centre: Sequence[float], half: float) -> list[tuple[float, ...]]:
+def design(centre: Sequence[float], half: float, inner: bool = False) -> list[tuple[float, ...]]:
     """The design's points in shares of each range ([0, 1] per gain), the centre first: a box ±`half` around
     `centre`, shifted inside [0, 1] (an answer on an edge puts the box against it); every corner, face centre
     and the centre (3^d points) up to three gains, else the corners, the face centres of the axes (±half on one
-    gain) and the centre (a face-centred central composite design: 2^d + 2d + 1 points)."""
+    gain) and the centre (a face-centred central composite design: 2^d + 2d + 1 points); with `inner`, also the
+    corners of the box half as wide (2^d points more: between the centre and the corners)."""
     half = min(max(float(half), 0.0), 0.5)
     mid = [min(max(float(c), half), 1.0 - half) for c in centre]
     d = len(mid)
@@ -54,6 +55,8 @@ def design(centre: Sequence[float], half: float) -> list[tuple[float, ...]]:
     else:
         axes = [tuple(s if k == i else 0 for k in range(d)) for i in range(d) for s in (-1, 1)]
         levels = [(0,) * d, *axes, *product((-1, 1), repeat=d)]
+    if inner:
+        levels += list(product((-0.5, 0.5), repeat=d))
     return [tuple(min(max(m + half * lv, 0.0), 1.0) for m, lv in zip(mid, level)) for level in levels]
 
 
