@@ -225,3 +225,56 @@ def test_no_answer_beside_a_wall_while_a_point_off_it_is_as_good():
     pts[(1.0, 0.3)] = [0.1] * 8  # told apart: much the best, and flown often — the flights say so
     got, _ = answer(pts, [(0.7, 1.0), (0.2, 0.5)], pool=pool)
     assert min(pts, key=lambda p: math.dist(p, got)) == (1.0, 0.3)
+
+
+def _valley_points(noise, seed, repeats=3):
+    """A 5 x 5 design over [0.3, 0.9]² of an asymmetric valley (steep above its minimum at 0.62 in kp, shallow
+    below; the same in kd at 0.5): each point's `repeats` flights with relative noise `noise`."""
+    rng = random.Random(seed)
+    levels = [0.3 + 0.15 * i for i in range(5)]
+
+    def cost(kp, kd):
+        u, v = kp - 0.62, kd - 0.5
+        return 1.0 + (40.0 if u > 0 else 4.0) * u * u + (30.0 if v > 0 else 3.0) * v * v
+
+    return {(a, b): [cost(a, b) * (1.0 + noise * rng.gauss(0.0, 1.0)) for _ in range(repeats)]
+            for a in levels for b in levels}
+
+
+def _pool(cv):
+    from mavtune.search.evidence import NoisePool
+
+    return NoisePool.prior(cv, 100.0)
+
+
+@given(st.integers(0, 10_000))
+@settings(max_examples=20, deadline=None)
+def test_an_asymmetric_valley_is_answered_nearer_its_minimum_by_the_cubic(seed):
+    """Where the flights reject a quadratic (steep on one side, shallow on the other, noise 2 %), the cubic's
+    minimum lies nearer the valley's than the quadratic's, which leans to the shallow side."""
+    points = _valley_points(0.02, seed)
+    box = [(0.3, 0.9), (0.3, 0.9)]
+    cubic_answer, fitted = answer(points, box, (), _pool(0.02))
+    square_answer, _ = answer(points, box, (), _pool(0.02), cubic_level=0.0)
+    assert fitted and math.dist(cubic_answer, (0.62, 0.5)) < math.dist(square_answer, (0.62, 0.5))
+
+
+@given(st.integers(0, 10_000), st.floats(0.02, 0.35))
+@settings(max_examples=10, deadline=None)
+def test_a_noisy_quadratic_keeps_the_quadratic_unless_the_flights_reject_it(seed, noise):
+    """A quadratic cost with relative noise: the cubic replaces it about as often as the test's level says (5 %),
+    however noisy the flights (the variance from a fit, not from the noisy means); with the noise unknown or nil,
+    never."""
+    import numpy as np
+
+    from mavtune.search.surface import cubic
+
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1.0, 1.0, (40, 2))
+    mean = 1.0 + x[:, 0] ** 2 + 0.5 * x[:, 1] ** 2
+    flights = np.ones(40)
+    y = mean * (1.0 + noise * rng.standard_normal(40))
+    assert cubic(x, y, flights, math.nan) is None and cubic(x, y, flights, 0.0) is None
+    rejected = sum(cubic(x, mean * (1.0 + noise * rng.standard_normal(40)), flights, noise) is not None
+                   for _ in range(60))
+    assert rejected <= 12  # 3 expected at 5 %; 12 or more of 60 has p < 1e-4

@@ -17,7 +17,11 @@ answer next to the wall.
 
 Weights as the line search's own fit (`model`): each point by its flights over its variance (the noise is
 relative, sd ∝ cost), times a tricube kernel in its largest distance (in shares of each range) from the design's
-centre, reaching twice the design's half-width: the fit is local to where the design flew.
+centre, reaching twice the design's half-width: the fit is local to where the design flew. Where the flights reject
+the quadratic (its residuals exceed the run's noise by more than a cubic's extra terms explain: `cubic`), the
+answer is the minimiser of the cubic instead, where it lies inside the box (on a face the cubic terms extrapolate):
+an asymmetric valley — a wall of oscillating gains on one side — pulls a quadratic's minimum towards the shallow
+side (benchmarks/results/answer_diagnostic.md).
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ from mavtune.search.evidence import NoisePool, point_stats
 LEVEL = 0.9  # a flown point worse than the best by more than this two-sided quantile of the error is ruled out
 
 REACH = 2.0  # the kernel spans this many half-widths of the design from its centre
+POWER = 2.0  # each point weighs its flights over its cost to this power (2: the variance of a relative noise)
+CUBIC_LEVEL = 0.05  # a cubic replaces the quadratic where the flights reject the quadratic at this level
 GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the design's box (then polished)
 
 
@@ -112,16 +118,64 @@ def at_wall(points: Mapping[tuple[float, ...], Sequence[float]]) -> set[tuple[fl
     return out
 
 
+def cubic(x, y, n, cv: float, level: float = CUBIC_LEVEL):
+    """The value function of one cubic in every gain through points `x` (in the fit's scale) with mean costs `y`
+    and weights `n` (each point's flights, times the fit's kernel), weighted by its flights over its relative
+    variance, when the flights say the cost is no quadratic: with each point's variance cv²·ŷ²/flights (cv: the
+    run's relative noise; ŷ: a quadratic's fitted cost weighted by flights alone, not the noisy mean, which would
+    call a low mean precise),
+    the cubic terms lower the weighted residual sum of squares by more than the noise explains (against χ² with as
+    many degrees of freedom as cubic terms, at `level`); None otherwise, or with the noise unknown or nil. An
+    asymmetric valley (a wall of oscillating gains on one side, a slow rise on the other) pulls a quadratic's
+    minimum towards its shallow side; a cubic's skew follows it."""
+    from itertools import combinations_with_replacement
+
+    import numpy as np
+    from scipy.stats import chi2
+
+    d = x.shape[1]
+    square = [()] + [m for k in (1, 2) for m in combinations_with_replacement(range(d), k)]
+    terms = square + list(combinations_with_replacement(range(d), 3))
+    if not (math.isfinite(cv) and cv > 0 and level > 0) or np.count_nonzero(n > 0) < len(terms) + 2:
+        return None
+
+    def columns(u: np.ndarray, which: list[tuple[int, ...]]) -> np.ndarray:
+        return np.stack([np.prod(u[:, list(m)], axis=1) for m in which], axis=1)  # (the empty product is 1)
+
+    def fit(which: list[tuple[int, ...]], w: np.ndarray) -> tuple[np.ndarray, float]:
+        a, sw = columns(x, which), np.sqrt(w)
+        beta = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
+        r = (a @ beta - y) * sw
+        return beta, float(r @ r)
+
+    observed = n / np.maximum(np.abs(y), 1e-6) ** 2  # the fit's own weights (as the quadratic's)
+    try:
+        level_fit, _ = fit(square, n)  # by flights alone: unbiased by noisy weights
+        fitted = np.maximum(columns(x, square) @ level_fit, 0.1 * np.abs(y))  # (far below a mean: its mean's scale)
+        test = n / np.maximum(fitted, 1e-6) ** 2
+        (_, rss2), (_, rss3) = fit(square, test), fit(terms, test)
+        beta, _ = fit(terms, observed)
+    except np.linalg.LinAlgError:
+        return None
+    if not (np.all(np.isfinite(beta)) and (rss2 - rss3) / (cv * cv) > chi2.isf(level, len(terms) - len(square))):
+        return None
+    return lambda u: columns(np.atleast_2d(u), terms) @ beta
+
+
 def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
            worse: Collection[tuple[float, ...]] = (),
-           pool: NoisePool | None = None) -> tuple[tuple[float, ...], bool]:
-    """The minimiser of one weighted quadratic through `points` (gain vector in shares of each range → every
-    flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
+           pool: NoisePool | None = None, *, power: float = POWER, reach: float = REACH,
+           log: bool = False, cubic_level: float = CUBIC_LEVEL) -> tuple[tuple[float, ...], bool]:
+    """The minimiser of one weighted quadratic (of a cubic where the flights reject the quadratic, `cubic`, and its
+    minimiser lies inside the box) through
+    `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
     vectors whose nearest flown point neither failed nor is one the flights rule out (`worse`: `ruled_out`) nor,
     while a point in the box flown off the walls is not told apart from the box's best (`pool`: the run's noise;
     never with a noise-free cost), the first safe point off a wall (`at_wall`); and whether the fit gave it.
     Without a usable fit: the flown point in the box with the lowest mean cost among those (never an unflown
-    gain); the box's centre if none."""
+    gain); the box's centre if none. `power`, `reach`, `log` (a quadratic in the log of the cost, each point
+    weighted by its flights) and `cubic_level` (0: the quadratic alone) are the fit's variants
+    benchmarks/answer_diagnostic.py --replay measures; the defaults are the measured choice."""
     from statistics import NormalDist
 
     import numpy as np
@@ -183,12 +237,16 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         return out
 
     x = (every[ok] - centre) / half
-    dist = np.max(np.abs(x), axis=1) / REACH
+    dist = np.max(np.abs(x), axis=1) / reach
     y = means[ok]
     if not np.max(np.abs(y)) > 0:
         return fallback, False
     y = y / np.max(np.abs(y))
-    w = counts[ok] / np.maximum(np.abs(y), 1e-6) ** 2 * (1.0 - np.minimum(dist, 1.0) ** 3) ** 3
+    kernel = (1.0 - np.minimum(dist, 1.0) ** 3) ** 3
+    if log and np.all(y > 0):  # relative noise is even on the log scale: each point by its flights
+        y, w = np.log(y), counts[ok] * kernel
+    else:
+        w = counts[ok] / np.maximum(np.abs(y), 1e-6) ** power * kernel
     if np.count_nonzero(w > 0) < coefficients(d) + 1:
         return fallback, False
     fit = quadratic(x, y, w / np.max(w))
@@ -200,6 +258,9 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         u = np.atleast_2d(u)
         return c0 + u @ gradient + 0.5 * np.einsum("ni,ij,nj->n", u, hessian, u)
 
+    def slope(u: np.ndarray) -> np.ndarray:
+        return gradient + hessian @ u
+
     per_gain = max(3, int(GRID_POINTS ** (1.0 / d)))
     axes = [np.linspace(-1.0, 1.0, per_gain)] * d
     grid = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
@@ -207,11 +268,22 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     grid = grid[allowed(grid * half + centre)]
     if not len(grid):
         return fallback, False
-    best = grid[np.argmin(value(grid))]
-    polished = minimize(lambda u: float(value(u)[0]), best, jac=lambda u: gradient + hessian @ u,
-                        method="L-BFGS-B", bounds=[(-1.0, 1.0)] * d)
-    u = np.clip(polished.x, -1.0, 1.0)
-    if not (np.all(np.isfinite(u)) and value(u)[0] <= value(best)[0] and allowed((u * half + centre)[None])[0]):
-        u = best
+
+    def lowest(value, slope) -> np.ndarray:
+        """The fit's minimum among the allowed candidates, polished (kept only where allowed and lower)."""
+        best = grid[np.argmin(value(grid))]
+        polished = minimize(lambda u: float(value(u)[0]), best, jac=slope, method="L-BFGS-B",
+                            bounds=[(-1.0, 1.0)] * d)
+        u = np.clip(polished.x, -1.0, 1.0)
+        ok = np.all(np.isfinite(u)) and value(u)[0] <= value(best)[0] and allowed((u * half + centre)[None])[0]
+        return u if ok else best
+
+    u = lowest(value, slope)
+    skewed = None if log else cubic(x, y, w * np.maximum(np.abs(y), 1e-6) ** power,  # (flights x kernel)
+                                    pool.cv if pool is not None else math.nan, cubic_level)
+    if skewed is not None:  # the flights reject the quadratic: the cubic's minimum, where it lies inside the box
+        v = lowest(skewed, None)  # (on a face the cubic terms extrapolate: a cubic falls away towards one side)
+        if np.all(np.abs(v) < 1.0 - 1e-6):
+            u = v
     out = np.clip(u * half + centre, lo, hi)
     return tuple(float(v) for v in out), True

@@ -1,0 +1,349 @@
+"""Whose fault is a bad answer on the zoo: the flying's or the answer's? (issue 20, answer quality)
+
+For each plant, configuration and run of a half (the select half: even runs, as quality.py), the run is tuned as
+quality.py tunes it (`zoo.methods`: same vehicles, same settings) and every gain vector it flew is judged on the
+plant's truth (`zoo.truth`: paired common-random-number repeats, doubled near the 2 % line). Per run:
+
+    answer       the true excess of the run's answer over the optimum (what quality.py scores)
+    best flown   the lowest true excess of any point the run flew without a failed flight (and no fly-away in
+                 the truth): what a perfect choice among the flown points would have answered
+    best in box  the same among the points flown inside the last design's box (where the surface answers)
+
+A run whose best flown point is not within 2 % is the flying's fault (nothing good was flown); one whose best
+flown point is within 2 % but whose answer is not, the answer's. Every surface answer's inputs (the flown points,
+the design's box, the run's noise) are kept in benchmarks/.cache/answer/ so that other answer rules can be
+replayed offline on the same flights (`--replay`).
+
+    python benchmarks/answer_diagnostic.py --runs 20 [--plants ...] [--methods ...] [--workers 2]
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("SCIPY_ARRAY_API", "1")  # Crazyflow needs it before scipy is imported
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import shutil  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from datetime import datetime, timezone  # noqa: E402
+from multiprocessing import get_context  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import cpu_model  # noqa: E402
+from quality import CACHE as ZOO_CACHE, FULL, _clean, _git_commit, _init_worker, engine_hash  # noqa: E402
+from zoo.methods import Method, ZooFleet, candidates, tune_seed  # noqa: E402
+from zoo.plants import PLANTS  # noqa: E402
+from zoo.truth import WITHIN_PCT, Truth, key  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+CACHE = HERE / ".cache" / "answer"
+VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options), each on the runs' own flights
+    "the quadratic alone (no cubic)": {"cubic_level": 0.0},
+    "cubic at the 1 % level": {"cubic_level": 0.01},
+    "log-cost fit": {"log": True},
+    "weights flights / cost^3": {"power": 3.0},
+    "weights flights / cost^4": {"power": 4.0},
+    "kernel reach 1.5 half-widths": {"reach": 1.5},
+    "kernel reach 3 half-widths": {"reach": 3.0},
+}
+FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
+METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
+
+
+def _progress(msg: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+
+
+def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
+    """One tuning as quality.py flies it: the answer, every point flown (normalised gains → costs, a failed
+    flight's inf) and each surface answer's inputs (flown points, box, the run's noise)."""
+    import mavtune.tuner as tuner
+    from mavtune.flown import by_gains
+    from mavtune.strategy import Strategy
+
+    plant = PLANTS[plant_name]
+    settings = method.settings(plant, run)
+    fleet = ZooFleet(plant, settings.vehicles, tune_seed(run))
+    calls: list[dict[str, Any]] = []
+    original = tuner.surface_answer
+
+    def recorded(points, box, worse=(), pool=None):
+        out = original(points, box, worse, pool)
+        calls.append({"points": [[list(k), [c if math.isfinite(c) else "inf" for c in v]] for k, v in points.items()],
+                      "box": [list(b) for b in box], "cv": pool.cv if pool is not None else math.nan,
+                      "dof": pool.dof if pool is not None else 0.0, "answer": list(out[0]), "fitted": out[1]})
+        return out
+
+    tuner.surface_answer = recorded
+    try:
+        result = tuner.run_tuning(settings, fleet)
+    finally:
+        tuner.surface_answer = original
+    told = (pair for r in result.rounds for pair in zip(*Strategy.measured([f.gains for f in r.flights], r.flights)))
+    flown = {k: c for k, (_, c) in by_gains(told, list(plant.gains), digits=None).items()}
+    return {"plant": plant_name, "method": method.label, "run": run,
+            "x": [float(result.gains[g]) for g in plant.gains], "flights": int(result.flights),
+            "flown": [[list(k), [c if math.isfinite(c) else "inf" for c in v]] for k, v in flown.items()],
+            "surface_calls": calls, "noise": result.noise}
+
+
+def costs_of(pairs) -> dict[tuple[float, ...], list[float]]:
+    """A stored flown list back to point → costs (inf for a failed flight)."""
+    return {tuple(k): [math.inf if c == "inf" else float(c) for c in v] for k, v in pairs}
+
+
+class RunCache:
+    """Tuned runs (JSON lines) keyed by plant, configuration, run and mavtune's source hash."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.rows: dict[str, dict[str, Any]] = {}
+        if path.exists():
+            for line in path.read_text().splitlines():
+                try:
+                    row = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                self.rows[row["key"]] = row
+
+    @staticmethod
+    def key(plant: str, method: Method, run: int, engine: str) -> str:
+        return json.dumps([plant, method.key(), run, engine])
+
+    def add(self, k: str, row: dict[str, Any]) -> None:
+        self.rows[k] = row = {**row, "key": k}
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.open("a") as f:
+            f.write(json.dumps(row) + "\n")
+
+
+def truth_for(plant: str) -> Truth:
+    """The plant's truth from a private copy of the zoo's cache (its optimum as quality.py found it; the many
+    points judged here do not grow the shared cache)."""
+    CACHE.mkdir(parents=True, exist_ok=True)
+    t = Truth(plant, ZOO_CACHE)
+    if t.path is not None and t.path.exists() and not (CACHE / t.path.name).exists():
+        shutil.copyfile(t.path, CACHE / t.path.name)
+    return Truth(plant, CACHE)
+
+
+def judged(t: Truth, points: list[tuple[float, ...]], pm) -> None:
+    """Every point judged as quality.py judges an answer (64 repeats, doubled near the 2 % line)."""
+    t.judge(points, FULL["judge_repeats"], pm)
+
+
+def score(t: Truth, row: dict[str, Any]) -> dict[str, Any]:
+    """The run's answer against its best flown point (everywhere and in the last design's box)."""
+    flown = costs_of(row["flown"])
+    safe = [p for p, c in flown.items() if all(map(math.isfinite, c)) and t.fly_away(p) == 0.0]
+    ex = {p: t.excess(p)[0] for p in safe}
+    best = min(safe, key=ex.get) if safe else None
+    box = row["surface_calls"][-1]["box"] if row["surface_calls"] else None
+    in_box = [p for p in safe if box and all(lo - 1e-9 <= v <= hi + 1e-9 for v, (lo, hi) in zip(p, box))]
+    best_box = min(in_box, key=ex.get) if in_box else None
+    twice = [p for p in safe if len(flown[p]) >= 2]
+    means = {p: float(np.mean(flown[p])) for p in twice}
+    lowest = min(twice, key=means.get) if twice else None
+    answer = t.excess(row["x"])[0]
+    return {"run": row["run"], "answer_excess_pct": answer, "answer_fly_away": t.fly_away(row["x"]),
+            "best_flown_excess_pct": ex[best] if best else math.nan, "best_flown": list(best) if best else None,
+            "best_in_box_excess_pct": ex[best_box] if best_box else math.nan,
+            "lowest_mean_excess_pct": ex[lowest] if lowest else math.nan,
+            "flown_points": len(flown), "flown_within_2": sum(e <= WITHIN_PCT for e in ex.values()),
+            "flights": row["flights"]}
+
+
+def summary(scores: list[dict[str, Any]]) -> dict[str, Any]:
+    """Shares of runs: answer within 2 %, a flown point within 2 %, in the box, the answer's misses."""
+    n = len(scores)
+
+    def share(f) -> float:
+        return sum(1 for s in scores if f(s)) / n if n else math.nan
+
+    def med(k: str) -> float:
+        v = [s[k] for s in scores if math.isfinite(s[k])]
+        return float(np.median(v)) if v else math.nan
+
+    w = WITHIN_PCT
+    return {"runs": n, "answer_within": share(lambda s: s["answer_excess_pct"] <= w),
+            "flown_within": share(lambda s: s["best_flown_excess_pct"] <= w),
+            "box_within": share(lambda s: s["best_in_box_excess_pct"] <= w),
+            "lowest_mean_within": share(lambda s: s["lowest_mean_excess_pct"] <= w),
+            "answer_missed": share(lambda s: s["best_flown_excess_pct"] <= w < s["answer_excess_pct"]),
+            "never_flown": share(lambda s: not s["best_flown_excess_pct"] <= w),
+            "answer_beats_flown": share(lambda s: s["answer_excess_pct"] < s["best_flown_excess_pct"] - 1e-9),
+            "median_answer_pct": med("answer_excess_pct"), "median_best_flown_pct": med("best_flown_excess_pct"),
+            "median_best_in_box_pct": med("best_in_box_excess_pct"),
+            "median_lowest_mean_pct": med("lowest_mean_excess_pct"),
+            "fly_away_answers": sum(1 for s in scores if s["answer_fly_away"] > 0)}
+
+
+def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) -> list[dict[str, Any]]:
+    """Each run's last surface answer again, with the fit's `options`, on the same flights, judged on the truth
+    (exact for a configuration with one design, whose answer flies nothing after it; with more designs only
+    the last is replayed, the earlier ones' answers having chosen what was flown after them)."""
+    from mavtune.search import surface
+    from mavtune.search.evidence import NoisePool
+
+    out = []
+    for row in rows:
+        x = row["x"]
+        if row["surface_calls"]:
+            c = row["surface_calls"][-1]
+            points = costs_of(c["points"])
+            pool = NoisePool.prior(c["cv"], c["dof"]) if c["cv"] is not None and math.isfinite(c["cv"]) else None
+            x = list(surface.answer(points, [tuple(b) for b in c["box"]], surface.ruled_out(points, pool or
+                                                                                             NoisePool()), pool,
+                                    **options)[0])
+        out.append({"plant": row["plant"], "run": row["run"], "x": x})
+    judged(t, [tuple(r["x"]) for r in out], pm)
+    for r in out:
+        r["excess_pct"], r["fly_away"] = t.excess(r["x"])[0], t.fly_away(r["x"])
+    return out
+
+
+def replay_summary(base: list[dict[str, Any]], rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """A variant against the answer as flown: within 2 %, median excess, the paired sign test, fly-aways."""
+    from zoo.stats import sign_test
+
+    e = np.array([r["excess_pct"] for r in rows])
+    return {"within": float(np.mean(e <= WITHIN_PCT)), "median_excess_pct": float(np.median(e)),
+            "fly_away_answers": sum(1 for r in rows if r["fly_away"] > 0), "vs_flown": sign_test(rows, base)}
+
+
+def markdown(doc: dict[str, Any]) -> str:
+    m = doc["meta"]
+    lines = ["# Whose fault is a bad answer: the flights or the answer? (issue 20)", "",
+             f"Command: `{m['command']}` at commit `{m['commit']}` (mavtune source hash `{m['engine']}`), "
+             f"{m['started_utc']} to {m['finished_utc']}; machine: {m['cpu_model']}, nproc {m['cpus']} shared with "
+             f"other jobs, {m['workers']} worker processes; load average {m['load_start'][0]:.2f} at the start, "
+             f"{m['load_end'][0]:.2f} at the end.", "",
+             f"Runs {', '.join(map(str, m['seeds'][:3]))} … {m['seeds'][-1]} ({len(m['seeds'])} per plant, the "
+             f"{m['half']} half; flown as benchmarks/quality.py flies them). Every gain vector a run flew is judged "
+             "on the plant's truth as quality.py judges an answer. *answer*: the run's answer within 2 % of the "
+             "optimum; *flown*: some point the run flew (no failed flight, no fly-away in the truth) within 2 %; "
+             "*in box*: such a point inside the last design's box; *lowest mean*: the flown point (flown twice or "
+             "more) of lowest mean cost in the run's own flights; *missed*: a flown point within 2 % but the "
+             "answer not (the answer's fault); *never*: no flown point within 2 % (the flying's fault).", "",
+             "| plant | configuration | runs | answer within 2 % | flown within 2 % | in box | lowest mean | "
+             "missed (answer's fault) | never flown (flying's fault) | answer better than every flown point | "
+             "median excess %: answer / best flown / best in box / lowest mean | fly-away answers |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for p, per in doc["table"].items():
+        for lb, s in per.items():
+            lines.append(f"| {p} | {lb} | {s['runs']} | {s['answer_within']:.0%} | {s['flown_within']:.0%} | "
+                         f"{s['box_within']:.0%} | {s['lowest_mean_within']:.0%} | {s['answer_missed']:.0%} | "
+                         f"{s['never_flown']:.0%} | {s['answer_beats_flown']:.0%} | "
+                         f"{s['median_answer_pct']:.2f} / {s['median_best_flown_pct']:.2f} / "
+                         f"{s['median_best_in_box_pct']:.2f} / {s['median_lowest_mean_pct']:.2f} | "
+                         f"{s['fly_away_answers']} |")
+    if doc.get("replay"):
+        names = list(next(iter(next(iter(doc["replay"].values())).values())))
+        lines += ["", "## The surface fit's variants replayed on the same flights", "",
+                  "Each run's last response-surface answer recomputed with `surface.answer`'s options on the run's "
+                  "own flights (exact for the default, whose one design's answer flies nothing after it; for "
+                  "BUDGET_TUNING only the last of its three designs is replayed). Per cell: within 2 % (median "
+                  "excess %), and the paired sign test against the answer as flown: runs better–worse (p).", "",
+                  "| plant | configuration | as flown | " + " | ".join(names) + " |",
+                  "| --- | --- | --- | " + " | ".join("---" for _ in names) + " |"]
+        for p, per in doc["replay"].items():
+            for lb, variants in per.items():
+                s = doc["table"][p][lb]
+                cells = []
+                for n in names:
+                    v = variants[n]
+                    st = v["vs_flown"]
+                    fa = f", {v['fly_away_answers']} fly-away" if v["fly_away_answers"] else ""
+                    cells.append(f"{v['within']:.0%} ({v['median_excess_pct']:.2f}) {st['a_better']}–"
+                                 f"{st['b_better']} (p {st['p']:.2g}){fa}")
+                lines.append(f"| {p} | {lb} | {s['answer_within']:.0%} ({s['median_answer_pct']:.2f}) | "
+                             + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--half", choices=("select", "report"), default="select")
+    ap.add_argument("--runs", type=int, default=20)
+    ap.add_argument("--plants", default=",".join(FAILING), help="comma-separated plant names")
+    ap.add_argument("--methods", default=",".join(METHODS), help="comma-separated method labels (zoo.methods)")
+    ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument("--out", type=Path, default=HERE / "results")
+    ap.add_argument("--name", default="answer_diagnostic", help="results file name (markdown + json)")
+    ap.add_argument("--replay", action="store_true", help="also replay each run's last surface answer with the "
+                    "fit's variants (VARIANTS) on the same flights")
+    args = ap.parse_args(argv)
+    plants = [p.strip() for p in args.plants.split(",") if p.strip()]
+    unknown = [p for p in plants if p not in PLANTS]
+    if unknown:
+        ap.error(f"unknown plant(s) {unknown}; the zoo: {', '.join(PLANTS)}")
+    want = [s.strip() for s in args.methods.split(",") if s.strip()]
+    by_label = {m.label: m for m in candidates()}
+    if any(w not in by_label for w in want):
+        ap.error(f"unknown method(s) {[w for w in want if w not in by_label]}; known: {', '.join(by_label)}")
+    methods = [by_label[w] for w in want]
+    seeds = [2 * i + (0 if args.half == "select" else 1) for i in range(args.runs)]
+    started, load0 = datetime.now(timezone.utc), os.getloadavg()
+    engine, commit = engine_hash(), _git_commit()
+    cache = RunCache(CACHE / "runs.jsonl")
+    ex = (ProcessPoolExecutor(args.workers, mp_context=get_context("spawn"), initializer=_init_worker)
+          if args.workers > 1 else None)
+    if ex is None:
+        _init_worker()
+    pm = (lambda fn, *a: list(map(fn, *a))) if ex is None else (lambda fn, *a: list(ex.map(fn, *a)))
+    table: dict[str, dict[str, Any]] = {}
+    runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    replays: dict[str, dict[str, dict[str, Any]]] = {}
+    try:
+        for p in plants:
+            t = truth_for(p)
+            t.build(FULL, pm, _progress)
+            jobs = [(p, m, s) for m in methods for s in seeds if RunCache.key(p, m, s, engine) not in cache.rows]
+            if jobs:
+                _progress(f"{p}: {len(jobs)} runs to tune")
+                done = pm(tune_flights, *zip(*jobs))
+                for (pp, m, s), row in zip(jobs, done):
+                    cache.add(RunCache.key(pp, m, s, engine), row)
+            rows = {m.label: [cache.rows[RunCache.key(p, m, s, engine)] for s in seeds] for m in methods}
+            points = [tuple(k) for rs in rows.values() for r in rs for k, _ in r["flown"]]
+            points += [tuple(r["x"]) for rs in rows.values() for r in rs]
+            _progress(f"{p}: judging {len(set(map(key, points)))} points")
+            judged(t, points, pm)
+            runs[p] = {lb: [score(t, r) for r in rs] for lb, rs in rows.items()}
+            table[p] = {lb: summary(sc) for lb, sc in runs[p].items()}
+            if args.replay:
+                flown = {lb: [{"plant": p, "run": sc["run"], "excess_pct": sc["answer_excess_pct"]} for sc in scs]
+                         for lb, scs in runs[p].items()}
+                replays[p] = {lb: {n: replay_summary(flown[lb], replay(t, rs, o, pm)) for n, o in VARIANTS.items()}
+                              for lb, rs in rows.items()}
+            for lb, s in table[p].items():
+                _progress(f"{p} / {lb}: answer {s['answer_within']:.0%}, flown {s['flown_within']:.0%}, "
+                          f"missed {s['answer_missed']:.0%}")
+    finally:
+        if ex is not None:
+            ex.shutdown()
+    doc = {"meta": {"command": "python benchmarks/answer_diagnostic.py " + " ".join(
+        argv if argv is not None else sys.argv[1:]), "half": args.half, "seeds": seeds, "commit": commit,
+        "engine": engine, "started_utc": started.isoformat(timespec="seconds"),
+        "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "cpu_model": cpu_model(),
+        "cpus": os.cpu_count(), "workers": args.workers, "load_start": load0, "load_end": os.getloadavg()},
+        "table": table, "runs": runs, "replay": replays}
+    args.out.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(_clean(doc), indent=1)
+    (args.out / f"{args.name}.json").write_text(text)
+    (args.out / f"{args.name}.md").write_text(markdown(doc))
+    print(markdown(doc))
+    return doc
+
+
+if __name__ == "__main__":
+    main()
