@@ -101,7 +101,7 @@ def tune(
     times, `design_steps` designs in turn, each
     `design_shrink` times as wide as the one before once it surrounds its answer, `design_split`: the vehicles fly
     distinct points; `design_inner`: the first design also flies the corners of the box half as wide, each point
-    once) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it, `on_round`
+    once) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic), `on_round`
     sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
     `mavtune tune` refuses them. `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
     seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs

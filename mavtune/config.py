@@ -91,8 +91,8 @@ class Tuning(_Section):
     answer of each line search fitted to all its flights (`answer = "model"`) and a line search ending against its
     range's edge flying the edge (`edges`); then the response surface (`design`): a 3^d design of ±0.15 of each
     range around the passes' answer (9 points × the vehicles a point, 18 flights for 2 gains and 2 vehicles, the
-    same in every run) and the answer is the minimum of one quadratic in every gain fitted to the flights near it,
-    inside the flown design. Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs:
+    same in every run) and the answer is the minimum of one quadratic in every gain fitted to the flights near it
+    (of a cubic where the flights reject the quadratic), inside the flown design. Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs:
     benchmarks/results/selection.md): 43 % of runs within 2 % of the optimum on mean over the plants against 37 %
     without the design (paired sign test over the zoo: better in 80 runs, worse in 37, p 8.7e-05), no fly-away
     answer, 121 flights on mean against 100; two designs in turn (the second half as wide: `design_steps = 2`,
@@ -139,7 +139,8 @@ class Tuning(_Section):
                                    "pass's net move (Powell's direction): follows a valley that runs across the gains")
     design: StrictBool = Field(True, description="after the passes over the gains, fly a designed set of gain "
                                 "vectors around their answer and answer the minimiser of one quadratic in every gain "
-                                "fitted to the run's flights near it, inside the flown design (response surface)")
+                                "fitted to the run's flights near it (a cubic where the flights reject the "
+                                "quadratic), inside the flown design (response surface)")
     design_width: float = Field(0.15, gt=0.0, le=0.5, description="design: the design's half-width, a share of "
                                  "each gain's range (the design is shifted inside the ranges, not shrunk)")
     design_repeats: StrictInt = Field(1, ge=1, le=MAX_DESIGN_REPEATS, description="design: times each design point is flown "

@@ -537,7 +537,7 @@ class Tuner:
         """One step of the response surface (`design_count` in turn, each around the answer of the one before):
         fly the design around the gains now (`surface.design`, the same rounds whatever the
         costs: the plan knows them), then answer the minimiser of one quadratic in every gain fitted to the run's
-        flights near it, inside the design's box and never where the nearest flight failed (`surface.answer`). True
+        flights near it (a cubic where the flights reject the quadratic), inside the design's box and never where the nearest flight failed (`surface.answer`). True
         when that answer lies inside the box or on a range's bound, not on a face of the box inside the ranges (a
         trust region: the next design narrows in only around an answer the design surrounds)."""
         s = self.settings
