@@ -278,3 +278,27 @@ def test_a_noisy_quadratic_keeps_the_quadratic_unless_the_flights_reject_it(seed
     rejected = sum(cubic(x, mean * (1.0 + noise * rng.standard_normal(40)), flights, noise) is not None
                    for _ in range(60))
     assert rejected <= 12  # 3 expected at 5 %; 12 or more of 60 has p < 1e-4
+
+
+INF = math.inf
+LATENCY_RUN_35 = {  # the last design's flights of zoo run 35 on "sim latency +60 ms" (shares of each range; costs)
+    (0.2, 0.2): [133.45, 130.54], (0.8, 0.2): [INF, INF], (0.6, 0.2): [INF, INF], (0.4, 0.2): [INF, 1282.48],
+    (0.1, 0.2): [5.97, 7.31], (0.3, 0.2): [651.53, INF], (0.0, 0.2): [42.7, 23.39], (0.0674, 0.2): [8.47, 6.98],
+    (0.0674, 0.8): [115.42, 100.68], (0.0674, 0.6): [61.71, 77.73], (0.0674, 0.4): [24.76, 28.44], (0.0674,
+    0.1): [6.95, 12.19, 14.04, 12.66, 12.8, 11.07], (0.0674, 0.3): [6.11, 11.91, 8.59, 18.64, 7.9, 7.49], (0.2,
+    0.2072): [47.39, 139.48], (0.8, 0.2072): [INF, INF], (0.6, 0.2072): [INF, INF], (0.4, 0.2072): [941.53,
+    INF], (0.1, 0.2072): [4.44, 10.55], (0.3, 0.2072): [259.19, INF], (0.0, 0.2072): [63.51, 16.16], (0.0773,
+    0.2): [11.59, 9.81], (0.0773, 0.8): [108.54, 76.68], (0.0773, 0.6): [56.18, 61.09], (0.0773, 0.4): [27.16,
+    29.66], (0.0773, 0.1): [10.56, 10.49, 7.69, 7.53], (0.0773, 0.3): [13.41, 13.29], (0.0773, 0.0): [499.89,
+    376.95], (0.15, 0.15): [18.59, 15.23], (0.15, 0.0): [INF, INF], (0.15, 0.3): [32.83, 14.84], (0.0, 0.15):
+    [75.73, 48.3], (0.0, 0.0): [2122.64, 626.87], (0.0, 0.3): [23.88, 40.04], (0.3, 0.15): [INF, INF], (0.3,
+    0.0): [INF, INF], (0.3, 0.3): [249.17, 230.0]}
+
+
+def test_a_cubic_answer_never_dips_into_the_gap_beside_a_failed_flight():
+    """On that run the flights reject the quadratic and the cubic's minimum (kp 0.12, kd 0.06) lay nearer the
+    failed (0.15, 0) than any safe point flown: 6 % of true flights there diverged. The answer stays off it."""
+    from mavtune.search.surface import beside_wall
+
+    x, fitted = answer(LATENCY_RUN_35, [(0.0, 0.3), (0.0, 0.3)], (), _pool(0.354))
+    assert fitted and beside_wall(LATENCY_RUN_35, x, 0.0) is None

@@ -19,7 +19,8 @@ Weights as the line search's own fit (`model`): each point by its flights over i
 relative, sd ∝ cost), times a tricube kernel in its largest distance (in shares of each range) from the design's
 centre, reaching twice the design's half-width: the fit is local to where the design flew. Where the flights reject
 the quadratic (its residuals exceed the run's noise by more than a cubic's extra terms explain: `cubic`), the
-answer is the minimiser of the cubic instead, where it lies inside the box (on a face the cubic terms extrapolate):
+answer is the minimiser of the cubic instead, where it lies inside the box (on a face the cubic terms extrapolate)
+and not beside a failed flight (a cubic dips into the unflown gap next to one):
 an asymmetric valley — a wall of oscillating gains on one side — pulls a quadratic's minimum towards the shallow
 side (benchmarks/results/answer_diagnostic.md).
 """
@@ -167,7 +168,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            pool: NoisePool | None = None, *, power: float = POWER, reach: float = REACH,
            log: bool = False, cubic_level: float = CUBIC_LEVEL) -> tuple[tuple[float, ...], bool]:
     """The minimiser of one weighted quadratic (of a cubic where the flights reject the quadratic, `cubic`, and its
-    minimiser lies inside the box) through
+    minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
     vectors whose nearest flown point neither failed nor is one the flights rule out (`worse`: `ruled_out`) nor,
     while a point in the box flown off the walls is not told apart from the box's best (`pool`: the run's noise;
@@ -283,7 +284,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
                                     pool.cv if pool is not None else math.nan, cubic_level)
     if skewed is not None:  # the flights reject the quadratic: the cubic's minimum, where it lies inside the box
         v = lowest(skewed, None)  # (on a face the cubic terms extrapolate: a cubic falls away towards one side)
-        if np.all(np.abs(v) < 1.0 - 1e-6):
-            u = v
+        if np.all(np.abs(v) < 1.0 - 1e-6) and beside_wall(points, tuple(v * half + centre), 0.0) is None:
+            u = v  # (nor next to a failed flight with nothing safe flown between: a cubic dips into the gap)
     out = np.clip(u * half + centre, lo, hi)
     return tuple(float(v) for v in out), True
