@@ -149,7 +149,7 @@ def cubic(x, y, n, cv: float, level: float = CUBIC_LEVEL):
         r = (a @ beta - y) * sw
         return beta, float(r @ r)
 
-    observed = n / np.maximum(np.abs(y), 1e-6) ** 2  # the fit's own weights (as the quadratic's)
+    observed = n / np.maximum(np.abs(y), 1e-6) ** POWER  # the fit's own weights (as the quadratic's)
     try:
         level_fit, _ = fit(square, n)  # by flights alone: unbiased by noisy weights
         fitted = np.maximum(columns(x, square) @ level_fit, 0.1 * np.abs(y))  # (far below a mean: its mean's scale)
@@ -280,8 +280,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         return u if ok else best
 
     u = lowest(value, slope)
-    skewed = None if log else cubic(x, y, w * np.maximum(np.abs(y), 1e-6) ** power,  # (flights x kernel)
-                                    pool.cv if pool is not None else math.nan, cubic_level)
+    skewed = None if log else cubic(x, y, counts[ok] * kernel, pool.cv if pool is not None else math.nan,
+                                    cubic_level)
     if skewed is not None:  # the flights reject the quadratic: the cubic's minimum, where it lies inside the box
         v = lowest(skewed, None)  # (on a face the cubic terms extrapolate: a cubic falls away towards one side)
         if np.all(np.abs(v) < 1.0 - 1e-6) and beside_wall(points, tuple(v * half + centre), 0.0) is None:
