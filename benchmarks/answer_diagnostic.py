@@ -28,7 +28,6 @@ import json  # noqa: E402
 import math  # noqa: E402
 import shutil  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from datetime import datetime, timezone  # noqa: E402
 from multiprocessing import get_context  # noqa: E402
@@ -39,7 +38,9 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model  # noqa: E402
-from quality import CACHE as ZOO_CACHE, FULL, _clean, _git_commit, _init_worker, engine_hash  # noqa: E402
+from quality import (  # noqa: E402
+    CACHE as ZOO_CACHE, FULL, Runs, _clean, _git_commit, _init_worker, _labels, _progress, engine_hash,
+)
 from zoo.methods import Method, ZooFleet, candidates, tune_seed  # noqa: E402
 from zoo.plants import PLANTS  # noqa: E402
 from zoo.truth import WITHIN_PCT, Truth, key  # noqa: E402
@@ -57,10 +58,6 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
-
-
-def _progress(msg: str) -> None:
-    print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
 
 
 def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
@@ -99,31 +96,6 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
 def costs_of(pairs) -> dict[tuple[float, ...], list[float]]:
     """A stored flown list back to point → costs (inf for a failed flight)."""
     return {tuple(k): [math.inf if c == "inf" else float(c) for c in v] for k, v in pairs}
-
-
-class RunCache:
-    """Tuned runs (JSON lines) keyed by plant, configuration, run and mavtune's source hash."""
-
-    def __init__(self, path: Path):
-        self.path = path
-        self.rows: dict[str, dict[str, Any]] = {}
-        if path.exists():
-            for line in path.read_text().splitlines():
-                try:
-                    row = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                self.rows[row["key"]] = row
-
-    @staticmethod
-    def key(plant: str, method: Method, run: int, engine: str) -> str:
-        return json.dumps([plant, method.key(), run, engine])
-
-    def add(self, k: str, row: dict[str, Any]) -> None:
-        self.rows[k] = row = {**row, "key": k}
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        with self.path.open("a") as f:
-            f.write(json.dumps(row) + "\n")
 
 
 def truth_for(plant: str) -> Truth:
@@ -286,15 +258,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     unknown = [p for p in plants if p not in PLANTS]
     if unknown:
         ap.error(f"unknown plant(s) {unknown}; the zoo: {', '.join(PLANTS)}")
-    want = [s.strip() for s in args.methods.split(",") if s.strip()]
-    by_label = {m.label: m for m in candidates()}
-    if any(w not in by_label for w in want):
-        ap.error(f"unknown method(s) {[w for w in want if w not in by_label]}; known: {', '.join(by_label)}")
-    methods = [by_label[w] for w in want]
+    want = _labels(args.methods, [m.label for m in candidates()])
+    if isinstance(want, str):
+        ap.error(f"--methods: no method labelled {want!r}; known: {'; '.join(m.label for m in candidates())}")
+    methods = [m for m in candidates() if m.label in want]
     seeds = [2 * i + (0 if args.half == "select" else 1) for i in range(args.runs)]
     started, load0 = datetime.now(timezone.utc), os.getloadavg()
     engine, commit = engine_hash(), _git_commit()
-    cache = RunCache(CACHE / "runs.jsonl")
+    cache = Runs(CACHE / "runs.jsonl")
     ex = (ProcessPoolExecutor(args.workers, mp_context=get_context("spawn"), initializer=_init_worker)
           if args.workers > 1 else None)
     if ex is None:
@@ -307,13 +278,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         for p in plants:
             t = truth_for(p)
             t.build(FULL, pm, _progress)
-            jobs = [(p, m, s) for m in methods for s in seeds if RunCache.key(p, m, s, engine) not in cache.rows]
+            jobs = [(p, m, s) for m in methods for s in seeds if Runs.key(p, m, s, None, engine) not in cache.rows]
             if jobs:
                 _progress(f"{p}: {len(jobs)} runs to tune")
                 done = pm(tune_flights, *zip(*jobs))
                 for (pp, m, s), row in zip(jobs, done):
-                    cache.add(RunCache.key(pp, m, s, engine), row)
-            rows = {m.label: [cache.rows[RunCache.key(p, m, s, engine)] for s in seeds] for m in methods}
+                    cache.add(Runs.key(pp, m, s, None, engine), row)
+            rows = {m.label: [cache.rows[Runs.key(p, m, s, None, engine)] for s in seeds] for m in methods}
             points = [tuple(k) for rs in rows.values() for r in rs for k, _ in r["flown"]]
             points += [tuple(r["x"]) for rs in rows.values() for r in rs]
             _progress(f"{p}: judging {len(set(map(key, points)))} points")
