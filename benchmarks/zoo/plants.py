@@ -62,21 +62,14 @@ def sim_fly(changes: dict[str, Any], box: tuple[tuple[float, float], tuple[float
     (p0, p1), (d0, d1) = box
 
     def fly(x, seeds, rounds):
-        from unittest import mock
-
         from mavtune.sim import batch
         from mavtune.sim import kernel as K
         from mavtune.sim.gains import to_physical
 
         sc = _scenario(changes)
         kx, kv = to_physical(p0 + x[:, 0] * (p1 - p0), d0 + x[:, 1] * (d1 - d0))
-        args = (sc, kx, kv, np.asarray(seeds, dtype=np.int64), np.asarray(rounds, dtype=np.int64))
-        if airframe is None:
-            res = batch.fly(*args)
-        else:  # the kernel reads the airframe from batch.constants: the same flight with another vehicle's figures
-            cp = _airframe_constants(batch.constants(sc), airframe)
-            with mock.patch.object(batch, "constants", lambda _: cp):
-                res = batch.fly(*args)
+        res = batch.fly(sc, kx, kv, np.asarray(seeds, dtype=np.int64), np.asarray(rounds, dtype=np.int64),
+                        airframe=None if airframe is None else _airframe_constants(batch.constants(sc), airframe))
         return res.cost(sc.cost), res.status != K.OK
 
     return fly
@@ -401,8 +394,8 @@ def _sim_units(box) -> dict[str, tuple[str, float, float]]:
 
 PX4_CASCADE = Plant(
     "mavsim PX4 cascade", "PX4's cascade as mavsim flies it today (Px4Altitude: MPC_Z_P into the MPC_Z_VEL_P/I/D_ACC "
-    "PID, velocity limits, anti-windup; I 2, D 0), MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15], IAE", ("kp", "kd"), px4_cascade_fly(("kp", "kd"), {}), px4_units(("kp", "kd")),
-    judge_cap=128, chunk=256)
+    "PID, velocity limits, anti-windup; I 2, D 0), MPC_Z_P [0.1, 1.5] x MPC_Z_VEL_P_ACC [2, 15], IAE", ("kp", "kd"),
+    px4_cascade_fly(("kp", "kd"), {}), px4_units(("kp", "kd")), judge_cap=128, chunk=256)
 """PX4's altitude cascade as mavsim flies it (replaced the zoo's "mavsim PX4", the old PD mapping k_x = MPC_Z_P ·
 MPC_Z_VEL_P_ACC, k_v = MPC_Z_VEL_P_ACC, on 2026-11-25; another name, so no cached truth or run of the old plant is
 taken for it)."""

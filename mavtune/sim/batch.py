@@ -138,11 +138,12 @@ class BatchResult:
 
 
 def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0,
-        parallel: bool | None = None) -> BatchResult:
+        parallel: bool | None = None, airframe: np.ndarray | None = None) -> BatchResult:
     """Fly len(seeds) flights at once: flight i has physical gains (kx_z[i], kv_z[i]) and randomness (seeds[i],
     round_ids[i]). trace_hz > 0 records, at that rate, the low-passed altitude measurement the controller acted on
     (the signal of the cost; 0: no trace). `parallel`: spread the batch over numba's threads (True), fly it on
-    this thread (False), or choose by size (None: from PARALLEL_FROM flights on); the results are the same."""
+    this thread (False), or choose by size (None: from PARALLEL_FROM flights on); the results are the same.
+    `airframe`: the kernel's constants for another vehicle than the F550 (default: `constants(scenario)`)."""
     seeds = seed_array(seeds)
     b = seeds.shape[0]
     round_ids = kernel_array(round_ids, np.int64, (b,))
@@ -158,9 +159,10 @@ def fly(scenario: Scenario, kx_z, kv_z, seeds, round_ids, trace_hz: float = 0.0,
     t_fail = np.empty(b)
     mix, alloc = mixing()
     kernel = K.fly_batch if (b >= PARALLEL_FROM if parallel is None else parallel) else K.fly_serial
+    cp = kernel_array(constants(scenario) if airframe is None else airframe)
     if b:
-        kernel(seeds, round_ids, kx, kv, ref, settle_steps(scenario), kernel_array(constants(scenario)), mix, alloc,
-               every, traces, costs, status, t_fail, float64_lanes())
+        kernel(seeds, round_ids, kx, kv, ref, settle_steps(scenario), cp, mix, alloc, every, traces, costs, status,
+               t_fail, float64_lanes())
     t_trace = np.arange(n_trace) * every * DT_S
     z_ref = ref[::every, 2].copy() if every else np.empty(0)
     return BatchResult(costs=costs, status=status, t_fail_s=t_fail, traces=traces[:, :n_trace], trace_t_s=t_trace,
