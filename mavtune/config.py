@@ -84,7 +84,7 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
-                   "design_steps", "design_shrink", "design_split", "design_inner")  # what [tuning] gives the engine's Settings
+                   "design_steps", "design_shrink", "design_split", "design_inner", "budget")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -164,6 +164,15 @@ class Tuning(_Section):
                                      "box half as wide (2^d points more), each of its points once (a map of the "
                                      "box: a wide first design's corners and faces miss a narrow valley, or an "
                                      "optimum beside a fly-away region)")
+    budget: StrictInt | None = Field(None, ge=1, description="the run's flights, all vehicles together, known "
+                                     "before take-off and flown exactly: the passes' line searches share what the "
+                                     "designs do not need (each the passes' share left over the searches to come; "
+                                     "adaptive averaging only while its share keeps a round for every point still "
+                                     "to fly; a search whose share is spent answers from the flights it has), the "
+                                     "designs fly all the rest (more flights of their points); the last round flies "
+                                     "only the vehicles the budget has left. At least the designs' own flights; "
+                                     "unset: each stage flies what it asks for (the plan's count is then expected, "
+                                     "not exact)")
     pick: Literal["best", "near-stock"] | None = Field(None, description="the answer among the run's flown points: "
                                                        "the search's optimum (best), or the flown point nearest the "
                                                        "vehicles' stock gains whose cost is within one standard error "

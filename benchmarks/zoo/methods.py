@@ -34,12 +34,14 @@ class Method:
     label: str
     tuning: dict[str, Any] = field(default_factory=dict)
     peer: str | None = None
+    per_gain: int | None = None  # a budget of this many flights per gain tuned (config.Tuning's budget: the total)
 
     def settings(self, plant: Plant, run: int):
         """The engine's Settings of this configuration on `plant`'s box, seeded by the run."""
         from mavtune.config import Tuning
 
-        return Tuning.model_validate({**self.tuning, "seed": run}).settings(space=plant.space)
+        budget = {} if self.per_gain is None else {"budget": self.per_gain * len(plant.space)}
+        return Tuning.model_validate({**self.tuning, "seed": run, **budget}).settings(space=plant.space)
 
     def key(self) -> str:
         """Identical settings give one key (a configuration listed twice runs once; the cache keys on it)."""
@@ -48,7 +50,8 @@ class Method:
         from mavtune.config import Tuning
 
         s = Tuning.model_validate(self.tuning).settings(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
-        return json.dumps([s.fingerprint(), s.vehicles], sort_keys=True, default=str)
+        per_gain = [] if self.per_gain is None else [{"budget per gain": self.per_gain}]
+        return json.dumps([s.fingerprint(), s.vehicles, *per_gain], sort_keys=True, default=str)
 
 
 class ZooFleet:
@@ -167,6 +170,8 @@ def candidates() -> list[Method]:
         Method("3 designs from the whole box shrink 0.5", {**first, "design_shrink": 0.5}),
         Method("3 designs from the whole box shrink 0.3", {**first, "design_shrink": 0.3}),
         Method("3 designs: the first with inner corners (shrink 0.4)", {**designs, "design_shrink": 0.4}),
+        *(Method(f"budget {n} flights a gain", per_gain=n) for n in (28, 42, 56)),
+        Method("budget 28 flights a gain, 1 pass", {"bootstraps": 1}, per_gain=28),
     ]
 
 
