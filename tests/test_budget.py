@@ -197,3 +197,22 @@ def test_the_least_budget_flies_the_design_alone():
     result = run_tuning(s, NoisyFleet(2), draws=0)
     assert {r.gain for r in result.rounds} == {"design"} and result.flights == 18
     assert all(x.stop_reason and "share of the budget" in x.stop_reason for x in result.searches)
+
+
+def test_the_cli_plans_and_flies_a_budget_given_in_a_file(tmp_path):
+    """`[tuning] budget` in a file: `mavtune plan` states the flights and rounds exactly, `mavtune tune` flies
+    them; a budget below the design's flights is one line naming the least."""
+    import json
+
+    from tests.test_fuzz import cli
+
+    good, bad = tmp_path / "good.toml", tmp_path / "bad.toml"
+    good.write_text("[tuning]\nbudget = 57\n")
+    bad.write_text("[tuning]\nbudget = 12\n")
+    code, out, _ = cli("plan", "--config", str(good))
+    text = " ".join(out.split())
+    assert code == 0 and "rounds 29 exactly" in text and "flights 57 (2 vehicles × 29 rounds" in text
+    code, _, _ = cli("tune", "--config", str(good), "-q", "--out", str(tmp_path / "run"))
+    assert code == 0 and json.loads((tmp_path / "run" / "result.json").read_text())["flights"] == 57
+    code, _, err = cli("plan", "--config", str(bad))
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "give at least 18" in err

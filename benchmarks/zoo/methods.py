@@ -170,7 +170,7 @@ def candidates() -> list[Method]:
         Method("3 designs from the whole box shrink 0.5", {**first, "design_shrink": 0.5}),
         Method("3 designs from the whole box shrink 0.3", {**first, "design_shrink": 0.3}),
         Method("3 designs: the first with inner corners (shrink 0.4)", {**designs, "design_shrink": 0.4}),
-        *(Method(f"budget {n} flights a gain", per_gain=n) for n in (28, 42, 56)),
+        *(Method(f"budget {n} flights a gain", per_gain=n) for n in (28, 35, 42, 56)),
         Method("budget 28 flights a gain, 1 pass", {"bootstraps": 1}, per_gain=28),
     ]
 
