@@ -29,7 +29,7 @@ def noisy_bowl(seed: int, noise: float = 0.2):
 def budgeted(gains: int, vehicles: int, extra: int, **options) -> Settings:
     """The default's settings over `gains` gains on `vehicles` vehicles, its budget `extra` above the least."""
     space = {n: (0.0, 1.0) for n in GAINS[:gains]}
-    least = Tuning().settings(space=space, vehicles=vehicles, **options).budget_minimum()
+    least = Tuning().settings(space=space, vehicles=vehicles, budget=None, **options).budget_minimum()
     return Tuning().settings(space=space, vehicles=vehicles, budget=least + extra, **options)
 
 
@@ -166,7 +166,7 @@ def test_stages_of_a_budgeted_run_fly_every_round_once(tmp_path):
 
 
 def test_a_budget_is_in_the_journal_and_its_absence_leaves_old_journals_resumable(tmp_path):
-    assert "budget" not in Tuning().settings().fingerprint()  # unset: the fingerprint of before
+    assert "budget" not in Tuning(budget="none").settings().fingerprint()  # none: the fingerprint of before
     assert Tuning().settings(budget=60).fingerprint()["budget"] == 60
     path = tmp_path / "j.sqlite"
     run_tuning(Tuning().settings(budget=60), NoisyFleet(2), path, draws=0)
@@ -182,7 +182,8 @@ def test_a_budget_is_in_the_journal_and_its_absence_leaves_old_journals_resumabl
     ({"tuning.budget": 40, "tuning.space": {g: [0.0, 1.0] for g in GAINS}}, "give at least 50"),
     ({"tuning.budget": 60, "tuning.design": False}, "budget needs design = true"),
     ({"tuning.budget": 60, "tuning.bootstraps": "auto"}, "budget needs a fixed number of passes"),
-    ({"tuning.budget": 0}, "tuning.budget: Input should be greater than or equal to 1"),
+    ({"tuning.budget": 0}, "tuning.budget: must be at least 1 flight"),
+    ({"tuning.budget": "some"}, "tuning.budget"),
     ({"tuning.budget": 56.5}, "tuning.budget"),
     ({"tuning.budget": True}, "tuning.budget"),
 ])
@@ -216,3 +217,21 @@ def test_the_cli_plans_and_flies_a_budget_given_in_a_file(tmp_path):
     assert code == 0 and json.loads((tmp_path / "run" / "result.json").read_text())["flights"] == 57
     code, _, err = cli("plan", "--config", str(bad))
     assert code == 2 and len(err.strip().splitlines()) == 1 and "give at least 18" in err
+
+
+def test_the_default_budget_is_42_flights_a_gain_and_the_presets_keep_flying_without_one(tmp_path):
+    """`budget = "auto"` (the default): 42 flights a gain with a design and fixed passes; the paper's setting, the
+    designs-only preset, a run without a design and a run folder from before budgets fly without one."""
+    import json
+
+    from mavtune.config import BUDGET_TUNING, PAPER_TUNING
+    from mavtune.run import saved_config
+
+    assert load_config(None).settings().budget == 84 == make_plan(load_config(None).settings()).flights
+    assert Tuning().settings(space={g: (0.0, 1.0) for g in GAINS}).budget == 168
+    for preset in (PAPER_TUNING, BUDGET_TUNING, {"tuning.design": False}, {"tuning.bootstraps": "auto"}):
+        assert load_config(None, preset).settings().budget is None
+    old = load_config(None).model_dump(mode="json")
+    del old["tuning"]["budget"]
+    (tmp_path / "config.json").write_text(json.dumps(old))
+    assert load_config(base=saved_config(tmp_path)).settings().budget is None

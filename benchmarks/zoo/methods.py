@@ -151,20 +151,24 @@ def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str
 
 
 def candidates() -> list[Method]:
-    """The configurations the default is chosen from (the first is today's default; `--half select`). The paper's
-    setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
+    """The configurations the default is chosen from (the first is today's default; `--half select`; the second the
+    default before the budget, chosen on benchmarks/results/selection_budget_default.md). The paper's setting
+    (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     from mavtune.config import BUDGET_TUNING
 
-    fixed = {"adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
+    none = {"budget": "none"}  # the configurations chosen among before budgets: each flies what it asks for
+    fixed = {**none, "adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
     designs = {k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}  # no passes: 3 designs, exact plan
     first = {**designs, "design_inner": False, "design_shrink": 0.4}  # the first BUDGET_TUNING: the 3^d box first
     return [
         Method("default (config.Tuning())"),
-        Method("previous default (no design)", {"design": False}),
-        Method("two designs, the second half as wide", {"design_steps": 2, "design_shrink": 0.5}),
-        Method("design ±0.1", {"design_width": 0.1}),
+        Method("previous default (no budget)", none),
+        Method("previous default (no design)", {**none, "design": False}),
+        Method("two designs, the second half as wide", {**none, "design_steps": 2, "design_shrink": 0.5}),
+        Method("design ±0.1", {**none, "design_width": 0.1}),
         Method("fixed budget: 1 pass, not adaptive, 3 designs", {**fixed, "design_steps": 3}),
-        Method("valley answer, directions, no design", {"answer": "valley", "directions": True, "design": False}),
+        Method("valley answer, directions, no design", {**none, "answer": "valley", "directions": True,
+                                                        "design": False}),
         Method("fixed budget: 3 designs from a map of the box (BUDGET_TUNING)", designs),
         Method("3 designs from the whole box (the first BUDGET_TUNING)", first),
         Method("3 designs from the whole box shrink 0.5", {**first, "design_shrink": 0.5}),
