@@ -79,6 +79,12 @@ def markdown(doc: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _load(doc: dict[str, Any]) -> str:
+    """The one-minute load average a quality.py result recorded at its start."""
+    load = doc["meta"].get("load_start")
+    return f"{load[0]:.2f}" if load else "not recorded"
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("new", type=Path, help="quality.py's json of the new engine")
@@ -102,7 +108,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "new_started": new["meta"]["started_utc"], "new_finished": new["meta"]["finished_utc"],
         "old_started": old["meta"]["started_utc"], "old_finished": old["meta"]["finished_utc"],
         "machine": f"{new['meta'].get('cpu_model', '?')}, nproc {new['meta'].get('cpus', '?')} shared with other "
-                   f"jobs, load average {new['meta'].get('load_start', ['?'])[0]} at the new run's start"}
+                   f"jobs, load average {_load(new)} at the new run's start, {_load(old)} at the old run's"}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{args.name}.json").write_text(json.dumps(doc, indent=1, default=str))
     (args.out / f"{args.name}.md").write_text(markdown(doc))
