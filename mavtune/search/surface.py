@@ -20,11 +20,11 @@ relative, sd ∝ cost), times a tricube kernel in its largest distance (in share
 centre, reaching twice the design's half-width: the fit is local to where the design flew. Where the flights do not
 reject a plane for the quadratic (at PLANE_LEVEL, 20 %: `plane`), the answer is the plane's minimum, on the flown
 region's boundary: a cost that only falls across the design towards an edge or a corner, measured by noisy flights,
-gives a quadratic whose noisy curvature puts its minimum inside (on the zoo's selection half, replayed on the
-default's own flights: the PX4 cascade within 2 % of its corner optimum in 30 % of runs instead of 5 %, ArduPilot
-65 % instead of 50 %, the corner box 35 % instead of 10 %, the edge box 45 % instead of 50 % (8 runs better, 8
-worse); on the other plants at most 2 runs of 20 moved, none worse: benchmarks/results/answer_diagnostic_corner.md,
-selection_corner.md). Where the flights reject
+gives a quadratic whose noisy curvature puts its minimum inside (on the zoo's selection half, 40 runs a plant:
+the PX4 cascade within 2 % of its corner optimum in 38 % of runs instead of 8 %, ArduPilot 68 % instead of 42 %, the
+corner box 42 % instead of 18 %, the edge box 45 % as before, no plant worse, the intervals' coverage and fly-away
+answers unchanged: benchmarks/results/selection_corner_paired.md; the levels replayed on the same flights:
+answer_diagnostic_corner.md). Where the flights reject
 the quadratic (its residuals exceed the run's noise by more than a cubic's extra terms explain: `cubic`), the
 answer is the minimiser of the cubic instead, where it lies inside the box (on a face the cubic terms extrapolate)
 and not beside a failed flight (a cubic dips into the unflown gap next to one):
