@@ -24,7 +24,11 @@ gives a quadratic whose noisy curvature puts its minimum inside (on the zoo's se
 the PX4 cascade within 2 % of its corner optimum in 38 % of runs instead of 8 %, ArduPilot 68 % instead of 42 %, the
 corner box 42 % instead of 18 %, the edge box 45 % as before, no plant worse, the intervals' coverage and fly-away
 answers unchanged: benchmarks/results/selection_corner_paired.md; the levels replayed on the same flights:
-answer_diagnostic_corner.md). Where the flights reject
+answer_diagnostic_corner.md). Its risk, seen on the unseen plants (report only, never chosen on:
+quality_unseen_corner_paired.md): an optimum inside the design whose curvature the flights do not resolve gets the
+plane's vertex, a corner of the design (the light step: 25 % of runs within 2 % against 85 %); `slope_level` (the
+plane only where the flights also reject a constant for it) is the guard measured on the selection half's replays
+(answer_diagnostic_corner_slope.md), not the default. Where the flights reject
 the quadratic (its residuals exceed the run's noise by more than a cubic's extra terms explain: `cubic`), the
 answer is the minimiser of the cubic instead, where it lies inside the box (on a face the cubic terms extrapolate)
 and not beside a failed flight (a cubic dips into the unflown gap next to one):
@@ -207,11 +211,15 @@ def cubic(x, y, n, cv: float, level: float = CUBIC_LEVEL):
     return _polynomial(x, y, n, _terms(d, 3))
 
 
-def plane(x, y, n, cv: float, level: float):
+def plane(x, y, n, cv: float, level: float, slope_level: float = 0.0):
     """The value function of one plane through the points (weighted as `cubic`) when the flights do not reject
-    it for a quadratic at `level` (`_rejects`); None otherwise, or with the noise unknown or nil."""
+    it for a quadratic at `level` (`_rejects`) and, with `slope_level`, reject a constant for it at that level
+    (the cost measurably falls across the points, not a flat bottom); None otherwise, or with the noise unknown
+    or nil."""
     d = x.shape[1]
     if not level > 0 or _rejects(x, y, n, cv, _terms(d, 1), _terms(d, 2), level) is not False:
+        return None
+    if slope_level > 0 and not _rejects(x, y, n, cv, _terms(d, 0), _terms(d, 1), slope_level):
         return None
     return _polynomial(x, y, n, _terms(d, 1))
 
@@ -220,7 +228,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            worse: Collection[tuple[float, ...]] = (),
            pool: NoisePool | None = None, *, power: float = POWER, reach: float = REACH,
            log: bool = False, cubic_level: float = CUBIC_LEVEL,
-           plane_level: float = PLANE_LEVEL) -> tuple[tuple[float, ...], bool]:
+           plane_level: float = PLANE_LEVEL, slope_level: float = 0.0) -> tuple[tuple[float, ...], bool]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
@@ -334,7 +342,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         return u if ok else best
 
     cv = pool.cv if pool is not None else math.nan
-    flat = None if log else plane(x, y, counts[ok] * kernel, cv, plane_level)
+    flat = None if log else plane(x, y, counts[ok] * kernel, cv, plane_level, slope_level)
     if flat is not None:  # the flights need no curvature: the plane's minimum, on the flown region's boundary
         return tuple(float(v) for v in np.clip(lowest(flat, None) * half + centre, lo, hi)), True
     u = lowest(value, slope)
