@@ -55,6 +55,9 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "weights flights / cost^4": {"power": 4.0},
     "kernel reach 1.5 half-widths": {"reach": 1.5},
     "kernel reach 3 half-widths": {"reach": 3.0},
+    "no divergence bound": {"risk": None},
+    "divergence chance <= 0.3 %": {"risk": 0.003},
+    "divergence chance <= 1 %": {"risk": 0.01},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -253,7 +256,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--name", default="answer_diagnostic", help="results file name (markdown + json)")
     ap.add_argument("--replay", action="store_true", help="also replay each run's last surface answer with the "
                     "fit's variants (VARIANTS) on the same flights")
+    ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated names of the variants replayed")
     args = ap.parse_args(argv)
+    variants = {n.strip(): VARIANTS.get(n.strip()) for n in args.variants.split(",") if n.strip()}
+    if None in variants.values():
+        ap.error(f"--variants: unknown {[n for n, v in variants.items() if v is None]}; known: {', '.join(VARIANTS)}")
     plants = [p.strip() for p in args.plants.split(",") if p.strip()]
     unknown = [p for p in plants if p not in PLANTS]
     if unknown:
@@ -294,7 +301,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             if args.replay:
                 flown = {lb: [{"plant": p, "run": sc["run"], "excess_pct": sc["answer_excess_pct"]} for sc in scs]
                          for lb, scs in runs[p].items()}
-                replays[p] = {lb: {n: replay_summary(flown[lb], replay(t, rs, o, pm)) for n, o in VARIANTS.items()}
+                replays[p] = {lb: {n: replay_summary(flown[lb], replay(t, rs, o, pm)) for n, o in variants.items()}
                               for lb, rs in rows.items()}
             for lb, s in table[p].items():
                 _progress(f"{p} / {lb}: answer {s['answer_within']:.0%}, flown {s['flown_within']:.0%}, "
