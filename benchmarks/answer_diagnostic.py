@@ -66,6 +66,9 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "weights flights / cost^4": {"power": 4.0},
     "kernel reach 1.5 half-widths": {"reach": 1.5},
     "kernel reach 3 half-widths": {"reach": 3.0},
+    "no divergence bound": {"risk": None},
+    "divergence chance <= 0.3 %": {"risk": 0.003},
+    "divergence chance <= 1 %": {"risk": 0.01},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -268,8 +271,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--flown-by", default=None, metavar="HASH", help="the runs recorded by the engine of this "
                     "source hash (benchmarks/.cache/answer), flown by the code before a change of the answer; "
                     "nothing is flown")
-    ap.add_argument("--variants", default="", help="comma-separated VARIANTS names to replay (default: all)")
+    ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated names of the variants replayed")
     args = ap.parse_args(argv)
+    variants = {n.strip(): VARIANTS.get(n.strip()) for n in args.variants.split(",") if n.strip()}
+    if None in variants.values():
+        ap.error(f"--variants: unknown {[n for n, v in variants.items() if v is None]}; known: {', '.join(VARIANTS)}")
     plants = [p.strip() for p in args.plants.split(",") if p.strip()]
     unknown = [p for p in plants if p not in PLANTS]
     if unknown:
@@ -281,7 +287,6 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     seeds = [2 * i + (0 if args.half == "select" else 1) for i in range(args.runs)]
     started, load0 = datetime.now(timezone.utc), os.getloadavg()
     engine, commit = args.flown_by or engine_hash(), _git_commit()
-    variants = {n: o for n, o in VARIANTS.items() if not args.variants or n in args.variants.split(",")}
     cache = Runs(CACHE / "runs.jsonl")
     ex = (ProcessPoolExecutor(args.workers, mp_context=get_context("spawn"), initializer=_init_worker)
           if args.workers > 1 else None)

@@ -59,6 +59,9 @@ unseen plants (quality_unseen_fly.md: 132 runs to 100; the heavy-lift figure-8 a
 mends an optimum beside fly-away gains (gusts, the cliff) and loses precision on smooth costs (each point of its
 first design is flown once); `design_inner = false, design_shrink = 0.4` restores the first preset."""
 
+PRESETS: dict[str, dict[str, Any]] = {"paper": PAPER_TUNING, "budget": BUDGET_TUNING}
+"""The named settings `--preset` gives (`mavtune tune --preset budget`), each [tuning] overrides over the file's."""
+
 
 GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
                                          "horizontal": ("kp", "kd")}

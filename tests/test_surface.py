@@ -395,3 +395,46 @@ def test_a_bowl_inside_the_design_keeps_the_quadratic(seed, noise):
     points = _design_flights(lambda a, b: 1.0 + 20.0 * (a - 0.82) ** 2 + 15.0 * (b - 0.86) ** 2, noise, rng)
     got, fitted = answer(points, [(0.7, 1.0), (0.7, 1.0)], (), _pool(noise))
     assert fitted and 0.7 < got[0] < 1.0 and 0.7 < got[1] < 1.0
+
+
+def _stochastic_cliff(seed: int, flights: int = 3):
+    """A 7 × 7 design over [0.3, 0.9] × [0.2, 0.8], each point flown `flights` times, of a bowl whose minimum
+    (0.8, 0.45) lies beyond a wall that moves from flight to flight: a flight diverges where kp − 0.5·kd exceeds
+    0.4 + 0.03·z (the analytic cliff of benchmarks/zoo); returns the points and the true divergence chance."""
+    from statistics import NormalDist
+
+    rng = random.Random(seed)
+    points = {}
+    for i in range(7):
+        for j in range(7):
+            kp, kd = 0.3 + 0.1 * i, 0.2 + 0.1 * j
+            c = 1.0 + 3.0 * (kp - 0.8) ** 2 + 6.0 * (kd - 0.45) ** 2
+            points[(kp, kd)] = [math.inf if kp - 0.5 * kd > 0.4 + 0.03 * rng.gauss(0, 1)
+                                else c * (1.0 + 0.05 * rng.gauss(0, 1)) for _ in range(flights)]
+    return points, lambda x: NormalDist().cdf((x[0] - 0.5 * x[1] - 0.4) / 0.03)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_no_answer_where_the_flights_make_a_fly_away_likely(seed):
+    """Next to a wall that moves from flight to flight, gains whose own flights all survived still diverge often:
+    the answer keeps where the run's flights put the chance below 0.1 %; without that bound it sits on the wall."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import ruled_out
+
+    points, chance = _stochastic_cliff(seed)
+    pool = NoisePool.prior(0.05, 100.0)
+    box = [(0.3, 0.9), (0.2, 0.8)]
+    kept, _ = answer(points, box, ruled_out(points, pool), pool)
+    bare, _ = answer(points, box, ruled_out(points, pool), pool, risk=None)
+    assert chance(kept) < 0.015 < chance(bare)
+
+
+def test_the_divergence_bound_leaves_a_run_without_failures_alone():
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.risk import divergence
+
+    points = {k: [c for c in v if math.isfinite(c)] or [1.0] for k, v in _stochastic_cliff(0)[0].items()}
+    pool = NoisePool.prior(0.05, 100.0)
+    box = [(0.3, 0.9), (0.2, 0.8)]
+    assert answer(points, box, (), pool) == answer(points, box, (), pool, risk=None)
+    assert divergence(points, (0.6, 0.5), (0.3, 0.3), lambda u: [1.0] * len(u)) is None

@@ -14,6 +14,9 @@ on the far side of a wall. Nor is a gain
 vector answered whose nearest flown point the flights rule out (worse than the best point by more than the 90 %
 two-sided error of their difference, `ruled_out`): a quadratic bent by a steep wall of oscillating gains must not
 answer next to the wall.
+A wall that moves from flight to flight (gusts, the vehicle's spread) is not told by where one flight failed and
+the next survived, so neither is an answer given where a logistic model of the divergence chance fitted to the
+run's flights near it (`risk`) puts that chance above `risk.RISK` (0.1 %).
 
 Weights as the line search's own fit (`model`): each point by its flights over its variance (the noise is
 relative, sd ∝ cost), times a tricube kernel in its largest distance (in shares of each range) from the design's
@@ -44,6 +47,7 @@ from typing import Collection, Mapping, Sequence
 
 from mavtune.flown import within_noise
 from mavtune.search.evidence import NoisePool, point_stats
+from mavtune.search.risk import RISK, divergence
 
 LEVEL = 0.9  # a flown point worse than the best by more than this two-sided quantile of the error is ruled out
 
@@ -228,16 +232,20 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            worse: Collection[tuple[float, ...]] = (),
            pool: NoisePool | None = None, *, power: float = POWER, reach: float = REACH,
            log: bool = False, cubic_level: float = CUBIC_LEVEL,
-           plane_level: float = PLANE_LEVEL, slope_level: float = 0.0) -> tuple[tuple[float, ...], bool]:
+           plane_level: float = PLANE_LEVEL, slope_level: float = 0.0,
+           risk: float | None = RISK) -> tuple[tuple[float, ...], bool]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
     vectors whose nearest flown point neither failed nor is one the flights rule out (`worse`: `ruled_out`) nor,
     while a point in the box flown off the walls is not told apart from the box's best (`pool`: the run's noise;
-    never with a noise-free cost), the first safe point off a wall (`at_wall`); and whether the fit gave it.
+    never with a noise-free cost), the first safe point off a wall (`at_wall`), nor, where a flight the kernel
+    reaches failed, where the run's flights put the divergence chance above `risk` (`risk.divergence`; None: no
+    such bound); and whether the fit gave it.
     Without a usable fit: the flown point in the box with the lowest mean cost among those (never an unflown
     gain); the box's centre if none. `power`, `reach`, `log` (a quadratic in the log of the cost, each point
-    weighted by its flights), `cubic_level` (0: no cubic) and `plane_level` (0: no plane) are the fit's variants
+    weighted by its flights), `cubic_level` (0: no cubic), `plane_level` (0: no plane) and `slope_level` (0: the
+    plane wherever the flights do not reject it; else only where they also reject a constant) are the fit's variants
     benchmarks/answer_diagnostic.py --replay measures; the defaults are the measured choice."""
     from statistics import NormalDist
 
@@ -271,6 +279,17 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
             told = within_noise(_finite_stats({k: points[k] for k in told}, pool), level)
         if any(k not in wall for k in told):  # a point off the walls as good as the box's best, by the flights:
             near_ok, pick = near_ok & off_wall, inside & off_wall  # no answer beside a wall (else a caution)
+    def tricube(u: np.ndarray) -> np.ndarray:
+        """The fit's tricube weight of points at u (in half-widths of the box from its centre)."""
+        return (1.0 - np.minimum(np.max(np.abs(u), axis=1) / reach, 1.0) ** 3) ** 3
+
+    fly_away = divergence(points, centre, half, tricube) if risk is not None and not np.all(ok) else None
+    if fly_away is not None:
+        likely = fly_away.chance(every) > risk
+        if np.all(likely[pick]):  # no point flown in the box has a chance that low (one failure amid survivors
+            fly_away = None  # tells no side): the bound chooses nothing
+        else:
+            pick = pick & ~likely  # the best point flown where a fly-away is unlikely
     fallback = tuple(float(v) for v in every[pick][np.argmin(means[pick])])
     tree = cKDTree(every)
     hull = None
@@ -287,8 +306,11 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     def allowed(x: np.ndarray) -> np.ndarray:
         """Each candidate's nearest flown point neither failed nor is ruled out; with failures, it lies in the
         hull of the safe points and the way to it from the best point flown passes no failed point (by half that
-        point's distance to the nearest safe one): never on the far side of a wall."""
+        point's distance to the nearest safe one): never on the far side of a wall; the fitted divergence chance
+        is at most `risk` there."""
         out = near_ok[tree.query(x)[1]]
+        if fly_away is not None:
+            out &= fly_away.chance(x) <= risk
         if hull is None:
             return out
         out &= hull.find_simplex(x, tol=1e-9) >= 0
@@ -300,12 +322,11 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         return out
 
     x = (every[ok] - centre) / half
-    dist = np.max(np.abs(x), axis=1) / reach
     y = means[ok]
     if not np.max(np.abs(y)) > 0:
         return fallback, False
     y = y / np.max(np.abs(y))
-    kernel = (1.0 - np.minimum(dist, 1.0) ** 3) ** 3
+    kernel = tricube(x)
     if log and np.all(y > 0):  # relative noise is even on the log scale: each point by its flights
         y, w = np.log(y), counts[ok] * kernel
     else:
