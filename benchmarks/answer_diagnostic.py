@@ -54,6 +54,7 @@ CACHE = HERE / ".cache" / "answer"
 VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options), each on the runs' own flights
     "the answer now (surface.answer's defaults)": {},
     "no plane (the quadratic and cubic alone)": {"plane_level": 0.0},
+    "plane on a face of the design inside the ranges too": {"plane_inside": True},
     "plane at the 10 % level": {"plane_level": 0.1},
     "plane at the 35 % level": {"plane_level": 0.35},
     "plane where its slope is significant at 5 %": {"slope_level": 0.05},

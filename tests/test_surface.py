@@ -438,3 +438,28 @@ def test_the_divergence_bound_leaves_a_run_without_failures_alone():
     box = [(0.3, 0.9), (0.2, 0.8)]
     assert answer(points, box, (), pool) == answer(points, box, (), pool, risk=None)
     assert divergence(points, (0.6, 0.5), (0.3, 0.3), lambda u: [1.0] * len(u)) is None
+
+
+def test_a_plane_answers_a_range_bound_never_a_corner_of_the_design_inside_the_ranges():
+    """A bowl whose curvature the flights do not resolve (10 % noise, its minimum mid-design): a plane is often not
+    rejected, and its minimum is a corner of the design — inside the ranges that says the optimum lies beyond the
+    design, not there, so the quadratic answers instead (`plane_inside` answers the plane's corner)."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import ruled_out
+
+    box = [(0.35, 0.65), (0.35, 0.65)]
+    pool = NoisePool.prior(0.1, 100.0)
+    replaced = 0
+    for seed in range(30):
+        rng = random.Random(seed)
+        points = {(x, y): [(1.0 + 0.06 * ((x - 0.52) ** 2 + (y - 0.5) ** 2) / 0.15 ** 2) * (1 + 0.1 * rng.gauss(0, 1))
+                           for _ in range(2)] for x in (0.35, 0.5, 0.65) for y in (0.35, 0.5, 0.65)}
+        worse = ruled_out(points, pool)
+        plane, _ = answer(points, box, worse, pool, plane_inside=True)
+        got, _ = answer(points, box, worse, pool)
+        if any(min(abs(v - a), abs(v - b)) < 1e-9 for v, (a, b) in zip(plane, box)):  # on a face of the design
+            assert got == answer(points, box, worse, pool, plane_level=0.0)[0]  # the quadratic's (or cubic's)
+            replaced += got != plane
+        else:
+            assert got == plane
+    assert replaced >= 5

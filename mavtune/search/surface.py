@@ -21,17 +21,16 @@ run's flights near it (`risk`) puts that chance above `risk.RISK` (0.1 %).
 Weights as the line search's own fit (`model`): each point by its flights over its variance (the noise is
 relative, sd ∝ cost), times a tricube kernel in its largest distance (in shares of each range) from the design's
 centre, reaching twice the design's half-width: the fit is local to where the design flew. Where the flights do not
-reject a plane for the quadratic (at PLANE_LEVEL, 20 %: `plane`), the answer is the plane's minimum, on the flown
-region's boundary: a cost that only falls across the design towards an edge or a corner, measured by noisy flights,
-gives a quadratic whose noisy curvature puts its minimum inside (on the zoo's selection half, 40 runs a plant:
-the PX4 cascade within 2 % of its corner optimum in 38 % of runs instead of 8 %, ArduPilot 68 % instead of 42 %, the
-corner box 42 % instead of 18 %, the edge box 45 % as before, no plant worse, the intervals' coverage and fly-away
-answers unchanged: benchmarks/results/selection_corner_paired.md; the levels replayed on the same flights:
-answer_diagnostic_corner.md). Its risk, seen on the unseen plants (report only, never chosen on:
-quality_unseen_corner_paired.md): an optimum inside the design whose curvature the flights do not resolve gets the
-plane's vertex, a corner of the design (the light step: 25 % of runs within 2 % against 85 %); `slope_level` (the
-plane only where the flights also reject a constant for it) is the guard measured on the selection half's replays
-(answer_diagnostic_corner_slope.md), not the default. Where the flights reject
+reject a plane for the quadratic (at PLANE_LEVEL, 20 %: `plane`) and the plane's minimum lies on a range's bound (or
+off the design's faces), the answer is the plane's minimum: a cost that only falls across the design towards an edge
+or a corner of the ranges, measured by noisy flights, gives a quadratic whose noisy curvature puts its minimum inside,
+short of the flown corner. The plane's minimum on a face of the design inside the ranges is not answered (the
+quadratic is): there a plane the flights do not reject says the optimum lies beyond the design, or that too few
+flights resolve its curvature — on the unseen light step an optimum mid-design got the design's corner, 25 % of runs
+within 2 % against 85 % (quality_unseen_corner_paired.md; the plane on every face, `plane_inside`, is the variant
+measured there and on the zoo's selection half: PX4 cascade 38 % of runs instead of 8 %, selection_corner_paired.md).
+Replayed on the selection half's flights (answer_diagnostic_plane_faces.md, 20 runs a plant): the PX4 cascade
+within 2 % of its corner optimum in 25 % of runs instead of 5 % (5 runs better, none worse), no plant worse. Where the flights reject
 the quadratic (its residuals exceed the run's noise by more than a cubic's extra terms explain: `cubic`), the
 answer is the minimiser of the cubic instead, where it lies inside the box (on a face the cubic terms extrapolate)
 and not beside a failed flight (a cubic dips into the unflown gap next to one):
@@ -232,7 +231,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            worse: Collection[tuple[float, ...]] = (),
            pool: NoisePool | None = None, *, power: float = POWER, reach: float = REACH,
            log: bool = False, cubic_level: float = CUBIC_LEVEL,
-           plane_level: float = PLANE_LEVEL, slope_level: float = 0.0,
+           plane_level: float = PLANE_LEVEL, slope_level: float = 0.0, plane_inside: bool = False,
            risk: float | None = RISK) -> tuple[tuple[float, ...], bool]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
@@ -244,8 +243,9 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     such bound); and whether the fit gave it.
     Without a usable fit: the flown point in the box with the lowest mean cost among those (never an unflown
     gain); the box's centre if none. `power`, `reach`, `log` (a quadratic in the log of the cost, each point
-    weighted by its flights), `cubic_level` (0: no cubic), `plane_level` (0: no plane) and `slope_level` (0: the
-    plane wherever the flights do not reject it; else only where they also reject a constant) are the fit's variants
+    weighted by its flights), `cubic_level` (0: no cubic), `plane_level` (0: no plane), `slope_level` (0: the
+    plane wherever the flights do not reject it; else only where they also reject a constant) and `plane_inside`
+    (the plane's minimum answered on a face of the design inside the ranges too) are the fit's variants
     benchmarks/answer_diagnostic.py --replay measures; the defaults are the measured choice."""
     from statistics import NormalDist
 
@@ -364,8 +364,11 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
 
     cv = pool.cv if pool is not None else math.nan
     flat = None if log else plane(x, y, counts[ok] * kernel, cv, plane_level, slope_level)
-    if flat is not None:  # the flights need no curvature: the plane's minimum, on the flown region's boundary
-        return tuple(float(v) for v in np.clip(lowest(flat, None) * half + centre, lo, hi)), True
+    if flat is not None:  # the flights need no curvature: the plane's minimum, on the flown region's boundary,
+        v = np.clip(lowest(flat, None) * half + centre, lo, hi)  # where that lies on a range's bound (or off the
+        face = (np.abs(v - lo) < 1e-9) & (lo > 1e-9) | (np.abs(v - hi) < 1e-9) & (hi < 1.0 - 1e-9)  # design's faces)
+        if plane_inside or not np.any(face):  # (a face inside the ranges: a plane not rejected by too few flights
+            return tuple(float(t) for t in v), True  # says the optimum lies beyond the design, not on its corner)
     u = lowest(value, slope)
     skewed = None if log else cubic(x, y, counts[ok] * kernel, cv, cubic_level)
     if skewed is not None:  # the flights reject the quadratic: the cubic's minimum, where it lies inside the box
