@@ -59,6 +59,9 @@ unseen plants (quality_unseen_fly.md: 132 runs to 100; the heavy-lift figure-8 a
 mends an optimum beside fly-away gains (gusts, the cliff) and loses precision on smooth costs (each point of its
 first design is flown once); `design_inner = false, design_shrink = 0.4` restores the first preset."""
 
+PRESETS: dict[str, dict[str, Any]] = {"paper": PAPER_TUNING, "budget": BUDGET_TUNING}
+"""The named settings `--preset` gives (`mavtune tune --preset budget`), each [tuning] overrides over the file's."""
+
 
 GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
                                          "horizontal": ("kp", "kd")}
@@ -94,7 +97,9 @@ class Tuning(_Section):
     range's edge flying the edge (`edges`); then the response surface (`design`): a 3^d design of ±0.15 of each
     range around the passes' answer (9 points × the vehicles a point, 18 flights for 2 gains and 2 vehicles, the
     same in every run) and the answer is the minimum of one quadratic in every gain fitted to the flights near it
-    (of a cubic where the flights reject the quadratic), inside the flown design. Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs:
+    (of a plane where the flights do not reject a plane and its minimum lies on a bound of the ranges: a cost still
+    falling towards an edge or corner of the ranges; of a cubic where they reject the quadratic), inside the flown
+    design. Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs:
     benchmarks/results/selection.md): 43 % of runs within 2 % of the optimum on mean over the plants against 37 %
     without the design (paired sign test over the zoo: better in 80 runs, worse in 37, p 8.7e-05), no fly-away
     answer, 121 flights on mean against 100; two designs in turn (the second half as wide: `design_steps = 2`,
@@ -105,7 +110,12 @@ class Tuning(_Section):
     both take it (`settings()`). `PAPER_TUNING` restores the paper's exact setting. `BUDGET_TUNING` is a fixed
     budget (no passes, three designs from a map of the whole box: 50 flights for 2 gains, exact before take-off),
     measured in benchmarks/results/selection_fly.md and quality_fly.md; not the default (significantly worse than it
-    on one zoo plant of each half: 60 ms more latency on the selection runs, 4 gains on the report runs).
+    on one zoo plant of each half: 60 ms more latency on the selection runs, 4 gains on the report runs). Since the
+    answer takes a plane where the flights do not reject it and its minimum lies on a range's bound
+    (benchmarks/results/answer_diagnostic_plane_faces.md, select half replayed, 20 runs a plant): the PX4 cascade
+    25 % of runs within 2 % instead of 5 %, no plant worse; a plane on every face of the design scored higher there
+    (selection_corner_paired.md: PX4 38 %, ArduPilot 68 %, the corner box 42 %) but lost an optimum mid-design on
+    the unseen light step (85 % -> 25 %).
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
@@ -141,8 +151,9 @@ class Tuning(_Section):
                                    "pass's net move (Powell's direction): follows a valley that runs across the gains")
     design: StrictBool = Field(True, description="after the passes over the gains, fly a designed set of gain "
                                 "vectors around their answer and answer the minimiser of one quadratic in every gain "
-                                "fitted to the run's flights near it (a cubic where the flights reject the "
-                                "quadratic), inside the flown design (response surface)")
+                                "fitted to the run's flights near it (a plane where the flights do not reject a "
+                                "plane, a cubic where they reject the quadratic), inside the flown design (response "
+                                "surface)")
     design_width: float = Field(0.15, gt=0.0, le=0.5, description="design: the design's half-width, a share of "
                                  "each gain's range (the design is shifted inside the ranges, not shrunk)")
     design_repeats: StrictInt = Field(1, ge=1, le=MAX_DESIGN_REPEATS, description="design: times each design point is flown "
