@@ -87,7 +87,7 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
-                   "design_steps", "design_shrink", "design_split", "design_inner")  # what [tuning] gives the engine's Settings
+                   "design_steps", "design_shrink", "design_split", "design_inner", "design_move")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -175,6 +175,11 @@ class Tuning(_Section):
                                      "box half as wide (2^d points more), each of its points once (a map of the "
                                      "box: a wide first design's corners and faces miss a narrow valley, or an "
                                      "optimum beside a fly-away region)")
+    design_move: float = Field(0.0, ge=0.0, le=3.0, description="design: where the next design goes when the fit "
+                               "of a design's own box (its points weighed alike) has its minimum on a face of the box "
+                               "inside the ranges: this many times the way from the box's centre to that face (1: "
+                               "centred on the face; 2: one box width on), shortened so that no point of it lies "
+                               "beyond a failed flight; 0: every next design is centred on the run's answer")
     pick: Literal["best", "near-stock"] | None = Field(None, description="the answer among the run's flown points: "
                                                        "the search's optimum (best), or the flown point nearest the "
                                                        "vehicles' stock gains whose cost is within one standard error "

@@ -53,6 +53,7 @@ LEVEL = 0.9  # a flown point worse than the best by more than this two-sided qua
 REACH = 2.0  # the kernel spans this many half-widths of the design from its centre
 POWER = 2.0  # each point weighs its flights over its cost to this power (2: the variance of a relative noise)
 CUBIC_LEVEL = 0.05  # a cubic replaces the quadratic where the flights reject the quadratic at this level
+LOCAL_REACH = 3.0  # the kernel of the fit that guides a design's move (`next_centre`): points in the box weigh ~alike
 PLANE_LEVEL = 0.2  # a plane replaces the quadratic where the flights do not reject the plane at this level
 GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the design's box (then polished)
 
@@ -74,6 +75,59 @@ def design(centre: Sequence[float], half: float, inner: bool = False) -> list[tu
     if inner:
         levels += list(product((-0.5, 0.5), repeat=d))
     return [tuple(min(max(m + half * lv, 0.0), 1.0) for m, lv in zip(mid, level)) for level in levels]
+
+
+def next_centre(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+                half: float, pool: NoisePool | None, move: float, answer_now: Sequence[float],
+                inner: bool = False) -> tuple[tuple[float, ...], bool]:
+    """The centre of the next design (in shares of each range) after the design of `box` (per gain (lo, hi), ±`half`
+    around its centre) answered `answer_now`, and whether it moved past a face: a trust region. The fit of the
+    design's own box (`answer` on the points flown inside it, every point weighed nearly alike: far flights, as a
+    line search's near a wall, bend a quadratic and hold its minimum inside) guides it: when that guide lies on a
+    face of the box inside the ranges, the next centre lies `move` times the way from the box's centre to the guide
+    (1: on the guide; 2: as far again, the next box against this one along the face's gain) — along the step, not
+    the face's gain alone: a valley across the gains runs on diagonally — shortened (by quarters of the way, down to
+    the guide) until no point of the next design lies beyond a failed flight (`walled`). Else (no face, or every
+    move walled) the next design lies around `answer_now`, or, where some point of that lies beyond a failed flight,
+    where this one was (flown again: its flights average the noise and fly no nearer a wall). `points`: every flown
+    gain vector → its flights' costs, a failed flight's infinite."""
+    centre = tuple(0.5 * (lo + hi) for lo, hi in box)
+    if move >= 1.0:
+        inside = {k: c for k, c in points.items() if all(lo - 1e-9 <= v <= hi + 1e-9 for v, (lo, hi) in zip(k, box))}
+        guide, _ = answer(inside, box, ruled_out(inside, pool) if pool is not None else (), pool, reach=LOCAL_REACH)
+        if any(hi - lo > 1e-9 and min(abs(g - lo), abs(g - hi)) <= 1e-9 and 1e-9 < g < 1 - 1e-9
+               for (lo, hi), g in zip(box, guide)):
+            for t in [move - 0.25 * k for k in range(int((move - 1.0) / 0.25 + 1e-9) + 1)]:
+                target = tuple(min(max(c + t * (g - c), 0.0), 1.0) for c, g in zip(centre, guide))
+                if not walled(points, guide, design(target, half, inner)):
+                    return target, True
+    here = tuple(float(v) for v in answer_now)
+    return (centre, False) if walled(points, here, design(here, half, inner)) else (here, False)
+
+
+def walled(points: Mapping[tuple[float, ...], Sequence[float]], start: Sequence[float],
+           targets: Sequence[Sequence[float]]) -> bool:
+    """Whether the way from `start` to any of `targets` (straight, in shares of each range) passes a failed flown
+    point closer than half that point's distance to the nearest point flown without failure (the rule of `answer`:
+    never beyond a wall)."""
+    import numpy as np
+
+    keys = [k for k, c in points.items() if c]
+    failed = np.array([k for k in keys if not all(map(math.isfinite, points[k]))], float)
+    safe = np.array([k for k in keys if all(map(math.isfinite, points[k]))], float)
+    if not len(failed):
+        return False
+    if not len(safe):
+        return True
+    base, x = np.asarray(start, float), np.asarray(targets, float)
+    step = x - base
+    length = np.maximum(np.sum(step * step, axis=1), 1e-300)
+    for f in failed:
+        r = 0.5 * float(np.min(np.linalg.norm(safe - f, axis=1)))
+        t = np.clip((step @ (f - base)) / length, 0.0, 1.0)
+        if np.any(np.linalg.norm(base + t[:, None] * step - f, axis=1) < r):
+            return True
+    return False
 
 
 def coefficients(d: int) -> int:
