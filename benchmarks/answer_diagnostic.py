@@ -15,6 +15,10 @@ the design's box, the run's noise) are kept in benchmarks/.cache/answer/ so that
 replayed offline on the same flights (`--replay`).
 
     python benchmarks/answer_diagnostic.py --runs 20 [--plants ...] [--methods ...] [--workers 2]
+
+With `--flown-by HASH` the runs recorded by the engine of that source hash are replayed (nothing is flown): a change
+of the answer alone is measured on the flights of the code before it (exact for the default, whose one design's
+answer flies nothing after it).
 """
 
 from __future__ import annotations
@@ -48,6 +52,14 @@ from zoo.truth import WITHIN_PCT, Truth, key  # noqa: E402
 HERE = Path(__file__).resolve().parent
 CACHE = HERE / ".cache" / "answer"
 VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options), each on the runs' own flights
+    "the answer now (surface.answer's defaults)": {},
+    "no plane (the quadratic and cubic alone)": {"plane_level": 0.0},
+    "plane on a face of the design inside the ranges too": {"plane_inside": True},
+    "plane at the 10 % level": {"plane_level": 0.1},
+    "plane at the 35 % level": {"plane_level": 0.35},
+    "plane where its slope is significant at 5 %": {"slope_level": 0.05},
+    "plane where its slope is significant at 20 %": {"slope_level": 0.2},
+    "plane where its slope is significant at 50 %": {"slope_level": 0.5},
     "the quadratic alone (no cubic)": {"cubic_level": 0.0},
     "cubic at the 1 % level": {"cubic_level": 0.01},
     "log-cost fit": {"log": True},
@@ -55,6 +67,9 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "weights flights / cost^4": {"power": 4.0},
     "kernel reach 1.5 half-widths": {"reach": 1.5},
     "kernel reach 3 half-widths": {"reach": 3.0},
+    "no divergence bound": {"risk": None},
+    "divergence chance <= 0.3 %": {"risk": 0.003},
+    "divergence chance <= 1 %": {"risk": 0.01},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -195,7 +210,8 @@ def replay_summary(base: list[dict[str, Any]], rows: list[dict[str, Any]]) -> di
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["meta"]
     lines = ["# Whose fault is a bad answer: the flights or the answer? (issue 20)", "",
-             f"Command: `{m['command']}` at commit `{m['commit']}` (mavtune source hash `{m['engine']}`), "
+             f"Command: `{m['command']}` at commit `{m['commit']}` (flown by mavtune source hash `{m['engine']}`"
+             f"{', replayed by ' + m['answered_by'] if m.get('answered_by', m['engine']) != m['engine'] else ''}), "
              f"{m['started_utc']} to {m['finished_utc']}; machine: {m['cpu_model']}, nproc {m['cpus']} shared with "
              f"other jobs, {m['workers']} worker processes; load average {m['load_start'][0]:.2f} at the start, "
              f"{m['load_end'][0]:.2f} at the end.", "",
@@ -253,7 +269,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--name", default="answer_diagnostic", help="results file name (markdown + json)")
     ap.add_argument("--replay", action="store_true", help="also replay each run's last surface answer with the "
                     "fit's variants (VARIANTS) on the same flights")
+    ap.add_argument("--flown-by", default=None, metavar="HASH", help="the runs recorded by the engine of this "
+                    "source hash (benchmarks/.cache/answer), flown by the code before a change of the answer; "
+                    "nothing is flown")
+    ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated names of the variants replayed")
     args = ap.parse_args(argv)
+    variants = {n.strip(): VARIANTS.get(n.strip()) for n in args.variants.split(",") if n.strip()}
+    if None in variants.values():
+        ap.error(f"--variants: unknown {[n for n, v in variants.items() if v is None]}; known: {', '.join(VARIANTS)}")
     plants = [p.strip() for p in args.plants.split(",") if p.strip()]
     unknown = [p for p in plants if p not in PLANTS]
     if unknown:
@@ -264,7 +287,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     methods = [m for m in candidates() if m.label in want]
     seeds = [2 * i + (0 if args.half == "select" else 1) for i in range(args.runs)]
     started, load0 = datetime.now(timezone.utc), os.getloadavg()
-    engine, commit = engine_hash(), _git_commit()
+    engine, commit = args.flown_by or engine_hash(), _git_commit()
     cache = Runs(CACHE / "runs.jsonl")
     ex = (ProcessPoolExecutor(args.workers, mp_context=get_context("spawn"), initializer=_init_worker)
           if args.workers > 1 else None)
@@ -279,6 +302,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             t = truth_for(p)
             t.build(FULL, pm, _progress)
             jobs = [(p, m, s) for m in methods for s in seeds if Runs.key(p, m, s, None, engine) not in cache.rows]
+            if jobs and args.flown_by:
+                ap.error(f"--flown-by {args.flown_by}: {len(jobs)} runs of {p} were not recorded by that engine")
             if jobs:
                 _progress(f"{p}: {len(jobs)} runs to tune")
                 done = pm(tune_flights, *zip(*jobs))
@@ -294,7 +319,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             if args.replay:
                 flown = {lb: [{"plant": p, "run": sc["run"], "excess_pct": sc["answer_excess_pct"]} for sc in scs]
                          for lb, scs in runs[p].items()}
-                replays[p] = {lb: {n: replay_summary(flown[lb], replay(t, rs, o, pm)) for n, o in VARIANTS.items()}
+                replays[p] = {lb: {n: replay_summary(flown[lb], replay(t, rs, o, pm)) for n, o in variants.items()}
                               for lb, rs in rows.items()}
             for lb, s in table[p].items():
                 _progress(f"{p} / {lb}: answer {s['answer_within']:.0%}, flown {s['flown_within']:.0%}, "
@@ -304,7 +329,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             ex.shutdown()
     doc = {"meta": {"command": "python benchmarks/answer_diagnostic.py " + " ".join(
         argv if argv is not None else sys.argv[1:]), "half": args.half, "seeds": seeds, "commit": commit,
-        "engine": engine, "started_utc": started.isoformat(timespec="seconds"),
+        "engine": engine, "answered_by": engine_hash(), "started_utc": started.isoformat(timespec="seconds"),
         "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "cpu_model": cpu_model(),
         "cpus": os.cpu_count(), "workers": args.workers, "load_start": load0, "load_end": os.getloadavg()},
         "table": table, "runs": runs, "replay": replays}

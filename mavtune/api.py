@@ -83,6 +83,7 @@ def tune(
     design_split: bool = DEFAULT,
     design_inner: bool = DEFAULT,
     budget: int | str | None = DEFAULT,
+    design_move: float = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
     max_rounds: int = MAX_ROUNDS,
@@ -104,7 +105,7 @@ def tune(
     times, `design_steps` designs in turn, each
     `design_shrink` times as wide as the one before once it surrounds its answer, `design_split`: the vehicles fly
     distinct points; `design_inner`: the first design also flies the corners of the box half as wide, each point
-    once) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic), `budget`
+    once; `design_move`: how far the next design moves past a face of the design where its own fit's minimum lies) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic), `budget`
     the run's flights exactly (the passes share what the designs leave; "auto": 42 a gain; None: as many as the
     stages ask), `on_round`
     sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
@@ -130,7 +131,8 @@ def tune(
         max_bootstraps=max_bootstraps, seed=seed if seed is not None else DEFAULT, adaptive=adaptive,
         confidence=confidence, cap=cap, answer=answer, edges=edges, directions=directions,
         design=design, design_width=design_width, design_repeats=design_repeats, design_steps=design_steps,
-        design_shrink=design_shrink, design_split=design_split, design_inner=design_inner, budget=budget)
+        design_shrink=design_shrink, design_split=design_split, design_inner=design_inner,
+        design_move=design_move, budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")

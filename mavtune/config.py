@@ -59,6 +59,9 @@ unseen plants (quality_unseen_fly.md: 132 runs to 100; the heavy-lift figure-8 a
 mends an optimum beside fly-away gains (gusts, the cliff) and loses precision on smooth costs (each point of its
 first design is flown once); `design_inner = false, design_shrink = 0.4` restores the first preset."""
 
+PRESETS: dict[str, dict[str, Any]] = {"paper": PAPER_TUNING, "budget": BUDGET_TUNING}
+"""The named settings `--preset` gives (`mavtune tune --preset budget`), each [tuning] overrides over the file's."""
+
 
 BUDGET_PER_GAIN = 42
 """The default budget (`[tuning] budget = "auto"`): flights per gain tuned, all vehicles together (84 for 2 gains, 168
@@ -99,7 +102,8 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
-                   "design_steps", "design_shrink", "design_split", "design_inner", "budget")  # what [tuning] gives the engine's Settings
+                   "design_steps", "design_shrink", "design_split", "design_inner", "design_move",
+                   "budget")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -108,8 +112,9 @@ class Tuning(_Section):
     answer of each line search fitted to all its flights (`answer = "model"`) and a line search ending against its
     range's edge flying the edge (`edges`); then the response surface (`design`): a 3^d design of ±0.15 of each
     range around the passes' answer (9 points × the vehicles a point) and the answer is the minimum of one quadratic
-    in every gain fitted to the flights near it (of a cubic where the flights reject the quadratic), inside the
-    flown design; all within a budget of 42 flights a gain (`budget = "auto"`: 84 for 2 gains, 168 for 4), flown
+    in every gain fitted to the flights near it (of a plane where the flights do not reject a plane and its minimum
+    lies on a bound of the ranges; of a cubic where they reject the quadratic), inside the flown design; all within
+    a budget of 42 flights a gain (`budget = "auto"`: 84 for 2 gains, 168 for 4), flown
     exactly and known before take-off: the passes share what the design does not need, the design flies the rest.
     The budget was chosen on the plant zoo of benchmarks/quality.py (selection half, even runs, 40 a plant:
     benchmarks/results/selection_budget_default.md): against the same configuration without a budget (121 flights
@@ -125,7 +130,12 @@ class Tuning(_Section):
     default: `mavtune tune` with no flags and `mavtune.tune()` with no options both take it (`settings()`).
     `budget = "none"` flies each stage's asking (the default before the budget). `PAPER_TUNING` restores the
     paper's exact setting. `BUDGET_TUNING` is a fixed budget without passes (three designs from a map of the whole
-    box: 50 flights for 2 gains), measured in benchmarks/results/selection_fly.md and quality_fly.md.
+    box: 50 flights for 2 gains), measured in benchmarks/results/selection_fly.md and quality_fly.md. Since the
+    answer takes a plane where the flights do not reject it and its minimum lies on a range's bound
+    (benchmarks/results/answer_diagnostic_plane_faces.md, select half replayed, 20 runs a plant): the PX4 cascade
+    25 % of runs within 2 % instead of 5 %, no plant worse; a plane on every face of the design scored higher there
+    (selection_corner_paired.md: PX4 38 %, ArduPilot 68 %, the corner box 42 %) but lost an optimum mid-design on
+    the unseen light step (85 % -> 25 %).
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
@@ -161,8 +171,9 @@ class Tuning(_Section):
                                    "pass's net move (Powell's direction): follows a valley that runs across the gains")
     design: StrictBool = Field(True, description="after the passes over the gains, fly a designed set of gain "
                                 "vectors around their answer and answer the minimiser of one quadratic in every gain "
-                                "fitted to the run's flights near it (a cubic where the flights reject the "
-                                "quadratic), inside the flown design (response surface)")
+                                "fitted to the run's flights near it (a plane where the flights do not reject a "
+                                "plane, a cubic where they reject the quadratic), inside the flown design (response "
+                                "surface)")
     design_width: float = Field(0.15, gt=0.0, le=0.5, description="design: the design's half-width, a share of "
                                  "each gain's range (the design is shifted inside the ranges, not shrunk)")
     design_repeats: StrictInt = Field(1, ge=1, le=MAX_DESIGN_REPEATS, description="design: times each design point is flown "
@@ -184,6 +195,11 @@ class Tuning(_Section):
                                      "box half as wide (2^d points more), each of its points once (a map of the "
                                      "box: a wide first design's corners and faces miss a narrow valley, or an "
                                      "optimum beside a fly-away region)")
+    design_move: float = Field(0.0, ge=0.0, le=3.0, description="design: where the next design goes when the fit "
+                               "of a design's own box (its points weighed alike) has its minimum on a face of the box "
+                               "inside the ranges: this many times the way from the box's centre to that face (1: "
+                               "centred on the face; 2: one box width on), shortened so that no point of it lies "
+                               "beyond a failed flight; 0: every next design is centred on the run's answer")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

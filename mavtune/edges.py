@@ -63,7 +63,9 @@ def range_edges(gains: Mapping[str, float], space: Mapping[str, tuple[float, flo
     `edge_evidence()`: an answer on a flown edge is said with its numbers; `flown` each gain's span flown without
     failure in that search: an edge that was flown and is not the answer cost more — no edge (the optimum lies
     inside); `brackets` each gain's final bracket: an edge it no longer reaches was ruled out by the comparisons
-    (with ε near 0.5 the tolerance spans nearly the whole range, so nearness alone says nothing)."""
+    (with ε near 0.5 the tolerance spans nearly the whole range, so nearness alone says nothing). An answer on the
+    bound itself is always said: the response surface answers from every flight of the run, and may end on an edge
+    the last line search flew and left (a cost that only falls across the design, `surface.plane`)."""
     edges = []
     for name, value in gains.items():
         lo, hi = space[name]
@@ -78,14 +80,16 @@ def range_edges(gains: Mapping[str, float], space: Mapping[str, tuple[float, flo
             side = "upper"
         else:
             continue
-        bracket = (brackets or {}).get(name)
-        if not said and bracket is not None and all(map(math.isfinite, bracket)) and abs(
-                (bracket[0] if side == "lower" else bracket[1]) - (lo if side == "lower" else hi)) > 1e-9 * (hi - lo):
+        edge = lo if side == "lower" else hi
+        on_bound = abs(value - edge) <= 1e-9 * (hi - lo)  # the answer is the bound itself: said whatever the last
+        bracket = (brackets or {}).get(name)  # line search ended on (the response surface answers from every flight)
+        if not said and not on_bound and bracket is not None and all(map(math.isfinite, bracket)) and abs(
+                (bracket[0] if side == "lower" else bracket[1]) - edge) > 1e-9 * (hi - lo):
             continue  # the comparisons moved the bracket off this edge: the minimiser lies inside
         span = (flown or {}).get(name)
-        if not said and span is not None and abs((span[0] if side == "lower" else span[1]) - (lo if side == "lower"
-                                                                                               else hi)) <= 1e-9 * (hi - lo):
+        if not said and not on_bound and span is not None and abs(
+                (span[0] if side == "lower" else span[1]) - edge) <= 1e-9 * (hi - lo):
             continue  # the edge was flown and lost to the answer
-        edges.append(RangeEdge(name, float(value), side, float(lo if side == "lower" else hi), tol,
-                               hint=f"widen tuning.space.{name}", evidence=said))
+        edges.append(RangeEdge(name, float(value), side, float(edge), tol, hint=f"widen tuning.space.{name}",
+                               evidence=said))
     return edges

@@ -26,6 +26,8 @@ BudgetOpt = typer.Option(None, "--budget", help="The run's flights, all vehicles
                          "share what the designs leave), or 'none': as many as the passes ask [42 a gain].")
 MaxRoundsOpt = typer.Option(None, "--max-rounds", help="Refuse a plan of more rounds than this [2000]; raise it "
                             "to fly a longer plan anyway.")
+PresetOpt = typer.Option(None, "--preset", help="Named settings over the file's [tuning]: paper (the paper's exact "
+                         "search) | budget (designs only: flights fixed before take-off). Flags still win.")
 SchedulerOpt = typer.Option(None, "--scheduler", help="Run the campaign's chunks on the Dask cluster whose "
                             "scheduler listens here (tcp://HOST:8786); default: in this process.")
 
@@ -53,12 +55,16 @@ def budget_flag(value: Optional[str]) -> int | str | None:
 def config_from_flags(config: Optional[Path], vehicles: Optional[int], strategy: Optional[str],
                       replicates: Optional[int], method: Optional[str], epsilon: Optional[float],
                       bootstraps: Optional[str], reuse: Optional[bool], battery_s: Optional[float],
-                      base: dict[str, Any] | None = None, **more: Any):
-    """The run's Config: the file (or `base`), then the flags given; `more` are further `section__field` flags."""
-    from mavtune.config import load_config
+                      base: dict[str, Any] | None = None, preset: str | None = None, **more: Any):
+    """The run's Config: the file (or `base`), then the named `preset`, then the flags given; `more` are further
+    `section__field` flags."""
+    from mavtune.config import PRESETS, load_config
+
+    if preset is not None and preset not in PRESETS:
+        raise MavtuneError(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}")
 
     flags = dict(tuning__vehicles=vehicles, tuning__strategy=strategy, tuning__replicates=replicates,
                  tuning__method=method, tuning__epsilon=epsilon, tuning__bootstraps=bootstraps_flag(bootstraps),
                  tuning__reuse=reuse, flight__battery_s=battery_s, **more)
-    return load_config(config, base=base,
-                       overrides={k.replace("__", "."): v for k, v in flags.items() if v is not None})
+    given = {k.replace("__", "."): v for k, v in flags.items() if v is not None}
+    return load_config(config, base=base, overrides={**(PRESETS[preset] if preset else {}), **given})

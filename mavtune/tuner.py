@@ -29,7 +29,7 @@ from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    ruled_out as surface_ruled_out,
+    next_centre as surface_next_centre, ruled_out as surface_ruled_out,
 )
 from mavtune.strategy import Strategy
 
@@ -233,6 +233,7 @@ class Settings:
     design_shrink: float = 1.0
     design_split: bool | str = False
     design_inner: bool = False
+    design_move: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -285,6 +286,9 @@ class Settings:
                                "over the one before")
         if not 1 <= int(self.design_steps) <= MAX_DESIGN_REPEATS:
             raise MavtuneError(f"design_steps must be from 1 to {MAX_DESIGN_REPEATS}, got {self.design_steps}")
+        if not (float(self.design_move) == 0.0 or 1.0 <= float(self.design_move) <= 3.0):
+            raise MavtuneError(f"design_move {self.design_move} must be 0 (the next design around the answer) or from 1 "
+                               "to 3 (how far past a face of the design its next one moves, in the way to that face)")
         if self.design_inner not in (True, False):
             raise MavtuneError(f"design_inner must be true or false, got {self.design_inner!r}")
         if self.design_split not in (True, False, "auto"):
@@ -425,7 +429,8 @@ class Settings:
             {"design": {"width": float(self.design_width), "repeats": int(self.design_repeats),
                          "steps": self.design_count(), "shrink": float(self.design_shrink)}
                         | ({"split": self.design_split} if self.design_split else {})
-                        | ({"inner": True} if self.design_inner else {})}
+                        | ({"inner": True} if self.design_inner else {})
+                        | ({"move": float(self.design_move)} if self.design_move else {})}
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
 
@@ -466,6 +471,7 @@ class Tuner:
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
+        self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
         self._shares: list[tuple[LineSearch, int, int]] = []  # budget: each line search, flights before it, its share
 
@@ -594,14 +600,17 @@ class Tuner:
         costs: the plan knows them), then answer the minimiser of one quadratic in every gain fitted to the run's
         flights near it (a cubic where the flights reject the quadratic), inside the design's box and never where the nearest flight failed (`surface.answer`). True
         when that answer lies inside the box or on a range's bound, not on a face of the box inside the ranges (a
-        trust region: the next design narrows in only around an answer the design surrounds)."""
+        trust region: the next design narrows in only around an answer the design surrounds). With `design_move`,
+        the next design goes past a face where the fit of this design's own box has its minimum
+        (`surface.next_centre`, never beyond a failed flight: False, the next design as wide), else around the
+        answer, or where this design was when some point around the answer lies beyond a failed flight."""
         s = self.settings
         names = list(s.space)
         lo = [s.space[n][0] for n in names]
         width = [s.space[n][1] - s.space[n][0] for n in names]
         step = len(self._design_answers)
-        points = surface_design([(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)], half,
-                                s.design_inner_at(step))
+        centre = self._centre or [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # (a move: `_surface`)
+        points = surface_design(centre, half, s.design_inner_at(step))
         per_point = s.design_per_point(step)
         queue = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, p)}
                  for _ in range(int(s.design_repeats)) for p in points for _ in range(per_point)]
@@ -634,6 +643,12 @@ class Tuner:
             if names[i] in last:
                 last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
         self._design_answers.append(dict(self.gains))
+        self._centre = None
+        if s.design_move and step + 1 < s.design_count():  # the design's own fit says the minimum lies beyond a face
+            self._centre, moved = surface_next_centre(flown, box, half, self.pool, s.design_move, best,
+                                                      s.design_inner_at(step + 1))
+            if moved:
+                return False
         return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
 
     def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]], names: list[str], lo: list[float],

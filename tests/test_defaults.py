@@ -35,3 +35,29 @@ def test_api_and_cli_fly_the_same_run(tmp_path, monkeypatch):
     assert cli["gains"] == api.gains
     for name, u in api.uncertainty.items():
         assert all(math.isclose(cli["uncertainty"][name][k], v, rel_tol=1e-9) or (math.isnan(v)) for k, v in u.items())
+
+
+def test_a_named_preset_is_its_settings_over_the_file_and_under_the_flags(tmp_path, capsys):
+    from typer.testing import CliRunner
+
+    from mavtune.cli import app
+    from mavtune.config import BUDGET_TUNING
+    from mavtune.options import config_from_flags
+
+    toml = tmp_path / "run.toml"
+    toml.write_text("[tuning]\nvehicles = 4\ndesign_steps = 1\n")
+    cfg = config_from_flags(toml, None, None, None, None, 0.15, None, None, None, preset="budget")
+    assert cfg.tuning.vehicles == 4  # the file's fields the preset does not name stay
+    assert cfg.tuning.design_steps == BUDGET_TUNING["tuning.design_steps"]  # the preset over the file
+    assert cfg.tuning.epsilon == 0.15  # a flag over the preset
+    assert config_from_flags(None, None, None, None, None, None, None, None, None, preset="paper").settings() \
+        == load_config(None, PAPER_TUNING).settings()
+    from mavtune.run import plan_of
+
+    budget = plan_of(load_config(None, BUDGET_TUNING))
+    assert not budget.adaptive  # exact before take-off
+    out = CliRunner().invoke(app, ["plan", "--preset", "budget"])
+    assert out.exit_code == 0 and f"flights {budget.flights} " in " ".join(out.output.split())
+    assert run_app(["plan", "--preset", "fast"]) == 2
+    err = capsys.readouterr().err
+    assert "--preset must be one of paper, budget, got 'fast'" in err and "Traceback" not in err

@@ -47,3 +47,16 @@ def test_a_run_at_epsilon_near_half_reports_no_edge_its_searches_moved_off():
     evidence, flown = result.edges()
     assert not range_edges(result.gains, {"kp": (0, 1), "kd": (0, 1)}, 0.4999, evidence, flown, result.brackets())
     assert range_edges(result.gains, {"kp": (0, 1), "kd": (0, 1)}, 0.4999)  # by nearness alone: always
+
+
+@given(st.sampled_from(["lower", "upper"]), st.floats(0.2, 0.8), st.floats(0.01, 0.3))
+def test_an_answer_on_the_bound_itself_is_always_said(side, inner, epsilon):
+    """The response surface may answer a bound the last line search flew and left (its bracket moved off it): an
+    answer on the bound is said all the same, never silent."""
+    bound = 0.0 if side == "lower" else 1.0
+    bracket = (min(inner, 0.5), max(inner, 0.5))
+    flown = (0.0, 1.0)
+    (edge,) = range_edges({"kp": bound}, {"kp": (0.0, 1.0)}, epsilon, {"kp": None}, {"kp": flown}, {"kp": bracket})
+    assert edge.side == side and edge.bound == bound and "widen tuning.space.kp" in edge.message()
+    near = bound + (0.5 - bound) * 0.5 * epsilon  # within the tolerance, off the bound: the flown edge lost to it
+    assert not range_edges({"kp": near}, {"kp": (0.0, 1.0)}, epsilon, {"kp": None}, {"kp": flown})

@@ -65,3 +65,29 @@ def test_method_labels_holding_commas_are_taken_whole_and_an_unknown_one_is_name
     assert quality._labels("CMA-ES, two designs", known) == "two designs"
     with pytest.raises(SystemExit):
         quality.main(["--quick", "--methods", "no such method"])
+
+
+def test_two_engines_results_are_paired_run_by_run(tmp_path):
+    """benchmarks/paired_engines.py: the same plant and run of two engines' default, compared by true excess (ties
+    left out), per plant and over the zoo; a run only one result holds is not paired."""
+    spec = importlib.util.spec_from_file_location("paired_engines", BENCH.with_name("paired_engines.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+    def result(excess, engine):
+        label = "default (config.Tuning())"
+        runs = {"p": {label: [{"plant": "p", "run": 2 * i, "excess_pct": e, "fly_away": 0.0}
+                              for i, e in enumerate(excess)]}}
+        return {"default": label, "runs": runs, "table": {"p": {label: {"coverage": 1.0}}},
+                "meta": {"command": "quality.py", "engine": engine, "started_utc": "2026-11-25T10:00:00+00:00",
+                         "finished_utc": "2026-11-25T10:10:00+00:00", "cpu_model": "AMD EPYC", "cpus": 2,
+                         "load_start": [1.0]}}
+
+    new, old = tmp_path / "new.json", tmp_path / "old.json"
+    new.write_text(json.dumps(result([0.5, 1.0, 5.0, 3.0, 9.0], "n")))
+    old.write_text(json.dumps(result([4.0, 1.0, 6.0, 2.0], "o")))
+    doc = module.main([str(new), str(old), "--out", str(tmp_path), "--name", "paired"])
+    row = doc["table"]["p"]
+    assert row["runs"] == 4 and (row["sign"]["a_better"], row["sign"]["b_better"], row["sign"]["ties"]) == (2, 1, 1)
+    assert row["within_new"] == 0.5 and row["within_old"] == 0.5
+    assert doc["zoo"]["runs"] == 4 and "| p | 4 | 50% | 50% |" in (tmp_path / "paired.md").read_text()

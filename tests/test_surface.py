@@ -304,3 +304,164 @@ def test_a_cubic_answer_never_dips_into_the_gap_beside_a_failed_flight():
 
     x, fitted = answer(LATENCY_RUN_35, [(0.0, 0.3), (0.0, 0.3)], (), _pool(0.354))
     assert fitted and beside_wall(LATENCY_RUN_35, x, 0.0) is None
+
+
+PX4_CASCADE_RUN_28 = {  # the flights near the last design of zoo run 28 on "mavsim PX4 cascade" (select half; shares
+    # of each range → IAE per flight); the truth's optimum is the corner (1, 1): (0.887, 1) is 3.8 % worse
+    (0.4, 0.6295): [0.112, 0.2083, 0.2016, 0.2377, 0.2137, 0.1208],
+    (0.6, 0.6295): [0.2387, 0.1504, 0.09622, 0.2458, 0.1612, 0.2268],
+    (0.7, 0.6295): [0.218, 0.1915], (0.7, 0.7): [0.1986, 0.2068], (0.7, 0.85): [0.1982, 0.2018],
+    (0.7, 1): [0.1124, 0.122],
+    (0.8, 0.6295): [0.1254, 0.1139, 0.1593, 0.2808, 0.163, 0.1761, 0.1615, 0.1762, 0.1483, 0.1098, 0.1636, 0.1102,
+                    0.1725, 0.1762],
+    (0.85, 0.4): [0.2485, 0.2209], (0.85, 0.6): [0.1143, 0.113, 0.1877, 0.1486, 0.1823, 0.1929],
+    (0.85, 0.7): [0.1286, 0.2659, 0.1677, 0.2134],
+    (0.85, 0.8): [0.1478, 0.1257, 0.08647, 0.1659, 0.08219, 0.1158, 0.191, 0.155], (0.85, 0.85): [0.1146, 0.09377],
+    (0.85, 0.9): [0.08586, 0.1922, 0.1205, 0.1629, 0.1859, 0.1034, 0.09875, 0.157, 0.1017, 0.1184],
+    (0.85, 1): [0.1485, 0.105, 0.1371, 0.1238, 0.1209, 0.08044, 0.09898, 0.1006],
+    (0.9, 0.6295): [0.1164, 0.1887, 0.1156, 0.09785, 0.1557, 0.1316, 0.1237, 0.1177, 0.1714, 0.1128],
+    (1, 0.4): [0.2159, 0.1045, 0.1203, 0.1954, 0.2697, 0.1825], (1, 0.5): [0.1358, 0.1049],
+    (1, 0.6): [0.1646, 0.1643, 0.1014, 0.1293, 0.2213, 0.1376],
+    (1, 0.6295): [0.1229, 0.1329, 0.1826, 0.1059, 0.1573, 0.2028], (1, 0.7): [0.1918, 0.1395, 0.08503, 0.2106],
+    (1, 0.8): [0.1328, 0.1022, 0.1377, 0.1805, 0.1733, 0.1279, 0.1955, 0.133, 0.193, 0.145, 0.1719, 0.1965, 0.1556,
+               0.1193],
+    (1, 0.85): [0.1204, 0.1373], (1, 1): [0.09961, 0.1069]}
+
+
+def test_a_cost_falling_into_a_flown_corner_under_noise_is_answered_on_that_corner():
+    """On that run's flights (29 % noise a flight) a quadratic's noisy curvature put its minimum inside, at kp 0.887;
+    the flights do not reject a plane, whose minimum is the flown corner (1, 1): the answer."""
+    from mavtune.search.surface import ruled_out
+
+    pool = _pool(0.291)
+    box = [(0.7, 1.0), (0.7, 1.0)]
+    worse = ruled_out(PX4_CASCADE_RUN_28, pool)
+    got, fitted = answer(PX4_CASCADE_RUN_28, box, worse, pool)
+    assert fitted and got == pytest.approx((1.0, 1.0), abs=1e-9) and got in {
+        tuple(map(float, k)) for k in PX4_CASCADE_RUN_28}  # a flown point, the corner
+    inside, _ = answer(PX4_CASCADE_RUN_28, box, worse, pool, plane_level=0.0)
+    assert inside[0] < 0.95  # the quadratic alone: pulled inside
+
+
+def _design_flights(cost, noise, rng, repeats=2, box=((0.7, 1.0), (0.7, 1.0))):
+    """A 3 x 3 design over `box`, each point flown `repeats` times with relative noise `noise`."""
+    levels = [[lo + (hi - lo) * i / 2 for i in range(3)] for lo, hi in box]
+    return {(a, b): [cost(a, b) * (1.0 + noise * rng.gauss(0.0, 1.0)) for _ in range(repeats)]
+            for a in levels[0] for b in levels[1]}
+
+
+@given(st.integers(0, 10_000), st.floats(0.0, 0.02), st.sampled_from([(1, 1), (1, 0), (0, 1), (0, 0)]))
+@settings(max_examples=30, deadline=None)
+def test_a_noisy_cost_still_falling_towards_a_corner_is_answered_on_that_flown_corner(seed, noise, corner):
+    """A cost that falls across the whole design towards one of its corners (30 % and 20 % over the design's
+    width, far more than the noise can hide; noise-free too): the answer is that corner, flown — never an unflown
+    gain inside."""
+    rng = random.Random(seed)
+    box = ((0.7, 1.0), (0.0, 0.3))
+    target = tuple(box[i][1] if c else box[i][0] for i, c in enumerate(corner))
+
+    def cost(a, b):
+        return 1.0 + abs(a - target[0]) + 0.7 * abs(b - target[1])
+
+    points = _design_flights(cost, noise, rng, box=box)
+    got, fitted = answer(points, list(box), (), _pool(noise))
+    assert fitted and got == pytest.approx(target, abs=1e-6)
+    assert min(points, key=lambda p: math.dist(p, got)) == pytest.approx(target)  # the corner was flown
+
+
+@given(st.integers(0, 10_000), st.floats(0.02, 0.35))
+@settings(max_examples=10, deadline=None)
+def test_a_noisy_plane_keeps_the_plane_unless_the_flights_reject_it(seed, noise):
+    """A plane with relative noise: the quadratic replaces it about as often as the test's level says (20 %),
+    however noisy the flights; with the noise unknown or nil, never a plane."""
+    import numpy as np
+
+    from mavtune.search.surface import PLANE_LEVEL, plane
+
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1.0, 1.0, (40, 2))
+    mean = 2.0 + 0.5 * x[:, 0] - 0.3 * x[:, 1]
+    flights = np.ones(40)
+    assert plane(x, mean, flights, math.nan, PLANE_LEVEL) is None and plane(x, mean, flights, 0.0, PLANE_LEVEL) is None
+    rejected = sum(plane(x, mean * (1.0 + noise * rng.standard_normal(40)), flights, noise, PLANE_LEVEL) is None
+                   for _ in range(60))
+    assert rejected <= 26  # 12 expected at 20 %; 26 or more of 60 has p < 1e-4
+
+
+@given(st.integers(0, 10_000), st.floats(0.01, 0.05))
+@settings(max_examples=20, deadline=None)
+def test_a_bowl_inside_the_design_keeps_the_quadratic(seed, noise):
+    """A bowl whose minimum lies inside the design (curvature the flights measure): the plane is rejected and the
+    answer is the quadratic's, inside the box, not a corner of it."""
+    rng = random.Random(seed)
+    points = _design_flights(lambda a, b: 1.0 + 20.0 * (a - 0.82) ** 2 + 15.0 * (b - 0.86) ** 2, noise, rng)
+    got, fitted = answer(points, [(0.7, 1.0), (0.7, 1.0)], (), _pool(noise))
+    assert fitted and 0.7 < got[0] < 1.0 and 0.7 < got[1] < 1.0
+
+
+def _stochastic_cliff(seed: int, flights: int = 3):
+    """A 7 × 7 design over [0.3, 0.9] × [0.2, 0.8], each point flown `flights` times, of a bowl whose minimum
+    (0.8, 0.45) lies beyond a wall that moves from flight to flight: a flight diverges where kp − 0.5·kd exceeds
+    0.4 + 0.03·z (the analytic cliff of benchmarks/zoo); returns the points and the true divergence chance."""
+    from statistics import NormalDist
+
+    rng = random.Random(seed)
+    points = {}
+    for i in range(7):
+        for j in range(7):
+            kp, kd = 0.3 + 0.1 * i, 0.2 + 0.1 * j
+            c = 1.0 + 3.0 * (kp - 0.8) ** 2 + 6.0 * (kd - 0.45) ** 2
+            points[(kp, kd)] = [math.inf if kp - 0.5 * kd > 0.4 + 0.03 * rng.gauss(0, 1)
+                                else c * (1.0 + 0.05 * rng.gauss(0, 1)) for _ in range(flights)]
+    return points, lambda x: NormalDist().cdf((x[0] - 0.5 * x[1] - 0.4) / 0.03)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_no_answer_where_the_flights_make_a_fly_away_likely(seed):
+    """Next to a wall that moves from flight to flight, gains whose own flights all survived still diverge often:
+    the answer keeps where the run's flights put the chance below 0.1 %; without that bound it sits on the wall."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import ruled_out
+
+    points, chance = _stochastic_cliff(seed)
+    pool = NoisePool.prior(0.05, 100.0)
+    box = [(0.3, 0.9), (0.2, 0.8)]
+    kept, _ = answer(points, box, ruled_out(points, pool), pool)
+    bare, _ = answer(points, box, ruled_out(points, pool), pool, risk=None)
+    assert chance(kept) < 0.015 < chance(bare)
+
+
+def test_the_divergence_bound_leaves_a_run_without_failures_alone():
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.risk import divergence
+
+    points = {k: [c for c in v if math.isfinite(c)] or [1.0] for k, v in _stochastic_cliff(0)[0].items()}
+    pool = NoisePool.prior(0.05, 100.0)
+    box = [(0.3, 0.9), (0.2, 0.8)]
+    assert answer(points, box, (), pool) == answer(points, box, (), pool, risk=None)
+    assert divergence(points, (0.6, 0.5), (0.3, 0.3), lambda u: [1.0] * len(u)) is None
+
+
+def test_a_plane_answers_a_range_bound_never_a_corner_of_the_design_inside_the_ranges():
+    """A bowl whose curvature the flights do not resolve (10 % noise, its minimum mid-design): a plane is often not
+    rejected, and its minimum is a corner of the design — inside the ranges that says the optimum lies beyond the
+    design, not there, so the quadratic answers instead (`plane_inside` answers the plane's corner)."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import ruled_out
+
+    box = [(0.35, 0.65), (0.35, 0.65)]
+    pool = NoisePool.prior(0.1, 100.0)
+    replaced = 0
+    for seed in range(30):
+        rng = random.Random(seed)
+        points = {(x, y): [(1.0 + 0.06 * ((x - 0.52) ** 2 + (y - 0.5) ** 2) / 0.15 ** 2) * (1 + 0.1 * rng.gauss(0, 1))
+                           for _ in range(2)] for x in (0.35, 0.5, 0.65) for y in (0.35, 0.5, 0.65)}
+        worse = ruled_out(points, pool)
+        plane, _ = answer(points, box, worse, pool, plane_inside=True)
+        got, _ = answer(points, box, worse, pool)
+        if any(min(abs(v - a), abs(v - b)) < 1e-9 for v, (a, b) in zip(plane, box)):  # on a face of the design
+            assert got == answer(points, box, worse, pool, plane_level=0.0)[0]  # the quadratic's (or cubic's)
+            replaced += got != plane
+        else:
+            assert got == plane
+    assert replaced >= 5

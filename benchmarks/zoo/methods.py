@@ -160,6 +160,7 @@ def candidates() -> list[Method]:
     fixed = {**none, "adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
     designs = {k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}  # no passes: 3 designs, exact plan
     first = {**designs, "design_inner": False, "design_shrink": 0.4}  # the first BUDGET_TUNING: the 3^d box first
+    moving = {"design_steps": 2, "design_split": True, "design_move": 1.5}  # today's design's flights in two designs
     return [
         Method("default (config.Tuning())"),
         Method("previous default (no budget)", none),
@@ -174,6 +175,8 @@ def candidates() -> list[Method]:
         Method("3 designs from the whole box shrink 0.5", {**first, "design_shrink": 0.5}),
         Method("3 designs from the whole box shrink 0.3", {**first, "design_shrink": 0.3}),
         Method("3 designs: the first with inner corners (shrink 0.4)", {**designs, "design_shrink": 0.4}),
+        Method("two designs each point once, the second moved 1.5x past a face", moving),
+        Method("three designs each point once, moved 1.5x past a face", {**moving, "design_steps": 3}),
         *(Method(f"budget {n} flights a gain", per_gain=n) for n in (28, 35, 42, 56)),
         Method("budget 28 flights a gain, 1 pass", {"bootstraps": 1}, per_gain=28),
     ]

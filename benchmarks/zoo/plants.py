@@ -12,7 +12,9 @@ vehicle, wind and noise at every gain vector (common random numbers for the trut
 
 PLANTS is the zoo the defaults are chosen on; UNSEEN are plants of other kinds that nothing is chosen on (other
 airframes and primitives, PX4's cascade with 3 gains and a payload picked up in flight, a Crazyflie with a payload, a
-banana valley, a divergence cliff: `quality.py --zoo unseen`); ALL_PLANTS finds either by name.
+banana valley, a curved damping wall: `quality.py --zoo unseen`); ALL_PLANTS finds either by name. The divergence
+cliff was unseen until it showed every method answering gains beside it; it is a zoo plant since (2026-11-25), and
+the damping wall, written before any change was tried on it, took its place.
 """
 
 from __future__ import annotations
@@ -382,6 +384,16 @@ def cliff_fly(x, seeds, rounds):
     return np.where(diverged, CLIFF_COST, c * (1.0 + 0.05 * z[:, 0]) + 0.15 * (c - 1.0) * z[:, 1]), diverged
 
 
+def damping_wall_fly(x, seeds, rounds):
+    """A bowl whose minimum (0.55, 0.1) lies below the damping a flight needs: a flight diverges where kd falls
+    short of 0.1 + 0.4·kp² + 0.025·z (the damping needed grows with the position gain; the margin moves with each
+    flight) and then costs 0.8 CLIFF_COST; lognormal noise of 6 % and a share growing with the cost."""
+    c = 1.0 + 4.0 * (x[:, 0] - 0.55) ** 2 + 5.0 * (x[:, 1] - 0.1) ** 2
+    z = _normals(seeds, rounds, 3)
+    diverged = x[:, 1] < 0.1 + 0.4 * x[:, 0] ** 2 + 0.025 * z[:, 2]
+    return np.where(diverged, 0.8 * CLIFF_COST, c * np.exp(0.06 * z[:, 0]) + 0.1 * (c - 1.0) * z[:, 1]), diverged
+
+
 # ----- the zoo ------------------------------------------------------------------------------------------------
 
 FULL = ((0.0, 1.0), (0.0, 1.0))
@@ -430,6 +442,9 @@ def _plants() -> dict[str, Plant]:
         Plant("crazyflow", "Crazyflow Crazyflie, Mellinger z gains, climbing circle, OU gust forces", ("kp", "kd"),
               crazyflow_fly, {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()},
               judge_cap=128, chunk=1024),
+        Plant("analytic cliff", "bowl whose minimum lies beyond a divergence cliff that moves with each flight: the "
+              "optimum is inside, next to the cliff (unseen until 2026-11-25, when it showed every method answering "
+              "gains beside the cliff)", ("kp", "kd"), cliff_fly),
     ]
     return {p.name: p for p in out}
 
@@ -470,8 +485,9 @@ def _unseen() -> dict[str, Plant]:
               {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()}, judge_cap=128, chunk=1024),
         Plant("unseen analytic banana", "Rosenbrock-like curved valley (the floor bends through the box), "
               "multiplicative lognormal noise 10 %", ("kp", "kd"), banana_fly),
-        Plant("unseen analytic cliff", "bowl whose minimum lies beyond a divergence cliff that moves with each "
-              "flight: the optimum is inside, next to the cliff", ("kp", "kd"), cliff_fly),
+        Plant("unseen analytic damping wall", "bowl whose minimum lies below the damping a flight needs: a curved "
+              "wall (the kd needed grows with kp²) that moves with each flight, lognormal noise", ("kp", "kd"),
+              damping_wall_fly),
     ]
     return {p.name: p for p in out}
 

@@ -14,10 +14,23 @@ on the far side of a wall. Nor is a gain
 vector answered whose nearest flown point the flights rule out (worse than the best point by more than the 90 %
 two-sided error of their difference, `ruled_out`): a quadratic bent by a steep wall of oscillating gains must not
 answer next to the wall.
+A wall that moves from flight to flight (gusts, the vehicle's spread) is not told by where one flight failed and
+the next survived, so neither is an answer given where a logistic model of the divergence chance fitted to the
+run's flights near it (`risk`) puts that chance above `risk.RISK` (0.1 %).
 
 Weights as the line search's own fit (`model`): each point by its flights over its variance (the noise is
 relative, sd ∝ cost), times a tricube kernel in its largest distance (in shares of each range) from the design's
-centre, reaching twice the design's half-width: the fit is local to where the design flew. Where the flights reject
+centre, reaching twice the design's half-width: the fit is local to where the design flew. Where the flights do not
+reject a plane for the quadratic (at PLANE_LEVEL, 20 %: `plane`) and the plane's minimum lies on a range's bound (or
+off the design's faces), the answer is the plane's minimum: a cost that only falls across the design towards an edge
+or a corner of the ranges, measured by noisy flights, gives a quadratic whose noisy curvature puts its minimum inside,
+short of the flown corner. The plane's minimum on a face of the design inside the ranges is not answered (the
+quadratic is): there a plane the flights do not reject says the optimum lies beyond the design, or that too few
+flights resolve its curvature — on the unseen light step an optimum mid-design got the design's corner, 25 % of runs
+within 2 % against 85 % (quality_unseen_corner_paired.md; the plane on every face, `plane_inside`, is the variant
+measured there and on the zoo's selection half: PX4 cascade 38 % of runs instead of 8 %, selection_corner_paired.md).
+Replayed on the selection half's flights (answer_diagnostic_plane_faces.md, 20 runs a plant): the PX4 cascade
+within 2 % of its corner optimum in 25 % of runs instead of 5 % (5 runs better, none worse), no plant worse. Where the flights reject
 the quadratic (its residuals exceed the run's noise by more than a cubic's extra terms explain: `cubic`), the
 answer is the minimiser of the cubic instead, where it lies inside the box (on a face the cubic terms extrapolate)
 and not beside a failed flight (a cubic dips into the unflown gap next to one):
@@ -33,12 +46,15 @@ from typing import Collection, Mapping, Sequence
 
 from mavtune.flown import within_noise
 from mavtune.search.evidence import NoisePool, point_stats
+from mavtune.search.risk import RISK, divergence
 
 LEVEL = 0.9  # a flown point worse than the best by more than this two-sided quantile of the error is ruled out
 
 REACH = 2.0  # the kernel spans this many half-widths of the design from its centre
 POWER = 2.0  # each point weighs its flights over its cost to this power (2: the variance of a relative noise)
 CUBIC_LEVEL = 0.05  # a cubic replaces the quadratic where the flights reject the quadratic at this level
+LOCAL_REACH = 3.0  # the kernel of the fit that guides a design's move (`next_centre`): points in the box weigh ~alike
+PLANE_LEVEL = 0.2  # a plane replaces the quadratic where the flights do not reject the plane at this level
 GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the design's box (then polished)
 
 
@@ -59,6 +75,59 @@ def design(centre: Sequence[float], half: float, inner: bool = False) -> list[tu
     if inner:
         levels += list(product((-0.5, 0.5), repeat=d))
     return [tuple(min(max(m + half * lv, 0.0), 1.0) for m, lv in zip(mid, level)) for level in levels]
+
+
+def next_centre(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+                half: float, pool: NoisePool | None, move: float, answer_now: Sequence[float],
+                inner: bool = False) -> tuple[tuple[float, ...], bool]:
+    """The centre of the next design (in shares of each range) after the design of `box` (per gain (lo, hi), ±`half`
+    around its centre) answered `answer_now`, and whether it moved past a face: a trust region. The fit of the
+    design's own box (`answer` on the points flown inside it, every point weighed nearly alike: far flights, as a
+    line search's near a wall, bend a quadratic and hold its minimum inside) guides it: when that guide lies on a
+    face of the box inside the ranges, the next centre lies `move` times the way from the box's centre to the guide
+    (1: on the guide; 2: as far again, the next box against this one along the face's gain) — along the step, not
+    the face's gain alone: a valley across the gains runs on diagonally — shortened (by quarters of the way, down to
+    the guide) until no point of the next design lies beyond a failed flight (`walled`). Else (no face, or every
+    move walled) the next design lies around `answer_now`, or, where some point of that lies beyond a failed flight,
+    where this one was (flown again: its flights average the noise and fly no nearer a wall). `points`: every flown
+    gain vector → its flights' costs, a failed flight's infinite."""
+    centre = tuple(0.5 * (lo + hi) for lo, hi in box)
+    if move >= 1.0:
+        inside = {k: c for k, c in points.items() if all(lo - 1e-9 <= v <= hi + 1e-9 for v, (lo, hi) in zip(k, box))}
+        guide, _ = answer(inside, box, ruled_out(inside, pool) if pool is not None else (), pool, reach=LOCAL_REACH)
+        if any(hi - lo > 1e-9 and min(abs(g - lo), abs(g - hi)) <= 1e-9 and 1e-9 < g < 1 - 1e-9
+               for (lo, hi), g in zip(box, guide)):
+            for t in [move - 0.25 * k for k in range(int((move - 1.0) / 0.25 + 1e-9) + 1)]:
+                target = tuple(min(max(c + t * (g - c), 0.0), 1.0) for c, g in zip(centre, guide))
+                if not walled(points, guide, design(target, half, inner)):
+                    return target, True
+    here = tuple(float(v) for v in answer_now)
+    return (centre, False) if walled(points, here, design(here, half, inner)) else (here, False)
+
+
+def walled(points: Mapping[tuple[float, ...], Sequence[float]], start: Sequence[float],
+           targets: Sequence[Sequence[float]]) -> bool:
+    """Whether the way from `start` to any of `targets` (straight, in shares of each range) passes a failed flown
+    point closer than half that point's distance to the nearest point flown without failure (the rule of `answer`:
+    never beyond a wall)."""
+    import numpy as np
+
+    keys = [k for k, c in points.items() if c]
+    failed = np.array([k for k in keys if not all(map(math.isfinite, points[k]))], float)
+    safe = np.array([k for k in keys if all(map(math.isfinite, points[k]))], float)
+    if not len(failed):
+        return False
+    if not len(safe):
+        return True
+    base, x = np.asarray(start, float), np.asarray(targets, float)
+    step = x - base
+    length = np.maximum(np.sum(step * step, axis=1), 1e-300)
+    for f in failed:
+        r = 0.5 * float(np.min(np.linalg.norm(safe - f, axis=1)))
+        t = np.clip((step @ (f - base)) / length, 0.0, 1.0)
+        if np.any(np.linalg.norm(base + t[:, None] * step - f, axis=1) < r):
+            return True
+    return False
 
 
 def coefficients(d: int) -> int:
@@ -119,63 +188,118 @@ def at_wall(points: Mapping[tuple[float, ...], Sequence[float]]) -> set[tuple[fl
     return out
 
 
-def cubic(x, y, n, cv: float, level: float = CUBIC_LEVEL):
-    """The value function of one cubic in every gain through points `x` (in the fit's scale) with mean costs `y`
-    and weights `n` (each point's flights, times the fit's kernel), weighted by its flights over its relative
-    variance, when the flights say the cost is no quadratic: with each point's variance cv²·ŷ²/flights (cv: the
-    run's relative noise; ŷ: a quadratic's fitted cost weighted by flights alone, not the noisy mean, which would
-    call a low mean precise),
-    the cubic terms lower the weighted residual sum of squares by more than the noise explains (against χ² with as
-    many degrees of freedom as cubic terms, at `level`); None otherwise, or with the noise unknown or nil. An
-    asymmetric valley (a wall of oscillating gains on one side, a slow rise on the other) pulls a quadratic's
-    minimum towards its shallow side; a cubic's skew follows it."""
+def _terms(d: int, degree: int) -> list[tuple[int, ...]]:
+    """The monomials of a polynomial in `d` gains up to `degree`, each as the gains it multiplies (() is 1)."""
     from itertools import combinations_with_replacement
 
+    return [m for k in range(degree + 1) for m in combinations_with_replacement(range(d), k)]
+
+
+def _columns(u, which: list[tuple[int, ...]]):
+    """The monomials `which` at each row of `u`."""
+    import numpy as np
+
+    return np.stack([np.prod(u[:, list(m)], axis=1) for m in which], axis=1)  # (the empty product is 1)
+
+
+def _fit(x, y, w, which: list[tuple[int, ...]]):
+    """Weighted least squares of the monomials `which`: (coefficients, weighted residual sum of squares)."""
+    import numpy as np
+
+    a, sw = _columns(x, which), np.sqrt(w)
+    beta = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
+    r = (a @ beta - y) * sw
+    return beta, float(r @ r)
+
+
+def _test_weights(x, y, n):
+    """Each point's inverse variance over cv² (`n`: its flights times the kernel over (cv·ŷ)², ŷ: a quadratic's
+    fitted cost weighted by flights alone, not the noisy mean, which would call a low mean precise)."""
+    import numpy as np
+
+    square = _terms(x.shape[1], 2)
+    level_fit, _ = _fit(x, y, n, square)  # by flights alone: unbiased by noisy weights
+    fitted = np.maximum(_columns(x, square) @ level_fit, 0.1 * np.abs(y))  # (far below a mean: its mean's scale)
+    return n / np.maximum(fitted, 1e-6) ** 2
+
+
+def _rejects(x, y, n, cv: float, small: list, large: list, level: float) -> bool | None:
+    """Whether the flights reject the polynomial of monomials `small` in favour of `large` (the larger's extra
+    terms lower the weighted residual sum of squares by more than the noise explains, against χ² with as many
+    degrees of freedom as extra terms, at `level`), each point's variance from the run's relative noise `cv`
+    (`_test_weights`); None with the noise unknown or nil, too few points for the larger fit, or a failed solve."""
     import numpy as np
     from scipy.stats import chi2
 
-    d = x.shape[1]
-    square = [()] + [m for k in (1, 2) for m in combinations_with_replacement(range(d), k)]
-    terms = square + list(combinations_with_replacement(range(d), 3))
-    if not (math.isfinite(cv) and cv > 0 and level > 0) or np.count_nonzero(n > 0) < len(terms) + 2:
+    if not (math.isfinite(cv) and cv > 0 and 0 < level < 1) or np.count_nonzero(n > 0) < len(large) + 2:
         return None
-
-    def columns(u: np.ndarray, which: list[tuple[int, ...]]) -> np.ndarray:
-        return np.stack([np.prod(u[:, list(m)], axis=1) for m in which], axis=1)  # (the empty product is 1)
-
-    def fit(which: list[tuple[int, ...]], w: np.ndarray) -> tuple[np.ndarray, float]:
-        a, sw = columns(x, which), np.sqrt(w)
-        beta = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
-        r = (a @ beta - y) * sw
-        return beta, float(r @ r)
-
-    observed = n / np.maximum(np.abs(y), 1e-6) ** POWER  # the fit's own weights (as the quadratic's)
     try:
-        level_fit, _ = fit(square, n)  # by flights alone: unbiased by noisy weights
-        fitted = np.maximum(columns(x, square) @ level_fit, 0.1 * np.abs(y))  # (far below a mean: its mean's scale)
-        test = n / np.maximum(fitted, 1e-6) ** 2
-        (_, rss2), (_, rss3) = fit(square, test), fit(terms, test)
-        beta, _ = fit(terms, observed)
+        test = _test_weights(x, y, n)
+        (_, rss_a), (_, rss_b) = _fit(x, y, test, small), _fit(x, y, test, large)
     except np.linalg.LinAlgError:
         return None
-    if not (np.all(np.isfinite(beta)) and (rss2 - rss3) / (cv * cv) > chi2.isf(level, len(terms) - len(square))):
+    return bool((rss_a - rss_b) / (cv * cv) > chi2.isf(level, len(large) - len(small)))
+
+
+def _polynomial(x, y, n, which: list[tuple[int, ...]]):
+    """The value function of the polynomial of monomials `which` through `x`, `y` weighted as the quadratic (`n`: each
+    point's flights times the kernel, over its cost to the POWER); None when the solve fails or is not finite."""
+    import numpy as np
+
+    try:
+        beta, _ = _fit(x, y, n / np.maximum(np.abs(y), 1e-6) ** POWER, which)
+    except np.linalg.LinAlgError:
         return None
-    return lambda u: columns(np.atleast_2d(u), terms) @ beta
+    if not np.all(np.isfinite(beta)):
+        return None
+    return lambda u: _columns(np.atleast_2d(u), which) @ beta
+
+
+def cubic(x, y, n, cv: float, level: float = CUBIC_LEVEL):
+    """The value function of one cubic in every gain through points `x` (in the fit's scale) with mean costs `y`
+    and weights `n` (each point's flights, times the fit's kernel), weighted by its flights over its relative
+    variance, when the flights say the cost is no quadratic (`_rejects`: the cubic terms explain more than the
+    noise, at `level`); None otherwise, or with the noise unknown or nil. An asymmetric valley (a wall of
+    oscillating gains on one side, a slow rise on the other) pulls a quadratic's minimum towards its shallow
+    side; a cubic's skew follows it."""
+    d = x.shape[1]
+    if not level > 0 or not _rejects(x, y, n, cv, _terms(d, 2), _terms(d, 3), level):
+        return None
+    return _polynomial(x, y, n, _terms(d, 3))
+
+
+def plane(x, y, n, cv: float, level: float, slope_level: float = 0.0):
+    """The value function of one plane through the points (weighted as `cubic`) when the flights do not reject
+    it for a quadratic at `level` (`_rejects`) and, with `slope_level`, reject a constant for it at that level
+    (the cost measurably falls across the points, not a flat bottom); None otherwise, or with the noise unknown
+    or nil."""
+    d = x.shape[1]
+    if not level > 0 or _rejects(x, y, n, cv, _terms(d, 1), _terms(d, 2), level) is not False:
+        return None
+    if slope_level > 0 and not _rejects(x, y, n, cv, _terms(d, 0), _terms(d, 1), slope_level):
+        return None
+    return _polynomial(x, y, n, _terms(d, 1))
 
 
 def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
            worse: Collection[tuple[float, ...]] = (),
            pool: NoisePool | None = None, *, power: float = POWER, reach: float = REACH,
-           log: bool = False, cubic_level: float = CUBIC_LEVEL) -> tuple[tuple[float, ...], bool]:
-    """The minimiser of one weighted quadratic (of a cubic where the flights reject the quadratic, `cubic`, and its
-    minimiser lies inside the box, not `beside_wall`) through
+           log: bool = False, cubic_level: float = CUBIC_LEVEL,
+           plane_level: float = PLANE_LEVEL, slope_level: float = 0.0, plane_inside: bool = False,
+           risk: float | None = RISK) -> tuple[tuple[float, ...], bool]:
+    """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
+    cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
     vectors whose nearest flown point neither failed nor is one the flights rule out (`worse`: `ruled_out`) nor,
     while a point in the box flown off the walls is not told apart from the box's best (`pool`: the run's noise;
-    never with a noise-free cost), the first safe point off a wall (`at_wall`); and whether the fit gave it.
+    never with a noise-free cost), the first safe point off a wall (`at_wall`), nor, where a flight the kernel
+    reaches failed, where the run's flights put the divergence chance above `risk` (`risk.divergence`; None: no
+    such bound); and whether the fit gave it.
     Without a usable fit: the flown point in the box with the lowest mean cost among those (never an unflown
     gain); the box's centre if none. `power`, `reach`, `log` (a quadratic in the log of the cost, each point
-    weighted by its flights) and `cubic_level` (0: the quadratic alone) are the fit's variants
+    weighted by its flights), `cubic_level` (0: no cubic), `plane_level` (0: no plane), `slope_level` (0: the
+    plane wherever the flights do not reject it; else only where they also reject a constant) and `plane_inside`
+    (the plane's minimum answered on a face of the design inside the ranges too) are the fit's variants
     benchmarks/answer_diagnostic.py --replay measures; the defaults are the measured choice."""
     from statistics import NormalDist
 
@@ -209,6 +333,17 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
             told = within_noise(_finite_stats({k: points[k] for k in told}, pool), level)
         if any(k not in wall for k in told):  # a point off the walls as good as the box's best, by the flights:
             near_ok, pick = near_ok & off_wall, inside & off_wall  # no answer beside a wall (else a caution)
+    def tricube(u: np.ndarray) -> np.ndarray:
+        """The fit's tricube weight of points at u (in half-widths of the box from its centre)."""
+        return (1.0 - np.minimum(np.max(np.abs(u), axis=1) / reach, 1.0) ** 3) ** 3
+
+    fly_away = divergence(points, centre, half, tricube) if risk is not None and not np.all(ok) else None
+    if fly_away is not None:
+        likely = fly_away.chance(every) > risk
+        if np.all(likely[pick]):  # no point flown in the box has a chance that low (one failure amid survivors
+            fly_away = None  # tells no side): the bound chooses nothing
+        else:
+            pick = pick & ~likely  # the best point flown where a fly-away is unlikely
     fallback = tuple(float(v) for v in every[pick][np.argmin(means[pick])])
     tree = cKDTree(every)
     hull = None
@@ -225,8 +360,11 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     def allowed(x: np.ndarray) -> np.ndarray:
         """Each candidate's nearest flown point neither failed nor is ruled out; with failures, it lies in the
         hull of the safe points and the way to it from the best point flown passes no failed point (by half that
-        point's distance to the nearest safe one): never on the far side of a wall."""
+        point's distance to the nearest safe one): never on the far side of a wall; the fitted divergence chance
+        is at most `risk` there."""
         out = near_ok[tree.query(x)[1]]
+        if fly_away is not None:
+            out &= fly_away.chance(x) <= risk
         if hull is None:
             return out
         out &= hull.find_simplex(x, tol=1e-9) >= 0
@@ -238,12 +376,11 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         return out
 
     x = (every[ok] - centre) / half
-    dist = np.max(np.abs(x), axis=1) / reach
     y = means[ok]
     if not np.max(np.abs(y)) > 0:
         return fallback, False
     y = y / np.max(np.abs(y))
-    kernel = (1.0 - np.minimum(dist, 1.0) ** 3) ** 3
+    kernel = tricube(x)
     if log and np.all(y > 0):  # relative noise is even on the log scale: each point by its flights
         y, w = np.log(y), counts[ok] * kernel
     else:
@@ -279,9 +416,15 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         ok = np.all(np.isfinite(u)) and value(u)[0] <= value(best)[0] and allowed((u * half + centre)[None])[0]
         return u if ok else best
 
+    cv = pool.cv if pool is not None else math.nan
+    flat = None if log else plane(x, y, counts[ok] * kernel, cv, plane_level, slope_level)
+    if flat is not None:  # the flights need no curvature: the plane's minimum, on the flown region's boundary,
+        v = np.clip(lowest(flat, None) * half + centre, lo, hi)  # where that lies on a range's bound (or off the
+        face = (np.abs(v - lo) < 1e-9) & (lo > 1e-9) | (np.abs(v - hi) < 1e-9) & (hi < 1.0 - 1e-9)  # design's faces)
+        if plane_inside or not np.any(face):  # (a face inside the ranges: a plane not rejected by too few flights
+            return tuple(float(t) for t in v), True  # says the optimum lies beyond the design, not on its corner)
     u = lowest(value, slope)
-    skewed = None if log else cubic(x, y, counts[ok] * kernel, pool.cv if pool is not None else math.nan,
-                                    cubic_level)
+    skewed = None if log else cubic(x, y, counts[ok] * kernel, cv, cubic_level)
     if skewed is not None:  # the flights reject the quadratic: the cubic's minimum, where it lies inside the box
         v = lowest(skewed, None)  # (on a face the cubic terms extrapolate: a cubic falls away towards one side)
         if np.all(np.abs(v) < 1.0 - 1e-6) and beside_wall(points, tuple(v * half + centre), 0.0) is None:
