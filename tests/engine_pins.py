@@ -10,7 +10,8 @@ on a stale hold or a cost still falling at the outermost point, with a Bonferron
 (calib, issue 20): no decision and no other number moved.
 
 The budgeted run (`budget`, config.Tuning's other fields at their defaults) was added on the budget branch (issue
-20), its pin written from that code alone; no other pin moved.
+20); no other pin moved. Written again when main's answer came to take a plane on a bound and the divergence bound
+(merged into the budget branch): the same rounds and assignments, the design's answer (its gains) moved.
 
 What a run decides is pinned exactly: its rounds, every assignment flown (the search's decisions, adaptive
 reflights included), the iterations of each line search and a search answer's gains (a point flown). The numbers

@@ -160,7 +160,8 @@ def candidates() -> list[Method]:
     fixed = {**none, "adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
     designs = {k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}  # no passes: 3 designs, exact plan
     first = {**designs, "design_inner": False, "design_shrink": 0.4}  # the first BUDGET_TUNING: the 3^d box first
-    moving = {"design_steps": 2, "design_split": True, "design_move": 1.5}  # today's design's flights in two designs
+    moving = {**none, "design_steps": 2, "design_split": True,
+              "design_move": 1.5}  # the design's flights before the budget, in two designs
     return [
         Method("default (config.Tuning())"),
         Method("previous default (no budget)", none),
