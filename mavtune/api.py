@@ -40,6 +40,8 @@ def default_settings(vehicles: int | None = None, **given: Any) -> Settings:
     options = {k: v for k, v in given.items() if v is not DEFAULT}
     if "bootstraps" in options and options["bootstraps"] is None:
         options["bootstraps"] = "auto"  # the API's None is the file's "auto": the paper's stop rule
+    if "budget" in options and options["budget"] is None:
+        options["budget"] = "none"  # the API's None is the file's "none": no budget
     if "initial" in options and options["initial"] is None:
         options["initial"] = {}
     if "space" in options and options["space"] is not None:
@@ -80,6 +82,7 @@ def tune(
     design_shrink: float = DEFAULT,
     design_split: bool = DEFAULT,
     design_inner: bool = DEFAULT,
+    budget: int | str | None = DEFAULT,
     design_move: float = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
@@ -102,7 +105,9 @@ def tune(
     times, `design_steps` designs in turn, each
     `design_shrink` times as wide as the one before once it surrounds its answer, `design_split`: the vehicles fly
     distinct points; `design_inner`: the first design also flies the corners of the box half as wide, each point
-    once; `design_move`: how far the next design moves past a face of the design where its own fit's minimum lies) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic), `on_round`
+    once; `design_move`: how far the next design moves past a face of the design where its own fit's minimum lies) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic), `budget`
+    the run's flights exactly (the passes share what the designs leave; "auto": 42 a gain; None: as many as the
+    stages ask), `on_round`
     sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
     `mavtune tune` refuses them. `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
     seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs
@@ -127,7 +132,7 @@ def tune(
         confidence=confidence, cap=cap, answer=answer, edges=edges, directions=directions,
         design=design, design_width=design_width, design_repeats=design_repeats, design_steps=design_steps,
         design_shrink=design_shrink, design_split=design_split, design_inner=design_inner,
-        design_move=design_move)
+        design_move=design_move, budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")

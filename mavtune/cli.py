@@ -19,8 +19,8 @@ from mavtune import interrupts
 from mavtune.errors import Interrupted, MavtuneError
 from mavtune.runfolder import usable_path
 from mavtune.options import (
-    AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MaxRoundsOpt, MethodOpt, PickOpt, ReplicatesOpt,
-    PresetOpt, ReuseOpt, SchedulerOpt, StrategyOpt, VehiclesOpt, config_from_flags,
+    AdaptiveOpt, BatteryOpt, BootstrapsOpt, BudgetOpt, ConfigOpt, EpsilonOpt, MaxRoundsOpt, MethodOpt, PickOpt,
+    PresetOpt, ReplicatesOpt, ReuseOpt, SchedulerOpt, StrategyOpt, VehiclesOpt, budget_flag, config_from_flags,
 )
 
 # name: (module, function, the first line of its docstring — tests/test_cli_text.py keeps them equal)
@@ -102,7 +102,7 @@ def plan_command(
     replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
     epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
-    adaptive: Optional[bool] = AdaptiveOpt, preset: Optional[str] = PresetOpt,
+    adaptive: Optional[bool] = AdaptiveOpt, preset: Optional[str] = PresetOpt, budget: Optional[str] = BudgetOpt,
     max_rounds: Optional[int] = MaxRoundsOpt,
 ) -> None:
     """Print, before anything flies, the rounds, flights, flight time and batteries a run needs."""
@@ -110,7 +110,8 @@ def plan_command(
     from rich.console import Console
 
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
-                            preset=preset, flight__max_rounds=max_rounds, tuning__adaptive=adaptive)
+                            preset=preset, flight__max_rounds=max_rounds, tuning__adaptive=adaptive,
+                            tuning__budget=budget_flag(budget))
     check_fleet(cfg, planning=True)  # a run that would be refused is not planned
     console = Console(emoji=False)
     warn(console, cfg)
@@ -128,7 +129,7 @@ def tune_command(
     replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
     epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
-    adaptive: Optional[bool] = AdaptiveOpt, preset: Optional[str] = PresetOpt,
+    adaptive: Optional[bool] = AdaptiveOpt, preset: Optional[str] = PresetOpt, budget: Optional[str] = BudgetOpt,
     max_rounds: Optional[int] = MaxRoundsOpt,
     seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the simulated vehicles (vehicle j: seed + j)."),
     payload: Optional[float] = typer.Option(None, "--payload", help="sim: payload mass, kg (paper: 0.9)."),
@@ -165,6 +166,7 @@ def tune_command(
                             preset=preset, flight__max_rounds=max_rounds, tuning__seed=seed, sim__payload_kg=payload,
                             fleet__kind=fleet, swarm__listen=listen, mavlink__urls=mavlink or None,
                             mavlink__keep_tuned=keep_tuned, tuning__adaptive=adaptive, mavlink__gain_set=gain_set,
+                            tuning__budget=budget_flag(budget),
                             tuning__pick=pick)
     given = {"--payload": payload, "--listen": listen, "--mavlink": mavlink, "--keep-tuned": keep_tuned,
              "--gain-set": gain_set}

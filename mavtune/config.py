@@ -36,12 +36,12 @@ class _Section(BaseModel):
 PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`mavtune reproduce` flies it)
     "tuning.method": "eql", "tuning.epsilon": 0.125, "tuning.bootstraps": 2, "tuning.reuse": False,
     "tuning.adaptive": False, "tuning.answer": "search", "tuning.initial": {"kd": 0.2}, "tuning.edges": False,
-    "tuning.design": False}
+    "tuning.design": False, "tuning.budget": "none"}
 
 
 BUDGET_TUNING: dict[str, Any] = {  # a fixed budget of flights, exact before take-off (issue 20; not the default)
     "tuning.bootstraps": 0, "tuning.design_width": 0.5, "tuning.design_steps": 3, "tuning.design_shrink": 0.5,
-    "tuning.design_split": "auto", "tuning.design_inner": True}
+    "tuning.design_split": "auto", "tuning.design_inner": True, "tuning.budget": "none"}
 """No passes over the gains: three response-surface designs, the first a map of the whole box (its corners, face
 centres, centre and the corners of the box half as wide, each point flown once), each next one around the fit's
 answer and half as wide once it surrounds that answer; 50 flights for 2 gains on 2 vehicles (13 + 18 + 18 and a
@@ -61,6 +61,21 @@ first design is flown once); `design_inner = false, design_shrink = 0.4` restore
 
 PRESETS: dict[str, dict[str, Any]] = {"paper": PAPER_TUNING, "budget": BUDGET_TUNING}
 """The named settings `--preset` gives (`mavtune tune --preset budget`), each [tuning] overrides over the file's."""
+
+
+BUDGET_PER_GAIN = 42
+"""The default budget (`[tuning] budget = "auto"`): flights per gain tuned, all vehicles together (84 for 2 gains, 168
+for 4): the smallest of 28, 35, 42 and 56 a gain that was not significantly worse than the unbudgeted default over
+the zoo's selection half (benchmarks/results/selection_budget_default.md, selection_budget_curve*.md)."""
+
+
+def resolved_budget(budget: Any, space: dict, design: bool, bootstraps: Any) -> int | None:
+    """The engine's budget of a [tuning] budget: a number as given; "none" (or None) no budget; "auto"
+    BUDGET_PER_GAIN flights per gain with a design and a fixed number of passes, else none (the paper's setting, or a
+    run without a design or with the paper's stop rule, keeps flying what it asks for)."""
+    if budget == "auto":
+        return BUDGET_PER_GAIN * len(space) if design and bootstraps not in ("auto", None) else None
+    return None if budget in ("none", None) else budget
 
 
 GAIN_SETS: dict[str, tuple[str, ...]] = {"altitude": ("kp", "kd"), "altitude-inner": ("kp", "kd", "ka", "ki"),
@@ -87,7 +102,8 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
-                   "design_steps", "design_shrink", "design_split", "design_inner", "design_move")  # what [tuning] gives the engine's Settings
+                   "design_steps", "design_shrink", "design_split", "design_inner", "design_move",
+                   "budget")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -95,22 +111,26 @@ class Tuning(_Section):
     tolerance (ε 0.2), reuse, adaptive averaging (confidence 0.85, at most 6 flights a point per comparison), the
     answer of each line search fitted to all its flights (`answer = "model"`) and a line search ending against its
     range's edge flying the edge (`edges`); then the response surface (`design`): a 3^d design of ±0.15 of each
-    range around the passes' answer (9 points × the vehicles a point, 18 flights for 2 gains and 2 vehicles, the
-    same in every run) and the answer is the minimum of one quadratic in every gain fitted to the flights near it
-    (of a plane where the flights do not reject a plane and its minimum lies on a bound of the ranges: a cost still
-    falling towards an edge or corner of the ranges; of a cubic where they reject the quadratic), inside the flown
-    design. Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs:
-    benchmarks/results/selection.md): 43 % of runs within 2 % of the optimum on mean over the plants against 37 %
-    without the design (paired sign test over the zoo: better in 80 runs, worse in 37, p 8.7e-05), no fly-away
-    answer, 121 flights on mean against 100; two designs in turn (the second half as wide: `design_steps = 2`,
-    `design_shrink = 0.5`) scored 47 % and beat it in the paired test (75 runs to 43) at 142 flights, but halved
-    the nominal simulator's share (50 %); a fixed budget (1 pass, not adaptive, 3 designs: 88 flights) scored
-    36 % with 2 fly-away answers. No configuration met the zoo's flight goals without losing most
-    of its quality. This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options
-    both take it (`settings()`). `PAPER_TUNING` restores the paper's exact setting. `BUDGET_TUNING` is a fixed
-    budget (no passes, three designs from a map of the whole box: 50 flights for 2 gains, exact before take-off),
-    measured in benchmarks/results/selection_fly.md and quality_fly.md; not the default (significantly worse than it
-    on one zoo plant of each half: 60 ms more latency on the selection runs, 4 gains on the report runs). Since the
+    range around the passes' answer (9 points × the vehicles a point) and the answer is the minimum of one quadratic
+    in every gain fitted to the flights near it (of a plane where the flights do not reject a plane and its minimum
+    lies on a bound of the ranges; of a cubic where they reject the quadratic), inside the flown design; all within
+    a budget of 42 flights a gain (`budget = "auto"`: 84 for 2 gains, 168 for 4), flown
+    exactly and known before take-off: the passes share what the design does not need, the design flies the rest.
+    The budget was chosen on the plant zoo of benchmarks/quality.py (selection half, even runs, 40 a plant:
+    benchmarks/results/selection_budget_default.md): against the same configuration without a budget (121 flights
+    on mean over the zoo, worst 262, the plan's count only expected) a tie over the zoo (paired sign test: the
+    budget better in 226 runs, worse in 244, p 0.43; 44 % of runs within 2 % of the optimum on mean over the plants
+    against 46 %), significantly worse on one plant (mavsim ArduPilot: 28 % against 42 %; nominal 55 % against 78 %,
+    not significant), better than CMA-ES (272 runs to 208) and TPE (292 to 188) at its flights; 91 flights on mean
+    over the zoo, worst 168 (4 gains). 28 and 35 flights a gain were significantly worse than no budget (20 runs a
+    plant: selection_budget_curve.md, selection_budget_curve35.md; the passes' line searches end before their
+    tolerance and the design around their answer is too narrow to reach an optimum on an edge); 56 a gain tied
+    too, at as many flights as no budget. Before the budget the design was chosen the same way
+    (benchmarks/results/selection.md: 43 % within 2 % against 37 % without the design, p 8.7e-05). This is the one
+    default: `mavtune tune` with no flags and `mavtune.tune()` with no options both take it (`settings()`).
+    `budget = "none"` flies each stage's asking (the default before the budget). `PAPER_TUNING` restores the
+    paper's exact setting. `BUDGET_TUNING` is a fixed budget without passes (three designs from a map of the whole
+    box: 50 flights for 2 gains), measured in benchmarks/results/selection_fly.md and quality_fly.md. Since the
     answer takes a plane where the flights do not reject it and its minimum lies on a range's bound
     (benchmarks/results/answer_diagnostic_plane_faces.md, select half replayed, 20 runs a plant): the PX4 cascade
     25 % of runs within 2 % instead of 5 %, no plant worse; a plane on every face of the design scored higher there
@@ -180,6 +200,16 @@ class Tuning(_Section):
                                "inside the ranges: this many times the way from the box's centre to that face (1: "
                                "centred on the face; 2: one box width on), shortened so that no point of it lies "
                                "beyond a failed flight; 0: every next design is centred on the run's answer")
+    budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
+                                     "together, known before take-off and flown exactly: the passes' line searches "
+                                     "share what the designs do not need (each the passes' share left over the "
+                                     "searches to come; adaptive averaging only while its share keeps a round for "
+                                     "every point still to fly; a search whose share is spent answers from the "
+                                     "flights it has), the designs fly all the rest (more flights of their points); "
+                                     "the last round flies only the vehicles the budget has left. At least the "
+                                     "designs' own flights. \"auto\": 42 flights per gain (BUDGET_PER_GAIN) with a "
+                                     "design and a fixed number of passes, else none; \"none\": each stage flies "
+                                     "what it asks for (the plan's count is then expected, not exact)")
     pick: Literal["best", "near-stock"] | None = Field(None, description="the answer among the run's flown points: "
                                                        "the search's optimum (best), or the flown point nearest the "
                                                        "vehicles' stock gains whose cost is within one standard error "
@@ -222,6 +252,13 @@ class Tuning(_Section):
             raise ValueError(f"unknown {info.field_name} {v!r}; choose one of {', '.join(choices)}")
         return v
 
+    @field_validator("budget")
+    @classmethod
+    def _whole_flights(cls, v: int | str) -> int | str:
+        if isinstance(v, int) and v < 1:
+            raise ValueError("must be at least 1 flight, \"auto\" or \"none\"")
+        return v
+
     @field_validator("bootstraps")
     @classmethod
     def _positive(cls, v: int | str) -> int | str:
@@ -237,6 +274,7 @@ class Tuning(_Section):
         values = {name: getattr(self, name) for name in SETTINGS_FIELDS} | given
         if "initial" not in given and "initial" not in self.model_fields_set:
             values["initial"] = {k: v for k, v in values["initial"].items() if k in values["space"]}
+        values["budget"] = resolved_budget(values["budget"], values["space"], values["design"], values["bootstraps"])
         values["bootstraps"] = None if values["bootstraps"] == "auto" else values["bootstraps"]
         return Settings(**{k: dict(v) if isinstance(v, dict) else v for k, v in values.items()})
 

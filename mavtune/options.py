@@ -22,6 +22,8 @@ AdaptiveOpt = typer.Option(None, "--adaptive/--no-adaptive", help="Fly close com
                            "the kept point is the best with probability [tuning] confidence.")
 PickOpt = typer.Option(None, "--pick", help="The answer among the flown points: best | near-stock (the flown gains "
                        "nearest stock whose cost is not told apart from the best) [near-stock on mavlink, else best].")
+BudgetOpt = typer.Option(None, "--budget", help="The run's flights, all vehicles together, flown exactly (the passes "
+                         "share what the designs leave), or 'none': as many as the passes ask [42 a gain].")
 MaxRoundsOpt = typer.Option(None, "--max-rounds", help="Refuse a plan of more rounds than this [2000]; raise it "
                             "to fly a longer plan anyway.")
 PresetOpt = typer.Option(None, "--preset", help="Named settings over the file's [tuning]: paper (the paper's exact "
@@ -38,6 +40,16 @@ def bootstraps_flag(value: Optional[str]) -> int | str | None:
         return int(value)
     except ValueError:
         raise MavtuneError(f"--bootstraps must be a whole number or 'auto', got {value!r}") from None
+
+
+def budget_flag(value: Optional[str]) -> int | str | None:
+    """--budget: a whole number of flights, 'none' or 'auto'."""
+    if value is None or value in ("none", "auto"):
+        return value
+    try:
+        return int(value)
+    except ValueError:
+        raise MavtuneError(f"--budget must be a whole number of flights, 'none' or 'auto', got {value!r}") from None
 
 
 def config_from_flags(config: Optional[Path], vehicles: Optional[int], strategy: Optional[str],

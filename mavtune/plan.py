@@ -51,10 +51,11 @@ class Plan:
     stop_rule: bool = False  # bootstraps end early when a point repeats (paper's rule)
     adaptive: bool = False  # rounds is the expected case, rounds_max the cap in every comparison
     rounds_min: int | None = None  # adaptive: the expected rounds when every comparison is clear (no re-flight)
+    budget: int | None = None  # the run's flights exactly (`Settings.budget`), its last round maybe not full
 
     @property
     def flights(self) -> int:
-        return self.rounds * self.vehicles
+        return self.budget if self.budget is not None else self.rounds * self.vehicles
 
     @property
     def round_s(self) -> float:
@@ -88,12 +89,17 @@ class Plan:
             f"bootstraps    {self.bootstraps}" + (" at most (the paper's stop rule may end the run sooner)"
                                                    if self.stop_rule else ""),
             f"rounds        {self.rounds}" + (
+                f" exactly, whatever the costs (a budget of {self.budget} flights"
+                + (f"; the last round flies {self.budget - (self.rounds - 1) * self.vehicles} of the vehicles)"
+                   if self.budget % self.vehicles else ")")
+                if self.budget is not None else
                 f" expected at {EXPECTED_NOISE:.0%} flight-to-flight noise ({self.rounds_min} if every comparison "
                 f"is clear at once, at most {self.rounds_max} if every one is too close to call until the cap)"
                 if self.adaptive else f" (guaranteed at most {self.rounds_max}, if no speculative point is ever used)"
                 if self.rounds_max != self.rounds else ""),
             f"flights       {self.flights} ({counted(self.vehicles, 'vehicle')} × {counted(self.rounds, 'round')}; "
-            f"{self.evaluations} points searched)",
+            + (f"{self.evaluations} points searched)" if self.budget is None else
+               "the budget: the passes' line searches fly a share, the response surface's designs the rest)"),
             f"flight time   {clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
             f"primitive + {self.settle_s:g} s settle)",
             f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each "
@@ -211,9 +217,13 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
     """Count rounds for these settings: one line search rehearsed, times the gains and the bootstraps (and the
     line searches across the gains between passes, `directions`: each the same search over its segment), plus the
     response surface's designs (`surface`: a fixed number of rounds; with no passes, `bootstraps = 0`, the plan is
-    exact: the designs alone); refused
+    exact: the designs alone; with a `budget`, exact too: its flights, in as many rounds as it fills); refused
     (MavtuneError) when the rehearsals would take more than `work_limit` steps (default `PLAN_WORK`)."""
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
+    if settings.budget is not None:  # exact whatever the costs: the line searches' shares, the designs the rest
+        rounds = settings.fewest_rounds()
+        return Plan(rounds, rounds, settings.vehicles, settings.budget, bootstraps, primitive_s, settle_s, battery_s,
+                    budget=settings.budget)
     # every gain's line search has the same shape relative to its range: rehearse one, count it per gain
     lo, hi = 0.0, 1.0
     minimisers = [(i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]

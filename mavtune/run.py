@@ -50,6 +50,8 @@ def saved_config(out_dir: Path) -> dict[str, Any] | None:
         raise MavtuneError(f"{path} is unreadable ({exc}); pass --config to say how the run was set up") from None
     if not isinstance(saved, dict):
         raise MavtuneError(f"{path} is not a mavtune configuration; pass --config to say how the run was set up")
+    if isinstance(saved.get("tuning"), dict):  # a folder from before budgets flew without one
+        saved["tuning"].setdefault("budget", "none")
     return saved
 
 

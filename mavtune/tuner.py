@@ -234,6 +234,7 @@ class Settings:
     design_split: bool | str = False
     design_inner: bool = False
     design_move: float = 0.0
+    budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
 
@@ -293,6 +294,57 @@ class Settings:
         if self.design_split not in (True, False, "auto"):
             raise MavtuneError(f"design_split must be true, false or \"auto\", got {self.design_split!r}")
         self.search(0.0, 1.0)  # validates
+        if self.budget is not None:
+            self._check_budget()
+
+    def _check_budget(self) -> None:
+        """A budget is a whole number of flights, at least the designs' (`budget_minimum`), with a design to take
+        what the passes leave and a fixed number of passes to share it among (one line naming what is wrong)."""
+        if isinstance(self.budget, bool) or not isinstance(self.budget, int):
+            raise MavtuneError(f"budget must be a whole number of flights, got {self.budget!r}")
+        if not self.design:
+            raise MavtuneError("budget needs design = true: the response surface's designs fly what the passes leave "
+                               "of it")
+        if self.bootstraps is None:
+            raise MavtuneError("budget needs a fixed number of passes (bootstraps), not the paper's stop rule "
+                               "(\"auto\")")
+        if not self.budget_minimum() <= self.budget <= MAX_ROUNDS * MAX_VEHICLES:
+            raise MavtuneError(f"budget {self.budget} is below the {self.budget_minimum()} flights of the "
+                               f"design{'s' if self.design_count() > 1 else ''} on {self.vehicles} vehicles; give at "
+                               f"least {self.budget_minimum()}" + ("" if self.design_split is True else
+                                                                  " (or design_split = true: each point once)")
+                               if self.budget < self.budget_minimum() else
+                               f"budget {self.budget} is above {MAX_ROUNDS * MAX_VEHICLES} flights")
+
+    def budget_minimum(self) -> int:
+        """The fewest flights a budget may be: every design's own flights (`design_flights`), each but the last in
+        whole rounds of the vehicles (a round flies one design; the last round of a run may fly fewer vehicles)."""
+        v, count = int(self.vehicles), self.design_count()
+        return sum(math.ceil(self.design_flights(k) / v) * v for k in range(count - 1)) + self.design_flights(count - 1)
+
+    def line_searches(self) -> int:
+        """Line searches a run of these settings may fly: one per gain and pass, and those across the gains."""
+        passes = self.bootstraps if self.bootstraps is not None else self.max_bootstraps
+        return len(self.space) * passes + self.direction_searches(passes)
+
+    def search_share(self, spent: int, started: int) -> int:
+        """budget: the flights the line search now starting may fly, when the run has flown `spent` flights and
+        `started` line searches before it: what the passes' share (the budget less `budget_minimum`) has left,
+        split evenly over the line searches still to come (what one leaves, the next may fly; what the passes
+        leave, the designs fly)."""
+        left = int(self.budget) - self.budget_minimum() - spent
+        return max(0, left // max(1, self.line_searches() - started))
+
+    def design_share(self, step: int, left: int) -> int:
+        """budget: the flights of design `step` when `left` flights of the budget remain as it starts: its own
+        flights in whole rounds and an even share of the rest over the designs still to come, in whole rounds;
+        the last design flies all that remains (the budget exactly)."""
+        count, v = self.design_count(), int(self.vehicles)
+        if step >= count - 1:
+            return left
+        own = [math.ceil(self.design_flights(k) / v) * v for k in range(step, count)]
+        extra = max(0, left - sum(own[:-1]) - self.design_flights(count - 1))
+        return own[0] + extra // (count - step) // v * v
 
     def search(self, lo: float, hi: float, pool: NoisePool | None = None, edges: bool | None = None) -> LineSearch:
         """A fresh line search of these settings over [lo, hi], sharing the run's noise `pool` (`edges`: whether
@@ -304,6 +356,8 @@ class Settings:
     def fewest_rounds(self) -> int:
         """The rounds a run of these settings takes at the least: every line search's budget of evaluations,
         as many a round as the strategy has slots, per gain and bootstrap (one, for the paper's stop rule)."""
+        if self.budget is not None:
+            return math.ceil(int(self.budget) / int(self.vehicles))
         rounds = math.ceil(self.search(0.0, 1.0, edges=False).budget() / self.strategy_rule.slots(int(self.vehicles)))
         passes = self.bootstraps if self.bootstraps is not None else 1
         return rounds * len(self.space) * passes + self.design_rounds()  # (a line search across the gains may be skipped)
@@ -377,7 +431,7 @@ class Settings:
                         | ({"split": self.design_split} if self.design_split else {})
                         | ({"inner": True} if self.design_inner else {})
                         | ({"move": float(self.design_move)} if self.design_move else {})}
-            if self.design else {})
+            if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
 
 class StageDone(Exception):
@@ -419,6 +473,7 @@ class Tuner:
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
+        self._shares: list[tuple[LineSearch, int, int]] = []  # budget: each line search, flights before it, its share
 
     @property
     def designed(self) -> Gains:
@@ -507,7 +562,7 @@ class Tuner:
                 search = s.search(lo, hi, self.pool)
                 held = {n: v for n, v in self.gains.items() if n != name}
                 self._active = (self.bootstrap, name, held, search)
-                while not search.done:
+                while not search.done and self._within_share(search):
                     self._round(search, self.bootstrap, name, self.gains)
                 if search.history or search.stop_reason is None:
                     self.gains[name] = search.result  # a search that decided nothing leaves the gain as it was
@@ -561,12 +616,14 @@ class Tuner:
                  for _ in range(int(s.design_repeats)) for p in points for _ in range(per_point)]
         box = [(min(p[i] for p in points), max(p[i] for p in points)) for i in range(len(names))]
         reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
-        todo = list(queue)
-        while todo:
+        todo, limit = self._design_budget(queue, points, names, lo, width, step)
+        while todo and (limit is None or limit > 0):
             record = self.recorded.get(len(self.rounds))
             vehicles = len(record.flights) if record is not None else self.fleet.size
             if vehicles < 1:
                 raise MavtuneError(f"no vehicle is available to fly round {len(self.rounds)}")
+            if limit is not None:  # a budget: the design flies its share exactly, the last round maybe fewer
+                vehicles, limit = min(vehicles, limit), limit - min(vehicles, limit)
             batch, todo = todo[:vehicles], todo[vehicles:]
             spare = [queue[k % len(queue)] for k in range(vehicles - len(batch))]  # no vehicle idles
             flights = self._fly([dict(a) for a in batch + spare], self.bootstrap, SURFACE, (-half, half))
@@ -593,6 +650,57 @@ class Tuner:
             if moved:
                 return False
         return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
+
+    def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]], names: list[str], lo: list[float],
+                       width: list[float], step: int) -> tuple[list[Gains], int | None]:
+        """The flights of design `step` in order and how many it flies: without a budget its `queue` (each point as
+        the settings say) until every one has measured; with one, its share of what the budget has left
+        (`Settings.design_share`): the queue, then one more flight of each point in turn (the centre first) until
+        the share is flown (a lost flight is flown again within it)."""
+        s = self.settings
+        if s.budget is None:
+            return list(queue), None
+        share = s.design_share(step, int(s.budget) - self._spent())
+        more = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, points[k % len(points)])}
+                for k in range(max(0, share - len(queue)))]
+        return list(queue) + more, share
+
+    def _spent(self) -> int:
+        """Flights made so far (lost ones included: a budget counts the flights flown, whatever they measured)."""
+        return sum(len(r.flights) for r in self.rounds)
+
+    def _next_vehicles(self) -> int:
+        """Vehicles of the next round: the journal's record when it is replayed, else the fleet's size now."""
+        record = self.recorded.get(len(self.rounds))
+        return len(record.flights) if record is not None else self.fleet.size
+
+    def _within_share(self, search: LineSearch) -> bool:
+        """Whether the line search may fly its next round under a budget (always without one): its share
+        (`Settings.search_share`, fixed as it starts) must hold the round, else the search ends with its answer from
+        the flights it has; a re-flight of a comparison too close to call (adaptive averaging) only while the share
+        keeps, after it, a round for every point the search still asks for (`LineSearch.to_finish`), else its
+        comparisons decide on the flights they have from now on (`LineSearch.hold`). The same rounds replay."""
+        s = self.settings
+        if s.budget is None:
+            return True
+        if not self._shares or self._shares[-1][0] is not search:
+            spent = self._spent()
+            self._shares.append((search, spent, s.search_share(spent, len(self._shares))))
+        _, before, share = self._shares[-1]
+        vehicles = self._next_vehicles()
+        left = share - (self._spent() - before)
+        if search.refining and not search.held:
+            slots = s.strategy_rule.slots(max(1, vehicles))
+            need = sum(math.ceil(n / slots) for n in search.to_finish() if n) * vehicles
+            if left - vehicles < need:
+                search.hold()
+        if search.done:
+            return False
+        if left < vehicles:
+            search.end(f"its share of the budget was spent ({share} flights of {s.budget}): the answer is from the "
+                       "flights it has")
+            return False
+        return True
 
     def _same_point(self, earlier: Gains) -> bool:
         """True when the latest gains are within the search's tolerance ε·(hi − lo) of `earlier` in every gain:
@@ -635,7 +743,7 @@ class Tuner:
                 out[n] = min(max(origin[n] + t * move[n], lo), hi)
             return out
 
-        while not search.done:
+        while not search.done and self._within_share(search):
             self._round(search, self.bootstrap, name, self.gains, place)
         if search.history or search.stop_reason is None:
             self.gains = place(search.result)

@@ -9,6 +9,10 @@ costs in units of the largest (f79f1f9): that moved the model-answer runs' gains
 on a stale hold or a cost still falling at the outermost point, with a Bonferroni test of the plausible region
 (calib, issue 20): no decision and no other number moved.
 
+The budgeted run (`budget`, config.Tuning's other fields at their defaults) was added on the budget branch (issue
+20); no other pin moved. Written again when main's answer came to take a plane on a bound and the divergence bound
+(merged into the budget branch): the same rounds and assignments, the design's answer (its gains) moved.
+
 What a run decides is pinned exactly: its rounds, every assignment flown (the search's decisions, adaptive
 reflights included), the iterations of each line search and a search answer's gains (a point flown). The numbers
 it computes from costs (a model answer's gains, intervals, noise, p_correct) are pinned to REL_TOL: they pass
@@ -63,6 +67,8 @@ def tune_cases() -> list[dict]:
                       seed=3))
     cases.append(dict(method="golden", strategy="split", vehicles=3, adaptive=True, epsilon=0.1, answer="search",
                       seed=5, refly=True))
+    cases.append(dict(method="eql", strategy="avg", vehicles=2, adaptive=True, confidence=0.85, cap=6, epsilon=0.2,
+                      answer="model", edges=True, design=True, budget=85, seed=7))  # a budget: shares, the last round 1
     return cases
 
 
@@ -101,7 +107,8 @@ def tune_numbers(case: dict) -> dict:
     result = run_tuning(settings, CallableFleet(evaluate, case["vehicles"]), draws=20)
     return {
         "rounds": len(result.rounds),
-        "assignments": digest([[a[r.gain].hex() for a in r.assignments] for r in result.rounds]),
+        "assignments": digest([[a[r.gain].hex() if r.gain in a else [a[g].hex() for g in SPACE]  # (a design:
+                                for a in r.assignments] for r in result.rounds]),  # every gain)
         "gains": {k: v.hex() for k, v in result.gains.items()},
         "uncertainty": {k: {f: float(x).hex() for f, x in u.items()} for k, u in result.uncertainty.items()},
         "noise": {k: float(v).hex() for k, v in result.noise.items()},

@@ -172,7 +172,7 @@ def test_planning_many_points_is_refused_early_not_after_the_whole_work():
     from mavtune import plan
     from mavtune.config import load_config
 
-    settings = load_config(overrides={"tuning.method": "nsection", "tuning.points": 100}).settings()
+    settings = load_config(overrides={"tuning.method": "nsection", "tuning.points": 100, "tuning.budget": "none"}).settings()
     rehearsed = []
     real = plan._rehearse
     plan._rehearse = lambda *a, **k: rehearsed.append(1) or real(*a, **k)

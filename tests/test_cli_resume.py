@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 MAVTUNE = str(Path(sys.executable).with_name("mavtune"))
-LONG = ["--epsilon", "0.01", "--bootstraps", "2", "--no-reuse", "--no-adaptive", "--seed", "4", "-q"]  # 792 rounds
+LONG = ["--epsilon", "0.01", "--bootstraps", "2", "--no-reuse", "--no-adaptive", "--seed", "4", "-q",
+        "--budget", "none"]  # 792 rounds
 
 
 def status(run_folder: Path) -> str:

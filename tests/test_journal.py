@@ -46,7 +46,7 @@ class CountingFleet:
 
 # the paper's search (strategy and reuse given by each test)
 SETTINGS = dict(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, initial={"kd": 0.2}, bootstraps=2, method="eql",
-                epsilon=0.125, adaptive=False, answer="search")
+                epsilon=0.125, adaptive=False, answer="search", budget=None)  # (no budget: as the stages ask)
 
 
 @given(st.integers(0, 19), st.sampled_from(["avg", "split"]), st.integers(1, 4))

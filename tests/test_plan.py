@@ -55,7 +55,7 @@ def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsi
                   adaptive=adaptive, answer=answer, confidence=confidence, cap=cap if adaptive else None, edges=edges,
                   directions=directions, design=design)
     plan = make_plan(Settings(**kwargs, bootstraps=2))
-    result = mavtune.tune(evaluate, bootstraps=2, draws=0, **kwargs)  # no interval: only the rounds count here
+    result = mavtune.tune(evaluate, bootstraps=2, draws=0, budget=None, **kwargs)  # no interval: only the rounds count here
     if adaptive:  # the worst case is stated before take-off and bounds every run
         assert plan.adaptive and plan.rounds <= plan.rounds_max
     assert len(result.rounds) <= plan.rounds_max
@@ -64,7 +64,7 @@ def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsi
 
 def test_plan_command_prints_the_numbers():
     out = CliRunner().invoke(app, ["plan", "--strategy", "split", "--vehicles", "8", "--battery-s", "60", "--epsilon", "0.125",
-                                   "--no-adaptive"])
+                                   "--no-adaptive", "--budget", "none"])
     assert out.exit_code == 0, out.output
     text = " ".join(out.output.split())
     assert "rounds 10 (guaranteed at most 34" in text  # 28 of the method's comparisons, 4 at a range's edge, and

@@ -17,7 +17,8 @@ from mavtune.search.surface import answer, design
 from mavtune.tuner import Settings
 
 SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
-FIXED = dict(design=True, adaptive=False, edges=False, bootstraps=1, draws=0)
+FIXED = dict(design=True, adaptive=False, edges=False, bootstraps=1, draws=0, budget=None)  # (no budget: each
+# stage flies what it asks for)
 
 
 def bowl(opt, coupling=0.0):
@@ -116,7 +117,7 @@ def test_the_plan_expects_exactly_the_flights_flown_with_a_fixed_design(strategy
                                                                          gains, seed):
     space = {name: (0.0, 1.0) for name in ["kp", "kd", "ki"][:gains]}
     options = dict(design=True, adaptive=False, edges=False, bootstraps=bootstraps, design_repeats=repeats,
-                   strategy=strategy, vehicles=vehicles, epsilon=0.2)
+                   strategy=strategy, vehicles=vehicles, epsilon=0.2, budget=None)
     plan = make_plan(Settings(space=space, **options))
     draw = random.Random(seed)
     result = mavtune.tune(lambda gs: [sum((v - 0.3) ** 2 for v in g.values()) + 0.1 * draw.random() for g in gs],
@@ -129,7 +130,8 @@ def test_the_plan_expects_exactly_the_flights_flown_with_a_fixed_design(strategy
         assert result.flights <= plan.rounds_max * vehicles
 
 
-DESIGNS = dict(bootstraps=0, design_width=0.5, design_steps=3, design_shrink=0.5, design_split="auto", draws=0)
+DESIGNS = dict(bootstraps=0, design_width=0.5, design_steps=3, design_shrink=0.5, design_split="auto", draws=0,
+               budget=None)
 
 
 @given(st.integers(1, 4), st.sampled_from([False, True, "auto"]), st.integers(1, 3), st.integers(1, 3),
@@ -177,7 +179,7 @@ def test_a_design_narrows_only_around_an_answer_it_surrounds(optimum, halves):
     """A trust region: the next design shrinks when the fit's minimiser lies inside the design's box (or on a
     range's bound), and keeps its width, re-centred, when it lies on a face of the box inside the ranges."""
     result = mavtune.tune(bowl(optimum), space=SPACE, vehicles=2, bootstraps=0, design_width=0.15, design_steps=3,
-                          design_shrink=0.5, initial={"kd": 0.2}, draws=0)
+                          design_shrink=0.5, initial={"kd": 0.2}, draws=0, budget=None)
     assert len(result.rounds) == 27  # 9 points on 2 vehicles a design
     assert [r.bracket[1] for r in result.rounds[::9]] == pytest.approx(halves)
 

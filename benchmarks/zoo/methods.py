@@ -34,12 +34,14 @@ class Method:
     label: str
     tuning: dict[str, Any] = field(default_factory=dict)
     peer: str | None = None
+    per_gain: int | None = None  # a budget of this many flights per gain tuned (config.Tuning's budget: the total)
 
     def settings(self, plant: Plant, run: int):
         """The engine's Settings of this configuration on `plant`'s box, seeded by the run."""
         from mavtune.config import Tuning
 
-        return Tuning.model_validate({**self.tuning, "seed": run}).settings(space=plant.space)
+        budget = {} if self.per_gain is None else {"budget": self.per_gain * len(plant.space)}
+        return Tuning.model_validate({**self.tuning, "seed": run, **budget}).settings(space=plant.space)
 
     def key(self) -> str:
         """Identical settings give one key (a configuration listed twice runs once; the cache keys on it)."""
@@ -48,7 +50,8 @@ class Method:
         from mavtune.config import Tuning
 
         s = Tuning.model_validate(self.tuning).settings(space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
-        return json.dumps([s.fingerprint(), s.vehicles], sort_keys=True, default=str)
+        per_gain = [] if self.per_gain is None else [{"budget per gain": self.per_gain}]
+        return json.dumps([s.fingerprint(), s.vehicles, *per_gain], sort_keys=True, default=str)
 
 
 class ZooFleet:
@@ -148,21 +151,26 @@ def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str
 
 
 def candidates() -> list[Method]:
-    """The configurations the default is chosen from (the first is today's default; `--half select`). The paper's
-    setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
+    """The configurations the default is chosen from (the first is today's default; `--half select`; the second the
+    default before the budget, chosen on benchmarks/results/selection_budget_default.md). The paper's setting
+    (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     from mavtune.config import BUDGET_TUNING
 
-    fixed = {"adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
+    none = {"budget": "none"}  # the configurations chosen among before budgets: each flies what it asks for
+    fixed = {**none, "adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
     designs = {k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}  # no passes: 3 designs, exact plan
     first = {**designs, "design_inner": False, "design_shrink": 0.4}  # the first BUDGET_TUNING: the 3^d box first
-    moving = {"design_steps": 2, "design_split": True, "design_move": 1.5}  # today's design's flights in two designs
+    moving = {**none, "design_steps": 2, "design_split": True,
+              "design_move": 1.5}  # the design's flights before the budget, in two designs
     return [
         Method("default (config.Tuning())"),
-        Method("previous default (no design)", {"design": False}),
-        Method("two designs, the second half as wide", {"design_steps": 2, "design_shrink": 0.5}),
-        Method("design ±0.1", {"design_width": 0.1}),
+        Method("previous default (no budget)", none),
+        Method("previous default (no design)", {**none, "design": False}),
+        Method("two designs, the second half as wide", {**none, "design_steps": 2, "design_shrink": 0.5}),
+        Method("design ±0.1", {**none, "design_width": 0.1}),
         Method("fixed budget: 1 pass, not adaptive, 3 designs", {**fixed, "design_steps": 3}),
-        Method("valley answer, directions, no design", {"answer": "valley", "directions": True, "design": False}),
+        Method("valley answer, directions, no design", {**none, "answer": "valley", "directions": True,
+                                                        "design": False}),
         Method("fixed budget: 3 designs from a map of the box (BUDGET_TUNING)", designs),
         Method("3 designs from the whole box (the first BUDGET_TUNING)", first),
         Method("3 designs from the whole box shrink 0.5", {**first, "design_shrink": 0.5}),
@@ -170,6 +178,8 @@ def candidates() -> list[Method]:
         Method("3 designs: the first with inner corners (shrink 0.4)", {**designs, "design_shrink": 0.4}),
         Method("two designs each point once, the second moved 1.5x past a face", moving),
         Method("three designs each point once, moved 1.5x past a face", {**moving, "design_steps": 3}),
+        *(Method(f"budget {n} flights a gain", per_gain=n) for n in (28, 35, 42, 56)),
+        Method("budget 28 flights a gain, 1 pass", {"bootstraps": 1}, per_gain=28),
     ]
 
 

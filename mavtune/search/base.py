@@ -112,6 +112,7 @@ class LineSearch(ABC):
         self._failed_tries = 0
         self._before: dict[int, int] = {}  # flights a point carried into this comparison had before it
         self.stop_reason: str | None = None  # why the search stopped narrowing before its tolerance
+        self.held = False  # a budget's share has no flights left for re-flights: each comparison decides at once
         self.steps = 0  # work besides the flights: flights rescanned, speculation states and points, p_best grids
         self._settle()
 
@@ -310,7 +311,7 @@ class LineSearch(ABC):
         unknown = [p for p in points if not self._samples.get(k := self.key(p)) or (self.refly and not self._fresh(k))]
         if unknown:
             return unknown
-        cap = self.adaptive.cap if self.adaptive is not None else 0
+        cap = self.adaptive.cap if self.adaptive is not None and not self.held else 0
         more = [(self._fresh(k := self.key(p)), self._stats(k).mean, p) for p in points]
         return [p for n, _, p in sorted(more) if n < cap]
 
@@ -359,7 +360,7 @@ class LineSearch(ABC):
     def _decided(self, keys: Sequence[int], p: float) -> bool:
         """True when the comparison may move on: not adaptive, confident enough, or every point at the cap."""
         a = self.adaptive
-        return a is None or p >= a.confidence or all(self._fresh(k) >= a.cap for k in keys)
+        return a is None or self.held or p >= a.confidence or all(self._fresh(k) >= a.cap for k in keys)
 
     def _settle(self) -> None:
         """Advance through every iteration whose points are all known and whose comparison is decided."""
@@ -401,6 +402,44 @@ class LineSearch(ABC):
         shown = ", ".join(f"{p:.4g}" for p in points)
         self.stop_reason = (f"every flight at {shown} failed, {FAILED_RETRIES + 1} times: a comparison of failed "
                             "points decides nothing, so the search stopped narrowing")
+
+    # ----- a budget of flights (the tuner's share of `Settings.budget` for this search) -------------------------
+
+    @property
+    def refining(self) -> bool:
+        """True when the next flights the search asks for are more flights of its comparison's points (adaptive
+        averaging of a comparison too close to call), not points it has not flown."""
+        points = None if self.done else self._step_points(self._state)
+        return points is not None and all(self._samples.get(k := self.key(p)) and not (self.refly and not self._fresh(k))
+                                          for p in points)
+
+    def hold(self) -> None:
+        """Decide every comparison on the flights it has from now on (adaptive averaging ends: what is left of a
+        budget is kept for the points still to fly); the comparison under way is decided now."""
+        self.held = True
+        self._settle()
+
+    def end(self, reason: str) -> None:
+        """Stop now (a budget's share is spent): the answer is from the flights it has (`vertex`), said by `reason`."""
+        if not self.done:
+            self.stop_reason = reason
+
+    def to_finish(self) -> list[int]:
+        """New points each comparison still to come asks for (the one under way first), without re-flights: along
+        the outcomes that keep the left point, the most (every method here asks as many points whichever point a
+        comparison keeps; the left path ends against the lower edge, whose comparison `edges` adds)."""
+        reuse = self.reuse and not self.refly
+        state, known, counts = self._state, set(), []
+        while (points := self._step_points(state)) is not None:
+            keys = {self.key(p) for p in points}
+            if not counts:  # the comparison under way: its points without a flight in it (as `ask`)
+                new = {k for k in keys if not self._samples.get(k) or (self.refly and not self._fresh(k))}
+            else:
+                new = {k for k in keys if not reuse or (k not in known and not self._samples.get(k))}
+            counts.append(len(new))
+            known.update(keys)
+            state = self._step_advance(state, 0)
+        return counts
 
     # ----- planning -----------------------------------------------------------------------------
 
@@ -450,7 +489,8 @@ class LineSearch(ABC):
     def _shape(self) -> Hashable:
         """Everything besides the flights that decides what this search asks: its method, interval, tolerance and
         rules (a method with more parameters adds them)."""
-        return type(self), self.lo, self.hi, self.epsilon, self.reuse, self.refly, self.adaptive, self.edges
+        return (type(self), self.lo, self.hi, self.epsilon, self.reuse, self.refly, self.adaptive, self.edges,
+                self.held)
 
     def _walk(self, n: int, exclude: Sequence[float], max_nodes: int) -> list[float]:
         """The speculation walk itself (see `speculate`)."""

@@ -10,8 +10,8 @@ import typer
 
 from mavtune.errors import MavtuneError
 from mavtune.options import (
-    AdaptiveOpt, BatteryOpt, BootstrapsOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt, StrategyOpt,
-    VehiclesOpt, config_from_flags,
+    AdaptiveOpt, BatteryOpt, BootstrapsOpt, BudgetOpt, ConfigOpt, EpsilonOpt, MethodOpt, ReplicatesOpt, ReuseOpt,
+    StrategyOpt, VehiclesOpt, budget_flag, config_from_flags,
 )
 from mavtune.swarm.config import load_swarm_config
 
@@ -87,7 +87,7 @@ def coordinator_command(
     replicates: Optional[int] = ReplicatesOpt, method: Optional[str] = MethodOpt,
     epsilon: Optional[float] = EpsilonOpt, bootstraps: Optional[str] = BootstrapsOpt,
     reuse: Optional[bool] = ReuseOpt, battery_s: Optional[float] = BatteryOpt,
-    adaptive: Optional[bool] = AdaptiveOpt,
+    adaptive: Optional[bool] = AdaptiveOpt, budget: Optional[str] = BudgetOpt,
     session: Optional[str] = typer.Option(None, "--session", help="Session id (overrides the config)."),
     key_file: Optional[Path] = typer.Option(None, "--key-file", help="The swarm key [made in OUT/swarm.key if none "
                                             "is configured, nor in $MAVTUNE_SWARM_KEY]."),
@@ -105,7 +105,7 @@ def coordinator_command(
         raise MavtuneError(f"--resume: there is no journal at {out / JOURNAL}")
     cfg = config_from_flags(config, vehicles, strategy, replicates, method, epsilon, bootstraps, reuse, battery_s,
                             base=saved_config(out) if config is None else None, fleet__kind="zenoh",
-                            tuning__adaptive=adaptive,
+                            tuning__adaptive=adaptive, tuning__budget=budget_flag(budget),
                             swarm__listen=listen, swarm__session=session,
                             swarm__key_file=None if key_file is None else str(key_file),
                             swarm__settle_s=settle_s, swarm__result_timeout_s=result_timeout_s,

@@ -60,7 +60,7 @@ def test_missing_config_file(tmp_path):
 def test_tune_writes_the_run_folder_with_the_report(tmp_path):
     out = tmp_path / "run"
     result = CliRunner().invoke(app, ["tune", "--quiet", "--strategy", "split", "--no-reuse", "--epsilon", "0.125", "--no-adaptive",
-                                       "--out", str(out)])
+                                       "--budget", "none", "--out", str(out)])
     assert result.exit_code == 0, result.output
     for name in ("journal.sqlite", "config.json", "result.json", "report.md", "timeline.png"):
         assert (out / name).exists(), name

@@ -112,7 +112,7 @@ def tune_mavlink(urls: list[str], out, config: MavlinkConfig, **tuning) -> dict:
     from mavtune.run import run
 
     flags = {"fleet.kind": "mavlink", "mavlink": {**config.model_dump(mode="json"), "urls": list(urls)},
-             **{f"tuning.{k}": v for k, v in tuning.items()}}
+             **{f"tuning.{k}": v for k, v in {"budget": "none", **tuning}.items()}}  # short runs: no budget
     run(load_config(None, flags), out, quiet=True, report=False)
     return json.loads((out / "result.json").read_text())
 

@@ -257,7 +257,7 @@ def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: st
     procs = [subprocess.Popen(
         [*mavtune, "coordinator", "--listen", endpoint, "--vehicles", str(len(urls)), "--out", str(folder / "run"),
          "--session", session, "--key-file", str(key), "--settle-s", "0", "--result-timeout-s",
-         str(result_timeout_s), "--bootstraps", "1", "--epsilon", "0.25"],
+         str(result_timeout_s), "--bootstraps", "1", "--epsilon", "0.25", "--budget", "none"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
     try:
         for i, (name, url) in enumerate(zip(ids, urls)):

@@ -34,6 +34,7 @@ kind = "mavlink"
 [tuning]
 epsilon = 0.25
 bootstraps = 1
+budget = "none"
 [mavlink]
 urls = ["{url}"]
 primitive_s = 4.0

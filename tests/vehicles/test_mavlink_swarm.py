@@ -44,7 +44,7 @@ def test_coordinator_tunes_mavlink_vehicles_through_their_agents_and_gives_their
         coordinator = subprocess.Popen(
             [*MAVTUNE, "coordinator", "--listen", endpoint, "--vehicles", "2", "--out", str(out), "--session", "mv",
              "--key-file", str(tmp_path / "swarm.key"), "--settle-s", "0", "--result-timeout-s", "60",
-             "--bootstraps", "1", "--epsilon", str(EPSILON)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             "--bootstraps", "1", "--epsilon", str(EPSILON), "--budget", "none"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         agents = [subprocess.Popen(
             [*MAVTUNE, "agent", "--id", f"m{i}", "--connect", endpoint, "--vehicle", "mavlink", "--mavlink", url,
              "--config", str(tmp_path / "agent.toml"), "--state-dir", str(tmp_path / f"state{i}")],

@@ -28,7 +28,7 @@ MAVTUNE = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
 def kill_after_first_change(sitl, out, tmp_path) -> dict[str, float]:
     """`mavtune tune` on the tuner link, SIGKILLed once the pilot's link sees the gains change; what it left."""
     config = tmp_path / "tune.toml"
-    config.write_text(f'[fleet]\nkind = "mavlink"\n[tuning]\nepsilon = 0.25\nbootstraps = 1\n[mavlink]\n'
+    config.write_text(f'[fleet]\nkind = "mavlink"\n[tuning]\nepsilon = 0.25\nbootstraps = 1\nbudget = "none"\n[mavlink]\n'
                       f'urls = ["{sitl.tuner_url}"]\nparam_timeout_s = 0.5\nheartbeat_wait_s = 20.0\n')
     proc = subprocess.Popen([*MAVTUNE, "tune", "-c", str(config), "--out", str(out), "--quiet"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

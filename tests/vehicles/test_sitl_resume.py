@@ -57,7 +57,8 @@ def test_ctrl_c_mid_run_restores_and_resumes_from_the_journal(tmp_path, name):
 
     with ap.vehicles(1) as (vehicle,):
         cmd = [*MAVTUNE, "tune", "--fleet", "mavlink", "--mavlink", vehicle.tuner_url, "--out", str(out), "--config",
-               str(tmp_path / "mavlink.toml"), "--epsilon", "0.25", "--bootstraps", "1", "--vehicles", "1"]
+               str(tmp_path / "mavlink.toml"), "--epsilon", "0.25", "--bootstraps", "1", "--vehicles", "1",
+               "--budget", "none"]
         proc = subprocess.Popen([*cmd, "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         try:
             with after_rounds(out, 2, lambda: proc.send_signal(signal.SIGINT)) as sent:

@@ -1,0 +1,237 @@
+"""A budget of flights (`[tuning] budget`): a run flies exactly that many, the plan says so before take-off, a
+resumed run flies the same rounds, and a budget no run can fly is one line naming the least it can be."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import mavtune
+from mavtune.config import Tuning, load_config
+from mavtune.errors import MavtuneError
+from mavtune.fleet import Flight, Status
+from mavtune.journal import Journal
+from mavtune.plan import make_plan
+from mavtune.tuner import Settings, StageDone, run_tuning
+
+GAINS = ["kp", "kd", "ki", "kf"]
+
+
+def noisy_bowl(seed: int, noise: float = 0.2):
+    """A bowl in every gain with relative noise, drawn in the order flown (a run's own stream)."""
+    draw = random.Random(seed)
+    return lambda gs: [(1 + sum((v - 0.3) ** 2 for v in g.values())) * (1 + noise * draw.gauss(0, 1)) for g in gs]
+
+
+def budgeted(gains: int, vehicles: int, extra: int, **options) -> Settings:
+    """The default's settings over `gains` gains on `vehicles` vehicles, its budget `extra` above the least."""
+    space = {n: (0.0, 1.0) for n in GAINS[:gains]}
+    least = Tuning().settings(space=space, vehicles=vehicles, budget=None, **options).budget_minimum()
+    return Tuning().settings(space=space, vehicles=vehicles, budget=least + extra, **options)
+
+
+@given(st.integers(1, 4), st.integers(1, 5), st.integers(0, 90), st.integers(0, 2), st.booleans(),
+       st.integers(0, 10**6))
+@settings(max_examples=25, deadline=None)
+def test_a_run_flies_exactly_its_budget_and_the_plan_says_so(gains, vehicles, extra, passes, flat, seed):
+    """Whatever the gains, vehicles, passes and costs (a bowl, or pure noise: every comparison too close to call),
+    the run flies the budget's flights, no more and no fewer, in the plan's rounds; a budget the vehicles do not
+    divide flies its last round on as many vehicles as it has left."""
+    s = budgeted(gains, vehicles, extra, bootstraps=passes)
+    plan = make_plan(s)
+    draw = random.Random(seed)
+    cost = (lambda gs: [draw.random() for _ in gs]) if flat else noisy_bowl(seed)
+    result = run_tuning(s, mavtune.fleet.CallableFleet(cost, vehicles), draws=0)
+    assert result.flights == plan.flights == s.budget
+    assert len(result.rounds) == plan.rounds == plan.rounds_max == math.ceil(s.budget / vehicles)
+    assert [len(r.flights) for r in result.rounds[:-1]] == [vehicles] * (len(result.rounds) - 1)
+    passes_flown = sum(len(r.flights) for r in result.rounds if r.gain != "design")
+    assert passes_flown <= s.budget - s.budget_minimum()  # the designs always get their own flights
+    every = {tuple(a[n] for n in s.space) for r in result.rounds for a in r.assignments}
+    got = tuple(result.gains[n] for n in s.space)
+    assert all(min(p[i] for p in every) <= got[i] <= max(p[i] for p in every) for i in range(gains))
+
+
+def test_adaptive_averaging_spends_only_what_the_share_leaves():
+    """On pure noise every comparison is too close to call: unbudgeted, each point is flown to the cap; budgeted
+    with room for every search's points and a few re-flights, each search keeps a round for every point it still
+    asks for, so every one reaches its tolerance (none ends for want of flights) within its share."""
+    plain = Tuning().settings(adaptive=False)
+    need = sum(math.ceil(n / plain.strategy_rule.slots(2)) * 2 for n in plain.search(0.0, 1.0).needs())
+    s = Tuning().settings(budget=18 + 4 * need + 6)  # 4 line searches non-adaptive, 6 flights to spare
+    draw = random.Random(1)
+    result = run_tuning(s, mavtune.fleet.CallableFleet(lambda gs: [draw.random() for _ in gs], 2), draws=0)
+    assert len(result.searches) == 4 and all(x.stop_reason is None for x in result.searches)
+    assert sum(len(r.flights) for r in result.rounds if r.gain != "design") <= 4 * need + 6
+    assert result.flights == s.budget
+
+
+def test_a_search_whose_share_is_spent_answers_from_its_flights_and_says_so():
+    s = budgeted(2, 2, 10)  # 28 flights for 4 line searches: each ends before its tolerance
+    result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(3), 2), draws=0)
+    ended = [x for x in result.searches if x.stop_reason]
+    assert ended and all("share of the budget was spent" in x.stop_reason for x in ended)
+    for x in ended:
+        if x.iterations:  # it decided something: its answer lies inside what it flew
+            assert min(x.samples) <= x.result <= max(x.samples)
+    assert result.flights == s.budget
+
+
+class LosingFleet:
+    """Two vehicles; the second loses every third flight (no cost): a budget counts the flights made."""
+
+    size = 2
+
+    def __init__(self):
+        self.made = 0
+
+    def fly(self, assignments, round_id):
+        out = []
+        for i, g in enumerate(assignments):
+            self.made += 1
+            lost = i == 1 and self.made % 3 == 0
+            cost = (1 + (g["kp"] - 0.6) ** 2 + (g["kd"] - 0.4) ** 2) * (1 + 0.1 * math.sin(round_id * 7 + i))
+            out.append(Flight(f"v{i}", g, math.nan if lost else cost, Status.LOST if lost else Status.OK))
+        return out
+
+    def close(self):
+        pass
+
+
+def test_lost_flights_count_in_the_budget():
+    s = budgeted(2, 2, 31)
+    fleet = LosingFleet()
+    result = run_tuning(s, fleet, draws=0)
+    assert fleet.made == result.flights == s.budget
+    assert any(f.status is Status.LOST for r in result.rounds for f in r.flights)
+
+
+class Crash(Exception):
+    pass
+
+
+class NoisyFleet:
+    """Flights with 20 % noise that depends only on (round, vehicle): a replayed round is the same round."""
+
+    def __init__(self, vehicles: int, crash_at: int | None = None):
+        self.size, self.crash_at, self.flown = vehicles, crash_at, []
+
+    def fly(self, assignments, round_id):
+        if round_id == self.crash_at:
+            raise Crash(round_id)
+        self.flown.append(round_id)
+        return [Flight(f"v{i}", g, (1.3 + (g["kp"] - 0.7) ** 2 + (g["kd"] - 0.4) ** 2)
+                       * (1 + 0.2 * random.Random(round_id * 1000 + i).gauss(0, 1))) for i, g in enumerate(assignments)]
+
+    def close(self):
+        pass
+
+
+@given(st.integers(0, 40), st.sampled_from([(2, 57), (3, 50)]))
+@settings(max_examples=10, deadline=None)
+def test_resume_inside_a_budgeted_run_is_identical(tmp_path_factory, crash_at, fleet_budget):
+    """A crash (or a battery swap) at any round: the resumed run replays the journal and flies the same rounds,
+    the last one short of vehicles included, to the same gains."""
+    vehicles, budget = fleet_budget
+    s = Tuning().settings(vehicles=vehicles, budget=budget)
+    reference = run_tuning(s, NoisyFleet(vehicles), draws=0)
+    crash_at = min(crash_at, len(reference.rounds) - 1)
+    path = tmp_path_factory.mktemp("j") / "journal.sqlite"
+    with pytest.raises(Crash):
+        run_tuning(s, NoisyFleet(vehicles, crash_at=crash_at), path, draws=0)
+    fleet = NoisyFleet(vehicles)
+    resumed = run_tuning(s, fleet, path, draws=0)
+    assert fleet.flown == list(range(crash_at, len(reference.rounds)))
+    assert [r.assignments for r in resumed.rounds] == [r.assignments for r in reference.rounds]
+    assert resumed.gains == reference.gains and resumed.flights == budget
+
+
+def test_stages_of_a_budgeted_run_fly_every_round_once(tmp_path):
+    s = Tuning().settings(budget=61)
+    reference = run_tuning(s, NoisyFleet(2), draws=0)
+    flown = []
+    while True:
+        fleet = NoisyFleet(2)
+        try:
+            result = run_tuning(s, fleet, tmp_path / "j.sqlite", stage_rounds=7, draws=0)
+            flown += fleet.flown
+            break
+        except StageDone:
+            flown += fleet.flown
+    assert flown == list(range(len(reference.rounds))) and result.gains == reference.gains
+    assert result.flights == 61
+
+
+def test_a_budget_is_in_the_journal_and_its_absence_leaves_old_journals_resumable(tmp_path):
+    assert "budget" not in Tuning(budget="none").settings().fingerprint()  # none: the fingerprint of before
+    assert Tuning().settings(budget=60).fingerprint()["budget"] == 60
+    path = tmp_path / "j.sqlite"
+    run_tuning(Tuning().settings(budget=60), NoisyFleet(2), path, draws=0)
+    with pytest.raises(MavtuneError, match="budget"):
+        run_tuning(Tuning().settings(budget=62), NoisyFleet(2), path, draws=0)
+    with Journal(path) as j:
+        assert len(j.rounds()) == 30
+
+
+@pytest.mark.parametrize("overrides, says", [
+    ({"tuning.budget": 10}, "budget 10 is below the 18 flights of the design on 2 vehicles; give at least 18"),
+    ({"tuning.budget": 30, "tuning.vehicles": 4}, "give at least 36 (or design_split = true"),
+    ({"tuning.budget": 40, "tuning.space": {g: [0.0, 1.0] for g in GAINS}}, "give at least 50"),
+    ({"tuning.budget": 60, "tuning.design": False}, "budget needs design = true"),
+    ({"tuning.budget": 60, "tuning.bootstraps": "auto"}, "budget needs a fixed number of passes"),
+    ({"tuning.budget": 0}, "tuning.budget: must be at least 1 flight"),
+    ({"tuning.budget": "some"}, "tuning.budget"),
+    ({"tuning.budget": 56.5}, "tuning.budget"),
+    ({"tuning.budget": True}, "tuning.budget"),
+])
+def test_a_budget_no_run_can_fly_is_one_line(overrides, says):
+    with pytest.raises(MavtuneError) as err:
+        load_config(None, overrides)
+    assert says in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_least_budget_flies_the_design_alone():
+    s = Tuning().settings(budget=18)
+    result = run_tuning(s, NoisyFleet(2), draws=0)
+    assert {r.gain for r in result.rounds} == {"design"} and result.flights == 18
+    assert all(x.stop_reason and "share of the budget" in x.stop_reason for x in result.searches)
+
+
+def test_the_cli_plans_and_flies_a_budget_given_in_a_file(tmp_path):
+    """`[tuning] budget` in a file: `mavtune plan` states the flights and rounds exactly, `mavtune tune` flies
+    them; a budget below the design's flights is one line naming the least."""
+    import json
+
+    from tests.test_fuzz import cli
+
+    good, bad = tmp_path / "good.toml", tmp_path / "bad.toml"
+    good.write_text("[tuning]\nbudget = 57\n")
+    bad.write_text("[tuning]\nbudget = 12\n")
+    code, out, _ = cli("plan", "--config", str(good))
+    text = " ".join(out.split())
+    assert code == 0 and "rounds 29 exactly" in text and "flights 57 (2 vehicles × 29 rounds" in text
+    code, _, _ = cli("tune", "--config", str(good), "-q", "--out", str(tmp_path / "run"))
+    assert code == 0 and json.loads((tmp_path / "run" / "result.json").read_text())["flights"] == 57
+    code, _, err = cli("plan", "--config", str(bad))
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "give at least 18" in err
+
+
+def test_the_default_budget_is_42_flights_a_gain_and_the_presets_keep_flying_without_one(tmp_path):
+    """`budget = "auto"` (the default): 42 flights a gain with a design and fixed passes; the paper's setting, the
+    designs-only preset, a run without a design and a run folder from before budgets fly without one."""
+    import json
+
+    from mavtune.config import BUDGET_TUNING, PAPER_TUNING
+    from mavtune.run import saved_config
+
+    assert load_config(None).settings().budget == 84 == make_plan(load_config(None).settings()).flights
+    assert Tuning().settings(space={g: (0.0, 1.0) for g in GAINS}).budget == 168
+    for preset in (PAPER_TUNING, BUDGET_TUNING, {"tuning.design": False}, {"tuning.bootstraps": "auto"}):
+        assert load_config(None, preset).settings().budget is None
+    old = load_config(None).model_dump(mode="json")
+    del old["tuning"]["budget"]
+    (tmp_path / "config.json").write_text(json.dumps(old))
+    assert load_config(base=saved_config(tmp_path)).settings().budget is None
