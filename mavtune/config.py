@@ -64,17 +64,23 @@ PRESETS: dict[str, dict[str, Any]] = {"paper": PAPER_TUNING, "budget": BUDGET_TU
 
 
 BUDGET_PER_GAIN = 42
-"""The default budget (`[tuning] budget = "auto"`): flights per gain tuned, all vehicles together (84 for 2 gains, 168
-for 4): the smallest of 28, 35, 42 and 56 a gain that was not significantly worse than the unbudgeted default over
-the zoo's selection half (benchmarks/results/selection_budget_default.md, selection_budget_curve*.md)."""
+"""The default budget (`[tuning] budget = "auto"`): flights per gain tuned on 2 vehicles (84 for 2 gains, 168 for
+4; as many rounds on more vehicles, each round of a bigger swarm flying more): the smallest of 28, 35, 42 and 56 a
+gain that was not significantly worse than the unbudgeted default over the zoo's selection half
+(benchmarks/results/selection_budget_default.md, selection_budget_curve*.md)."""
 
 
-def resolved_budget(budget: Any, space: dict, design: bool, bootstraps: Any) -> int | None:
+def resolved_budget(budget: Any, space: dict, design: bool, bootstraps: Any, vehicles: int = 2) -> int | None:
     """The engine's budget of a [tuning] budget: a number as given; "none" (or None) no budget; "auto"
-    BUDGET_PER_GAIN flights per gain with a design and a fixed number of passes, else none (the paper's setting, or a
-    run without a design or with the paper's stop rule, keeps flying what it asks for)."""
+    BUDGET_PER_GAIN flights per gain on up to 2 vehicles, the same rounds on more (a swarm flies the same time, more
+    flights a round), with a design and a fixed number of passes, else none (the paper's setting, or a run without a
+    design or with the paper's stop rule, keeps flying what it asks for)."""
     if budget == "auto":
-        return BUDGET_PER_GAIN * len(space) if design and bootstraps not in ("auto", None) else None
+        if not design or bootstraps in ("auto", None):
+            return None
+        if vehicles <= 2:
+            return BUDGET_PER_GAIN * len(space)
+        return math.ceil(BUDGET_PER_GAIN * len(space) / 2) * int(vehicles)  # 2 vehicles' rounds, every vehicle flying
     return None if budget in ("none", None) else budget
 
 
@@ -274,7 +280,8 @@ class Tuning(_Section):
         values = {name: getattr(self, name) for name in SETTINGS_FIELDS} | given
         if "initial" not in given and "initial" not in self.model_fields_set:
             values["initial"] = {k: v for k, v in values["initial"].items() if k in values["space"]}
-        values["budget"] = resolved_budget(values["budget"], values["space"], values["design"], values["bootstraps"])
+        values["budget"] = resolved_budget(values["budget"], values["space"], values["design"], values["bootstraps"],
+                                           values["vehicles"])
         values["bootstraps"] = None if values["bootstraps"] == "auto" else values["bootstraps"]
         return Settings(**{k: dict(v) if isinstance(v, dict) else v for k, v in values.items()})
 

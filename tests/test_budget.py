@@ -235,3 +235,15 @@ def test_the_default_budget_is_42_flights_a_gain_and_the_presets_keep_flying_wit
     del old["tuning"]["budget"]
     (tmp_path / "config.json").write_text(json.dumps(old))
     assert load_config(base=saved_config(tmp_path)).settings().budget is None
+
+
+def test_the_default_budget_gives_a_bigger_swarm_the_same_rounds():
+    """`budget = "auto"`: 42 flights a gain on 2 vehicles; on more, as many rounds with every vehicle flying (a swarm
+    of 32 is never refused for a budget below its design's flights)."""
+    from mavtune.config import Tuning
+    from mavtune.plan import make_plan
+
+    assert Tuning().settings().budget == 84 and Tuning(vehicles=1).settings().budget == 84
+    swarm = Tuning(vehicles=32).settings()
+    assert swarm.budget == 42 * 32 and make_plan(swarm).rounds == 42
+    assert Tuning(vehicles=3, space={"kp": (0.0, 1.0)}).settings().budget == 21 * 3

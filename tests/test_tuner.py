@@ -138,14 +138,15 @@ def test_the_api_refuses_what_the_cli_refuses_before_anything_flies():
         return [1.0] * len(assignments)
 
     with pytest.raises(MavtuneError, match="at least 40013 rounds, more than max_rounds = 2000") as info:
-        mavtune.tune(evaluate, epsilon=1e-4)
+        mavtune.tune(evaluate, epsilon=1e-4, budget=None)  # (a budget bounds the flights whatever ε asks)
     assert "\n" not in str(info.value) and not flown
-    plain = dict(adaptive=False, edges=False)  # no re-flights, no comparison at an edge: exactly the budget
+    plain = dict(adaptive=False, edges=False, budget=None)  # no re-flights, no comparison at an edge: exactly
+    # the rounds of the search
     result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=8, **plain)
     assert len(result.rounds) == 8  # EQL's 5 evaluations at ε = 0.25, one a round, and the design's 3 points (one
     # gain, both vehicles at a point): allowed at max_rounds = 8
     with pytest.raises(MavtuneError, match="at least 8 rounds, more than max_rounds = 7"):
-        mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=7)
+        mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=7, budget=None)
 
 
 def test_wrong_number_of_costs_is_named():
