@@ -152,7 +152,8 @@ class Journal:
             raise MavtuneError(
                 f"journal {self.path} does not record {', '.join(missing)} (an older mavtune wrote it), so resuming "
                 "could mix settings silently; start a new run folder")
-        if (field := first_difference(stored, config)) is not None:
+        given = [{k: v for k, v in c.items() if k != "budget"} for c in (stored, config)]  # ("auto" follows the
+        if (field := first_difference(*given) or first_difference(stored, config)) is not None:  # gains, vehicles)
             where, was, now = field
             raise MavtuneError(f"journal {self.path} belongs to another run: {where} was {was!r}, now {now!r} "
                                "(resume with the settings it was started with, or use a new run folder)")

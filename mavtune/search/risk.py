@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 RISK = 0.001  # the most divergence chance (by the run's flights) an answer may have
 SLOPE_SD = 65.0  # the slopes' prior sd, log-odds per share of a gain's range (a wall going from a 10 % to a 90 %
@@ -33,12 +34,15 @@ class Divergence:
 
     def chance(self, x: np.ndarray) -> np.ndarray:
         """The fitted divergence chance at each gain vector (rows of `x`, in shares of each range)."""
+        import numpy as np
         from scipy.special import expit
 
         return expit(_design(np.atleast_2d(x), self.centre, self.half) @ self.coef)
 
 
 def _design(x: np.ndarray, centre: np.ndarray, half: np.ndarray) -> np.ndarray:
+    import numpy as np
+
     return np.column_stack([np.ones(len(x)), (x - centre) / half])
 
 
@@ -47,6 +51,7 @@ def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequ
     """The divergence chance fitted to every flight of `points` (gain vector in shares of each range → its
     flights' costs, a failed flight's inf), each point weighted by `weight(u)` (the surface fit's kernel at
     u = (x − centre) / half); None when no flight the kernel reaches failed (no wall to keep off)."""
+    import numpy as np
     from scipy.optimize import minimize
     from scipy.special import expit, log_expit
 
