@@ -164,9 +164,11 @@ def test_a_plan_past_its_work_bound_is_refused_in_one_line():
 
 
 @pytest.mark.parametrize("toml", [
-    "[tuning]\nvehicles = 2\ncap = 1000000\n",  # the flat rehearsal would fly each point a million times
-    "[tuning]\nvehicles = 10000\nepsilon = 0.003\n",  # 20 rehearsals × 300 rounds × 10 000 flights
-    "[tuning]\nvehicles = 10000\nstrategy = 'split'\nmethod = 'nsection'\npoints = 1000\nepsilon = 0.0001\n",
+    # (without a budget: a budget's plan is exact, rehearsed at once)
+    "[tuning]\nvehicles = 2\ncap = 1000000\nbudget = 'none'\n",  # the flat rehearsal would fly each point 10^6 times
+    "[tuning]\nvehicles = 10000\nepsilon = 0.003\nbudget = 'none'\n",  # 20 rehearsals × 300 rounds × 10 000 flights
+    "[tuning]\nvehicles = 10000\nstrategy = 'split'\nmethod = 'nsection'\npoints = 1000\nepsilon = 0.0001\n"
+    "budget = 'none'\n",
 ])
 def test_the_cli_refuses_a_plan_it_cannot_rehearse_in_time_before_rehearsing(tmp_path, toml):
     path = tmp_path / "run.toml"
