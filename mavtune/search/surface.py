@@ -119,15 +119,22 @@ def walled(points: Mapping[tuple[float, ...], Sequence[float]], start: Sequence[
         return False
     if not len(safe):
         return True
-    base, x = np.asarray(start, float), np.asarray(targets, float)
+    radius = np.array([0.5 * float(np.min(np.linalg.norm(safe - f, axis=1))) for f in failed])
+    return not np.all(_clear(np.asarray(start, float), np.asarray(targets, float), failed, radius))
+
+
+def _clear(base, x, walls, radius):
+    """Per row of `x`: whether the straight way from `base` to it keeps at least `radius` from each failed point of
+    `walls` (the rule `answer` and `walled` share: never past a wall)."""
+    import numpy as np
+
+    out = np.ones(len(x), bool)
     step = x - base
     length = np.maximum(np.sum(step * step, axis=1), 1e-300)
-    for f in failed:
-        r = 0.5 * float(np.min(np.linalg.norm(safe - f, axis=1)))
+    for f, r in zip(walls, radius):
         t = np.clip((step @ (f - base)) / length, 0.0, 1.0)
-        if np.any(np.linalg.norm(base + t[:, None] * step - f, axis=1) < r):
-            return True
-    return False
+        out &= np.linalg.norm(base + t[:, None] * step - f, axis=1) >= r
+    return out
 
 
 def coefficients(d: int) -> int:
@@ -367,13 +374,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
             out &= fly_away.chance(x) <= risk
         if hull is None:
             return out
-        out &= hull.find_simplex(x, tol=1e-9) >= 0
-        step = x - base
-        length = np.maximum(np.sum(step * step, axis=1), 1e-300)
-        for f, r in zip(walls, radius):
-            t = np.clip((step @ (f - base)) / length, 0.0, 1.0)
-            out &= np.linalg.norm(base + t[:, None] * step - f, axis=1) >= r
-        return out
+        return out & (hull.find_simplex(x, tol=1e-9) >= 0) & _clear(base, x, walls, radius)
 
     x = (every[ok] - centre) / half
     y = means[ok]
