@@ -32,24 +32,24 @@ SchedulerOpt = typer.Option(None, "--scheduler", help="Run the campaign's chunks
                             "scheduler listens here (tcp://HOST:8786); default: in this process.")
 
 
-def bootstraps_flag(value: Optional[str]) -> int | str | None:
-    """--bootstraps: a whole number, or 'auto' for the paper's stop rule."""
-    if value is None or value == "auto":
+def _whole_or(value: Optional[str], words: tuple[str, ...], wrong: str) -> int | str | None:
+    """A flag that is a whole number or one of `words`; `wrong` the one-line error's start for anything else."""
+    if value is None or value in words:
         return value
     try:
         return int(value)
     except ValueError:
-        raise MavtuneError(f"--bootstraps must be a whole number or 'auto', got {value!r}") from None
+        raise MavtuneError(f"{wrong}, got {value!r}") from None
+
+
+def bootstraps_flag(value: Optional[str]) -> int | str | None:
+    """--bootstraps: a whole number, or 'auto' for the paper's stop rule."""
+    return _whole_or(value, ("auto",), "--bootstraps must be a whole number or 'auto'")
 
 
 def budget_flag(value: Optional[str]) -> int | str | None:
     """--budget: a whole number of flights, 'none' or 'auto'."""
-    if value is None or value in ("none", "auto"):
-        return value
-    try:
-        return int(value)
-    except ValueError:
-        raise MavtuneError(f"--budget must be a whole number of flights, 'none' or 'auto', got {value!r}") from None
+    return _whole_or(value, ("none", "auto"), "--budget must be a whole number of flights, 'none' or 'auto'")
 
 
 def config_from_flags(config: Optional[Path], vehicles: Optional[int], strategy: Optional[str],
