@@ -201,6 +201,8 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
                {"bootstraps": 1, "design_steps": 2, "design_width": 0.25, "design_shrink": 0.5, **split}, per_gain=n),
         Method(f"1 pass then the whole box, then ±0.15, each point once {n} a gain",
                {"bootstraps": 1, "design_steps": 2, "design_width": 0.5, "design_shrink": 0.3, **split}, per_gain=n),
+        *(Method(f"designs only, 4 designs each point once, shrink {k} {n} a gain (2 gains)",
+                 {**designs, **split, "design_steps": 4, "design_shrink": k}, per_gain=n) for k in (0.5, 0.7)),
         Method(f"designs only (BUDGET_TUNING) moved 1.5x {n} a gain", {**designs, "design_move": 1.5}, per_gain=n),
         Method(f"1 pass, then the map, ±0.2, ±0.08 each point once {n} a gain", passed, per_gain=n),
         Method(f"1 pass, then the map, ±0.25, ±0.125 each point once {n} a gain", {**passed, "design_shrink": 0.5},
