@@ -29,8 +29,9 @@ from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    next_centre as surface_next_centre, ruled_out as surface_ruled_out,
+    fly_away as surface_fly_away, next_centre as surface_next_centre, ruled_out as surface_ruled_out,
 )
+from mavtune.search.risk import RISK
 from mavtune.strategy import Strategy
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
@@ -130,6 +131,7 @@ class TuningResult:
     noise: dict[str, float] = field(default_factory=dict)  # the pooled flight-to-flight noise: cv and its dof
     in_progress: LineSearchRecord | None = None  # the line search under way when the run stopped, if any
     designed: Gains = field(default_factory=dict)  # the response surface's answer, when a design was flown
+    divergence: dict[str, Any] | None = None  # the design's answer near failed flights: `Tuner.divergence`
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each: an answer still moving between
@@ -167,6 +169,18 @@ class TuningResult:
             if wall is not None:
                 out.append(f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed (diverged): no "
                            "gain beyond it was answered, but the margin to it is one step of the search")
+        risk = self.divergence or {}
+        if risk and self.designed and all(self.gains.get(n) == v for n, v in self.designed.items()):
+            chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
+            said = f"fitted to the run's flights, some of which diverged, a flight at the answer diverges with " \
+                   f"chance {chance:.2%}"
+            if chance > bound:
+                out.append(f"{said}, above the {bound:.1%} an answer keeps to, which no point flown in the design "
+                           "meets: fly the design away from the failed flights (narrower ranges) before trusting it")
+            elif free:
+                gains = ", ".join(f"{n} {v:.4g}" for n, v in free.items())
+                out.append(f"{said}: the bound of {bound:.1%} on that chance moved the answer off the fit's minimum "
+                           f"({gains}), where it is {risk['unbounded_chance']:.1%}")
         return out
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
@@ -196,6 +210,7 @@ class TuningResult:
             "uncertainty": self.uncertainty,
             "uncertainty_note": INTERVAL_NOTE,
             "cautions": self.cautions(),
+            "divergence": self.divergence,
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
@@ -489,6 +504,7 @@ class Tuner:
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
+        self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
         self._shares: list[tuple[LineSearch, int, int]] = []  # budget: each line search, flights before it, its share
@@ -512,7 +528,7 @@ class Tuner:
                             bootstraps=self.bootstrap, stop_reason=stop_reason,
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
-                            designed=self.designed)
+                            designed=self.designed, divergence=self.divergence)
 
     @staticmethod
     def _record(bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
@@ -649,8 +665,10 @@ class Tuner:
             for a, cost in zip(*Strategy.measured(batch + spare, flights)):  # repeats of a point: the run's noise
                 self.pool.add((SURFACE, tuple(a[n] for n in names)), cost)
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
-        best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool), self.pool)
+        ruled = surface_ruled_out(flown, self.pool)
+        best, _ = surface_answer(flown, box, ruled, self.pool)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
+        self.divergence = self._divergence(flown, box, ruled, best)
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
         for rec in last.values():  # the caution of an answer next to a failed flight is the final answer's
@@ -676,6 +694,21 @@ class Tuner:
         narrow = self._surface(half)
         self._centre = None  # the next design goes around the passes' answer
         return half * self.settings.design_shrink if narrow else half
+
+    def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
+                    ruled: Any, best: tuple[float, ...]) -> dict[str, Any] | None:
+        """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
+        flights fit it, the bound on that chance (`risk.RISK`), and the fit's own answer without the bound and its
+        chance when the bound moved it (None when not); None when no flight near the design failed."""
+        chance = surface_fly_away(flown, box, best)
+        if chance is None:
+            return None
+        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None)
+        names, s = list(self.settings.space), self.settings
+        moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
+        return {"chance": chance, "risk": RISK,
+                "unbounded": {n: s.space[n][0] + (s.space[n][1] - s.space[n][0]) * u for n, u in zip(names, free)}
+                if moved else None, "unbounded_chance": surface_fly_away(flown, box, free) if moved else None}
 
     def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]], names: list[str], lo: list[float],
                        width: list[float], step: int) -> tuple[list[Gains], int | None]:
