@@ -216,7 +216,8 @@ class Tuning(_Section):
                                      "bounds): a design that moved the answer far narrows little, so the next one "
                                      "still reaches a narrow optimum the fit approached from afar")
     design_shrink_wall: float = Field(0.0, ge=0.0, le=1.0, description="design: the next design's half-width over "
-                                      "one in whose box a flight failed (0: `design_shrink`): a design beside a "
+                                      "a design with a failed flight within its half-width of its answer (0: "
+                                      "`design_shrink`): a design beside a "
                                       "fly-away narrows less, so a few flights next to the wall do not lead its fit")
     design_shrink_fit: StrictBool = Field(False, description="design: narrow by `design_shrink` to the power of the "
                                           "next design's own flights per three coefficients of its quadratic, at "

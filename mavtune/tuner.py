@@ -520,7 +520,7 @@ class Tuner:
         self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self._step: tuple[list[tuple[float, float]], tuple[float, ...], bool] | None = None  # last design's box,
-        # its answer, and whether a flight in its box failed (`_shrink`)
+        # its answer, and whether a flight failed within its half-width of the answer (`_shrink`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
         self._shares: list[tuple[LineSearch, int, int]] = []  # budget: each line search, flights before it, its share
 
@@ -645,8 +645,8 @@ class Tuner:
 
     def _shrink(self) -> float:
         """The next design's half-width over the last one's, once the last answered inside its box: `design_shrink`
-        (`design_shrink_wall` where a flight in the last design's box failed: a design beside a fly-away narrows
-        less, so its fit is not led by the noise of a few flights next to the wall); with `design_shrink_fit` that
+        (`design_shrink_wall` where a flight failed within the design's half-width of its answer: a design beside
+        a fly-away narrows less, so its fit is not led by the noise of a few flights next to the wall); with `design_shrink_fit` that
         to the power of the next design's own flights per three coefficients of its quadratic, at most 1 (a
         design with fewer flights than `design_split = "auto"` asks for narrows less: its fit's curvature stays
         above the noise); with `design_trust` no narrower than the answer's step from the box's centre, in shares
@@ -719,8 +719,9 @@ class Tuner:
             if names[i] in last:
                 last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
         self._design_answers.append(dict(self.gains))
+        near = half  # within this design's half-width of its answer
         self._step = (box, tuple(best), any(not all(map(math.isfinite, c)) for k, c in flown.items()
-                                            if c and all(a - 1e-9 <= v <= b + 1e-9 for v, (a, b) in zip(k, box))))
+                                            if c and max(abs(v - b) for v, b in zip(k, best)) <= near + 1e-9))
         self._centre = None
         if s.design_move and step + 1 < s.design_count():  # the design's own fit says the minimum lies beyond a face
             self._centre, moved = surface_next_centre(flown, box, half, self.pool, s.design_move, best,

@@ -212,7 +212,7 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
         Method(f"map, 1 pass, then ±0.25 {n} a gain", mapped, per_gain=n),
         Method(f"map, 1 pass, then ±0.25, ±0.125 each point once {n} a gain",
                {**mapped, **split, "design_steps": 3}, per_gain=n),
-        *(Method(f"designs only, shrink 0.4 (0.4^(flights/3 coefficients)), {w} beside a failed flight {n} a gain",
+        *(Method(f"designs only, shrink 0.4 (0.4^(flights/3 coefficients)), {w} next to a failed flight {n} a gain",
                  {**designs, "design_shrink": 0.4, "design_shrink_fit": True, "design_shrink_wall": w}, per_gain=n)
           for w in (0.6, 0.8)),
         Method(f"designs only, shrink 0.4 (0.4^(flights/3 coefficients)) {n} a gain",
