@@ -197,19 +197,20 @@ def test_a_trusted_design_narrows_no_more_than_its_answer_moved(trust, halves):
     assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((0.5, 0.31), abs=1e-6)
 
 
-@pytest.mark.parametrize("wall, halves", [(0.0, [0.15, 0.15, 0.075]),  # design_shrink, failure or not
-                                          (0.8, [0.15, 0.15, 0.12])])  # a flight in the box failed: 0.8
+@pytest.mark.parametrize("wall, halves", [(0.0, [0.15, 0.075, 0.0375]),  # design_shrink, failure or not
+                                          (0.8, [0.15, 0.12, 0.096])])  # a failed flight near the answer: 0.8
 def test_a_design_beside_a_failed_flight_narrows_by_its_own_shrink(wall, halves):
-    """`design_shrink_wall`: a design in whose box a flight failed (kp + kd above 1.2: the designs' far corners)
-    narrows the next one by that shrink instead of `design_shrink` (the first answers on its face, off the wall:
-    the second keeps its width)."""
+    """`design_shrink_wall`: a design with a failed flight within its half-width of its answer (kp + kd above 1.2:
+    each design's far corner, the answer at the bowl's minimum (0.5, 0.5)) narrows the next one by that shrink
+    instead of `design_shrink`."""
     wallcost = bowl((0.5, 0.5))
     result = mavtune.tune(lambda gs: [math.inf if g["kp"] + g["kd"] > 1.2 else c for g, c in zip(gs, wallcost(gs))],
                           space=SPACE, vehicles=2, bootstraps=0, design_width=0.15, design_steps=3,
-                          design_shrink=0.5, initial={"kp": 0.55, "kd": 0.55}, draws=0, budget=None,
+                          design_shrink=0.5, initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None,
                           design_shrink_wall=wall)
     assert any(not math.isfinite(f.cost) for r in result.rounds[:9] for f in r.flights)
     assert [r.bracket[1] for r in result.rounds[::9]] == pytest.approx(halves)
+    assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((0.5, 0.5), abs=1e-6)
 
 
 @pytest.mark.parametrize("gains", [2, 4])
