@@ -108,7 +108,7 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
-                   "design_steps", "design_shrink", "design_split", "design_inner", "design_move",
+                   "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "budget")  # what [tuning] gives the engine's Settings
 
 
@@ -206,6 +206,10 @@ class Tuning(_Section):
                                "inside the ranges: this many times the way from the box's centre to that face (1: "
                                "centred on the face; 2: one box width on), shortened so that no point of it lies "
                                "beyond a failed flight; 0: every next design is centred on the run's answer")
+    design_first: StrictBool = Field(False, description="design: the first design flies before the passes over "
+                                     "the gains, which start from its answer (with `design_inner` a map of the box: "
+                                     "the passes' held gains start near an optimum on an edge or in a corner); the "
+                                     "later designs fly after the passes, around their answer")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

@@ -29,8 +29,9 @@ from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    next_centre as surface_next_centre, ruled_out as surface_ruled_out,
+    fly_away as surface_fly_away, next_centre as surface_next_centre, ruled_out as surface_ruled_out,
 )
+from mavtune.search.risk import RISK
 from mavtune.strategy import Strategy
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
@@ -130,6 +131,7 @@ class TuningResult:
     noise: dict[str, float] = field(default_factory=dict)  # the pooled flight-to-flight noise: cv and its dof
     in_progress: LineSearchRecord | None = None  # the line search under way when the run stopped, if any
     designed: Gains = field(default_factory=dict)  # the response surface's answer, when a design was flown
+    divergence: dict[str, Any] | None = None  # the design's answer near failed flights: `Tuner.divergence`
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each: an answer still moving between
@@ -167,6 +169,18 @@ class TuningResult:
             if wall is not None:
                 out.append(f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed (diverged): no "
                            "gain beyond it was answered, but the margin to it is one step of the search")
+        risk = self.divergence or {}
+        if risk and self.designed and all(self.gains.get(n) == v for n, v in self.designed.items()):
+            chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
+            said = f"fitted to the run's flights, some of which diverged, a flight at the answer diverges with " \
+                   f"chance {chance:.2%}"
+            if chance > bound:
+                out.append(f"{said}, above the {bound:.1%} an answer keeps to, which no point flown in the design "
+                           "meets: fly the design away from the failed flights (narrower ranges) before trusting it")
+            elif free:
+                gains = ", ".join(f"{n} {v:.4g}" for n, v in free.items())
+                out.append(f"{said}: the bound of {bound:.1%} on that chance moved the answer off the fit's minimum "
+                           f"({gains}), where it is {risk['unbounded_chance']:.1%}")
         return out
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
@@ -196,6 +210,7 @@ class TuningResult:
             "uncertainty": self.uncertainty,
             "uncertainty_note": INTERVAL_NOTE,
             "cautions": self.cautions(),
+            "divergence": self.divergence,
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
@@ -234,6 +249,7 @@ class Settings:
     design_split: bool | str = False
     design_inner: bool = False
     design_move: float = 0.0
+    design_first: bool = False
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -291,6 +307,8 @@ class Settings:
                                "to 3 (how far past a face of the design its next one moves, in the way to that face)")
         if self.design_inner not in (True, False):
             raise MavtuneError(f"design_inner must be true or false, got {self.design_inner!r}")
+        if self.design_first not in (True, False):
+            raise MavtuneError(f"design_first must be true or false, got {self.design_first!r}")
         if self.design_split not in (True, False, "auto"):
             raise MavtuneError(f"design_split must be true, false or \"auto\", got {self.design_split!r}")
         self.search(0.0, 1.0)  # validates
@@ -319,20 +337,34 @@ class Settings:
     def budget_minimum(self) -> int:
         """The fewest flights a budget may be: every design's own flights (`design_flights`), each but the last in
         whole rounds of the vehicles (a round flies one design; the last round of a run may fly fewer vehicles)."""
+        return self.designs_minimum(0)
+
+    def designs_minimum(self, start: int) -> int:
+        """The own flights (`budget_minimum`) of designs `start` on: what the budget keeps for the designs still to
+        fly (with `design_first` the first is flown before the passes)."""
         v, count = int(self.vehicles), self.design_count()
-        return sum(math.ceil(self.design_flights(k) / v) * v for k in range(count - 1)) + self.design_flights(count - 1)
+        if start >= count:
+            return 0
+        return (sum(math.ceil(self.design_flights(k) / v) * v for k in range(start, count - 1))
+                + self.design_flights(count - 1))
+
+    def first_design_before_passes(self) -> bool:
+        """Whether the first design flies before the passes over the gains (`design_first`, with a pass and a
+        design): a map of the box whose answer the passes start from."""
+        passes = self.bootstraps if self.bootstraps is not None else self.max_bootstraps
+        return bool(self.design_first) and self.design_count() > 0 and passes > 0
 
     def line_searches(self) -> int:
         """Line searches a run of these settings may fly: one per gain and pass, and those across the gains."""
         passes = self.bootstraps if self.bootstraps is not None else self.max_bootstraps
         return len(self.space) * passes + self.direction_searches(passes)
 
-    def search_share(self, spent: int, started: int) -> int:
-        """budget: the flights the line search now starting may fly, when the run has flown `spent` flights and
-        `started` line searches before it: what the passes' share (the budget less `budget_minimum`) has left,
-        split evenly over the line searches still to come (what one leaves, the next may fly; what the passes
-        leave, the designs fly)."""
-        left = int(self.budget) - self.budget_minimum() - spent
+    def search_share(self, spent: int, started: int, designed: int = 0) -> int:
+        """budget: the flights the line search now starting may fly, when the run has flown `spent` flights,
+        `started` line searches and `designed` designs before it: what the passes' share (the budget less the own
+        flights of the designs still to fly, `designs_minimum`) has left, split evenly over the line searches still
+        to come (what one leaves, the next may fly; what the passes leave, the designs fly)."""
+        left = int(self.budget) - self.designs_minimum(designed) - spent
         return max(0, left // max(1, self.line_searches() - started))
 
     def design_share(self, step: int, left: int) -> int:
@@ -430,7 +462,8 @@ class Settings:
                          "steps": self.design_count(), "shrink": float(self.design_shrink)}
                         | ({"split": self.design_split} if self.design_split else {})
                         | ({"inner": True} if self.design_inner else {})
-                        | ({"move": float(self.design_move)} if self.design_move else {})}
+                        | ({"move": float(self.design_move)} if self.design_move else {})
+                        | ({"first": True} if self.first_design_before_passes() else {})}
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
 
@@ -471,6 +504,7 @@ class Tuner:
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
+        self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
         self._shares: list[tuple[LineSearch, int, int]] = []  # budget: each line search, flights before it, its share
@@ -494,7 +528,7 @@ class Tuner:
                             bootstraps=self.bootstrap, stop_reason=stop_reason,
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
-                            designed=self.designed)
+                            designed=self.designed, divergence=self.divergence)
 
     @staticmethod
     def _record(bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
@@ -555,6 +589,7 @@ class Tuner:
         s = self.settings
         found: list[Gains] = []
         limit = s.bootstraps if s.bootstraps is not None else s.max_bootstraps
+        half = self._first_design() if s.first_design_before_passes() else s.design_width
         for self.bootstrap in range(1, limit + 1):
             undecided = []
             start = dict(self.gains)
@@ -588,8 +623,7 @@ class Tuner:
                 self.stop_reason = f"reached the cap of {limit} bootstraps without a repeated point"
         if limit == 0:
             self.stop_reason = "no passes over the gains (bootstraps = 0): the designs only"
-        half = s.design_width
-        for _ in range(s.design_count()):
+        for _ in range(s.design_count() - len(self._design_answers)):
             if self._surface(half):  # inside the design's box: the next design narrows in; on its face: it moves
                 half *= s.design_shrink
         return self.snapshot()
@@ -631,8 +665,10 @@ class Tuner:
             for a, cost in zip(*Strategy.measured(batch + spare, flights)):  # repeats of a point: the run's noise
                 self.pool.add((SURFACE, tuple(a[n] for n in names)), cost)
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
-        best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool), self.pool)
+        ruled = surface_ruled_out(flown, self.pool)
+        best, _ = surface_answer(flown, box, ruled, self.pool)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
+        self.divergence = self._divergence(flown, box, ruled, best)
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
         for rec in last.values():  # the caution of an answer next to a failed flight is the final answer's
@@ -651,6 +687,29 @@ class Tuner:
                 return False
         return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
 
+    def _first_design(self) -> float:
+        """`design_first`: fly the first design (with `design_inner` a map of the box) before the passes, which start
+        from its answer; the half-width of the design after the passes (narrowed as `_surface` says)."""
+        half = self.settings.design_width
+        narrow = self._surface(half)
+        self._centre = None  # the next design goes around the passes' answer
+        return half * self.settings.design_shrink if narrow else half
+
+    def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
+                    ruled: Any, best: tuple[float, ...]) -> dict[str, Any] | None:
+        """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
+        flights fit it, the bound on that chance (`risk.RISK`), and the fit's own answer without the bound and its
+        chance when the bound moved it (None when not); None when no flight near the design failed."""
+        chance = surface_fly_away(flown, box, best)
+        if chance is None:
+            return None
+        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None)
+        names, s = list(self.settings.space), self.settings
+        moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
+        return {"chance": chance, "risk": RISK,
+                "unbounded": {n: s.space[n][0] + (s.space[n][1] - s.space[n][0]) * u for n, u in zip(names, free)}
+                if moved else None, "unbounded_chance": surface_fly_away(flown, box, free) if moved else None}
+
     def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]], names: list[str], lo: list[float],
                        width: list[float], step: int) -> tuple[list[Gains], int | None]:
         """The flights of design `step` in order and how many it flies: without a budget its `queue` (each point as
@@ -661,6 +720,8 @@ class Tuner:
         if s.budget is None:
             return list(queue), None
         share = s.design_share(step, int(s.budget) - self._spent())
+        if not self.searches and s.first_design_before_passes():  # before the passes: its own flights, whole rounds
+            share = math.ceil(s.design_flights(step) / int(s.vehicles)) * int(s.vehicles)
         more = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, points[k % len(points)])}
                 for k in range(max(0, share - len(queue)))]
         return list(queue) + more, share
@@ -685,7 +746,7 @@ class Tuner:
             return True
         if not self._shares or self._shares[-1][0] is not search:
             spent = self._spent()
-            self._shares.append((search, spent, s.search_share(spent, len(self._shares))))
+            self._shares.append((search, spent, s.search_share(spent, len(self._shares), len(self._design_answers))))
         _, before, share = self._shares[-1]
         vehicles = self._next_vehicles()
         left = share - (self._spent() - before)

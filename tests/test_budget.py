@@ -247,3 +247,23 @@ def test_the_default_budget_gives_a_bigger_swarm_the_same_rounds():
     swarm = Tuning(vehicles=32).settings()
     assert swarm.budget == 42 * 32 and make_plan(swarm).rounds == 42
     assert Tuning(vehicles=3, space={"kp": (0.0, 1.0)}).settings().budget == 21 * 3
+
+
+@given(st.integers(1, 4), st.integers(1, 3), st.integers(0, 40), st.integers(0, 10**6))
+@settings(max_examples=15, deadline=None)
+def test_a_first_design_flies_before_the_passes_which_start_from_its_answer(gains, vehicles, extra, seed):
+    """`design_first`: the map of the box flies its own flights before any line search, the first line search holds
+    the other gains at the map's answer, the later design flies after the passes, and the budget is flown
+    exactly."""
+    s = budgeted(gains, vehicles, extra + 2 * gains * vehicles, bootstraps=1, design_first=True, design_inner=True, design_width=0.5,
+                 design_steps=2, design_shrink=0.5, design_split="auto")
+    result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(seed), vehicles), draws=0)
+    kinds = [r.gain for r in result.rounds]
+    first = next((i for i, k in enumerate(kinds) if k != "design"), len(kinds))
+    assert sum(len(r.flights) for r in result.rounds[:first]) == math.ceil(s.design_flights(0) / vehicles) * vehicles
+    assert kinds[-1] == "design" and set(kinds[first:]) > {"design"}
+    assert result.flights == make_plan(s).flights == s.budget
+    assert s.fingerprint()["design"]["first"] is True
+    mapped = result.rounds[first].assignments[0]  # the first line search: the other gains where the map answered
+    held = result.searches[0].held
+    assert all(math.isclose(mapped[n], v) for n, v in held.items())

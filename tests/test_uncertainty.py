@@ -296,3 +296,50 @@ def test_the_cautions_fire_for_a_moving_answer_and_an_answer_next_to_a_fly_away(
         assert (f"{g} still moved" in said) == (abs(m) > 0.125), (g, m, said)
     quiet = mavtune.tune(lambda gs: [(g["kp"] - 0.3) ** 2 + (g["kd"] - 0.6) ** 2 + 0.1 for g in gs], seed=1, draws=20)
     assert not [c for c in quiet.cautions() if "still moved" in c or "failed" in c or "no longer are" in c]
+
+
+def _stochastic_cliff(seed: int):
+    """A bowl whose minimum (0.8, 0.45) lies beyond a wall that moves from flight to flight (a flight diverges
+    where kp − 0.5·kd exceeds 0.4 + 0.03·z), with 5 % noise; and the true divergence chance of a gain vector."""
+    from statistics import NormalDist
+
+    rng = random.Random(seed)
+
+    def evaluate(gs):
+        return [math.inf if g["kp"] - 0.5 * g["kd"] > 0.4 + 0.03 * rng.gauss(0, 1)
+                else (1.0 + 3.0 * (g["kp"] - 0.8) ** 2 + 6.0 * (g["kd"] - 0.45) ** 2) * (1 + 0.05 * rng.gauss(0, 1))
+                for g in gs]
+
+    return evaluate, lambda g: NormalDist().cdf((g["kp"] - 0.5 * g["kd"] - 0.4) / 0.03)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_an_answer_the_divergence_bound_moved_says_so_with_both_chances(seed):
+    """Beside a moving wall, the bound on the fitted divergence chance moves the answer off the fit's minimum: the
+    cautions say the answer's fitted chance, where the fit would have answered and its chance there (truly
+    likelier to fly away)."""
+    from mavtune.search.risk import RISK
+
+    evaluate, chance = _stochastic_cliff(seed)
+    result = mavtune.tune(evaluate, seed=seed)
+    risk = result.divergence
+    assert risk is not None and risk["chance"] <= RISK and risk["unbounded"] is not None
+    assert risk["unbounded_chance"] > RISK and chance(risk["unbounded"]) > chance(result.gains)
+    said = [c for c in result.cautions() if "moved the answer off the fit's minimum" in c]
+    assert len(said) == 1 and f"{risk['chance']:.2%}" in said[0] and f"{risk['unbounded_chance']:.1%}" in said[0]
+    assert result.to_dict()["divergence"] == risk
+    quiet = mavtune.tune(lambda gs: [(g["kp"] - 0.3) ** 2 + (g["kd"] - 0.6) ** 2 + 0.1 for g in gs], seed=seed)
+    assert quiet.divergence is None and not [c for c in quiet.cautions() if "diverges with chance" in c]
+
+
+def test_an_answer_above_the_divergence_bound_is_cautioned():
+    """Where no point flown in the design meets the bound, the bound chooses nothing: the cautions say the chance."""
+    from mavtune.tuner import TuningResult
+
+    gains = {"kp": 0.5, "kd": 0.4}
+    result = TuningResult(gains=dict(gains), rounds=[], searches=[], bootstraps=1, stop_reason="done",
+                          designed=dict(gains), divergence={"chance": 0.031, "risk": 0.001, "unbounded": None,
+                                                            "unbounded_chance": None})
+    assert [c for c in result.cautions() if "chance 3.10%, above the 0.1%" in c]
+    result.gains["kp"] = 0.45  # another stage answered: the design's verdict is not this answer's
+    assert not [c for c in result.cautions() if "diverges with chance" in c]

@@ -180,7 +180,38 @@ def candidates() -> list[Method]:
         Method("three designs each point once, moved 1.5x past a face", {**moving, "design_steps": 3}),
         *(Method(f"budget {n} flights a gain", per_gain=n) for n in (28, 35, 42, 56)),
         Method("budget 28 flights a gain, 1 pass", {"bootstraps": 1}, per_gain=28),
+        *small_candidates(designs),
         *moved(),
+    ]
+
+
+def small_candidates(designs: dict[str, Any]) -> list[Method]:
+    """Structures at about 26 flights a gain (52 for 2 gains, 104 for 4: issue 20's flight goals), against the
+    default's 42 a gain: designs only as BUDGET_TUNING, or one pass over the gains then designs."""
+    n = 26
+    split = {"design_split": True}
+    passed = {"bootstraps": 1, "design_inner": True, "design_width": 0.5, "design_steps": 3, "design_shrink": 0.4,
+              **split}  # one pass, then the designs of BUDGET_TUNING each point once
+    mapped = {"bootstraps": 1, "design_first": True, "design_inner": True, "design_width": 0.5, "design_steps": 2,
+              "design_shrink": 0.5, "design_split": "auto"}  # the map of the box, one pass from its answer, a design
+    return [
+        Method(f"designs only (BUDGET_TUNING) {n} a gain", designs, per_gain=n),
+        Method(f"designs only (BUDGET_TUNING) shrink 0.4 {n} a gain", {**designs, "design_shrink": 0.4}, per_gain=n),
+        Method(f"1 pass then 1 design {n} a gain", {"bootstraps": 1}, per_gain=n),
+        Method(f"1 pass then 2 designs ±0.25, ±0.125, each point once {n} a gain",
+               {"bootstraps": 1, "design_steps": 2, "design_width": 0.25, "design_shrink": 0.5, **split}, per_gain=n),
+        Method(f"1 pass then the whole box, then ±0.15, each point once {n} a gain",
+               {"bootstraps": 1, "design_steps": 2, "design_width": 0.5, "design_shrink": 0.3, **split}, per_gain=n),
+        *(Method(f"designs only, 4 designs each point once, shrink {k} {n} a gain (2 gains)",
+                 {**designs, **split, "design_steps": 4, "design_shrink": k}, per_gain=n) for k in (0.5, 0.7)),
+        Method(f"designs only (BUDGET_TUNING) moved 1.5x {n} a gain", {**designs, "design_move": 1.5}, per_gain=n),
+        Method(f"1 pass, then the map, ±0.2, ±0.08 each point once {n} a gain", passed, per_gain=n),
+        Method(f"1 pass, then the map, ±0.25, ±0.125 each point once {n} a gain", {**passed, "design_shrink": 0.5},
+               per_gain=n),
+        Method(f"map, 1 pass, then ±0.15 {n} a gain", {**mapped, "design_shrink": 0.3}, per_gain=n),
+        Method(f"map, 1 pass, then ±0.25 {n} a gain", mapped, per_gain=n),
+        Method(f"map, 1 pass, then ±0.25, ±0.125 each point once {n} a gain",
+               {**mapped, **split, "design_steps": 3}, per_gain=n),
     ]
 
 

@@ -42,11 +42,14 @@ from __future__ import annotations
 
 import math
 from itertools import product
-from typing import Collection, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Collection, Mapping, Sequence
 
 from mavtune.flown import within_noise
 from mavtune.search.evidence import NoisePool, point_stats
 from mavtune.search.risk import RISK, divergence
+
+if TYPE_CHECKING:
+    import numpy as np
 
 LEVEL = 0.9  # a flown point worse than the best by more than this two-sided quantile of the error is ruled out
 
@@ -288,6 +291,37 @@ def plane(x, y, n, cv: float, level: float, slope_level: float = 0.0):
     return _polynomial(x, y, n, _terms(d, 1))
 
 
+def _frame(box: Sequence[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A design's box (per gain (lo, hi), shares of each range) as arrays: lo, hi, its centre and half-widths."""
+    import numpy as np
+
+    lo = np.array([b[0] for b in box], float)
+    hi = np.array([b[1] for b in box], float)
+    return lo, hi, 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
+
+
+def _tricube(reach: float) -> Callable[[np.ndarray], np.ndarray]:
+    """The fit's kernel: the tricube weight of points at u (half-widths of the box from its centre), `reach` wide."""
+    import numpy as np
+
+    def tricube(u: np.ndarray) -> np.ndarray:
+        return (1.0 - np.minimum(np.max(np.abs(u), axis=1) / reach, 1.0) ** 3) ** 3
+
+    return tricube
+
+
+def fly_away(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+             x: Sequence[float], reach: float = REACH) -> float | None:
+    """The chance that a flight at `x` (shares of each range) diverges, as the run's flights near the design of
+    `box` fit it (`risk.divergence` under the answer's kernel: the chance `answer` keeps below `risk`); None where
+    no flight the kernel reaches failed."""
+    import numpy as np
+
+    _, _, centre, half = _frame(box)
+    fit = divergence(points, centre, half, _tricube(reach))
+    return None if fit is None else float(fit.chance(np.asarray(x, float))[0])
+
+
 def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
            worse: Collection[tuple[float, ...]] = (),
            pool: NoisePool | None = None, *, power: float = POWER, reach: float = REACH,
@@ -316,10 +350,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
 
     from mavtune.search.joint import quadratic
 
-    lo = np.array([b[0] for b in box], float)
-    hi = np.array([b[1] for b in box], float)
+    lo, hi, centre, half = _frame(box)
     d = len(lo)
-    centre, half = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
     keys = [k for k, c in points.items() if c]
     every = np.array(keys, float).reshape(len(keys), d)
     ok = np.array([all(map(math.isfinite, points[k])) for k in keys], bool)
@@ -340,10 +372,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
             told = within_noise(_finite_stats({k: points[k] for k in told}, pool), level)
         if any(k not in wall for k in told):  # a point off the walls as good as the box's best, by the flights:
             near_ok, pick = near_ok & off_wall, inside & off_wall  # no answer beside a wall (else a caution)
-    def tricube(u: np.ndarray) -> np.ndarray:
-        """The fit's tricube weight of points at u (in half-widths of the box from its centre)."""
-        return (1.0 - np.minimum(np.max(np.abs(u), axis=1) / reach, 1.0) ** 3) ** 3
-
+    tricube = _tricube(reach)
     fly_away = divergence(points, centre, half, tricube) if risk is not None and not np.all(ok) else None
     if fly_away is not None:
         likely = fly_away.chance(every) > risk
