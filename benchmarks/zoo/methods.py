@@ -181,6 +181,7 @@ def candidates() -> list[Method]:
         *(Method(f"budget {n} flights a gain", per_gain=n) for n in (28, 35, 42, 56)),
         Method("budget 28 flights a gain, 1 pass", {"bootstraps": 1}, per_gain=28),
         *small_candidates(designs),
+        *moved(),
     ]
 
 
@@ -219,6 +220,29 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
                {**designs, "design_shrink": 0.4, "design_shrink_fit": True}, per_gain=n),
         *(Method(f"designs only, trust step, shrink {k} {n} a gain",
                  {**designs, "design_shrink": k, "design_trust": True}, per_gain=n) for k in (0.4, 0.5, 0.6)),
+    ]
+
+
+def moved() -> list[Method]:
+    """design_move under the default's budget (42 flights a gain, "auto"): the designs' flights in two or three
+    designs, the next one moved past a face where the design's own fit puts its minimum (lane "move", issue 20)."""
+    split = {"design_split": True}  # each point once: two designs for the one design's 18 flights
+    return [
+        Method("budget: 2 designs each point once, the second moved 1.5x past a face", {**split, "design_steps": 2,
+                                                                                        "design_move": 1.5}),
+        Method("budget: 2 designs each point once, the second moved 2x past a face", {**split, "design_steps": 2,
+                                                                                      "design_move": 2.0}),
+        Method("budget: 3 designs each point once, moved 1.5x past a face", {**split, "design_steps": 3,
+                                                                              "design_move": 1.5}),
+        Method("budget: 2 designs, the second moved 1.5x past a face", {"design_steps": 2, "design_move": 1.5}),
+        Method("budget: 2 designs each point once, the second moved 1.5x past a face or half as wide",
+               {**split, "design_steps": 2, "design_move": 1.5, "design_shrink": 0.5}),
+        Method("budget: 3 designs each point once, moved 1.5x past a face or half as wide",
+               {**split, "design_steps": 3, "design_move": 1.5, "design_shrink": 0.5}),
+        Method("budget: 1 pass, 3 designs each point once, moved 1.5x past a face",
+               {**split, "bootstraps": 1, "design_steps": 3, "design_move": 1.5}),
+        Method("budget: 1 pass, 2 designs, the second moved 1.5x past a face",
+               {"bootstraps": 1, "design_steps": 2, "design_move": 1.5}),
     ]
 
 
