@@ -88,8 +88,10 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
     calls: list[dict[str, Any]] = []
     original = tuner.surface_answer
 
-    def recorded(points, box, worse=(), pool=None):
-        out = original(points, box, worse, pool)
+    def recorded(points, box, worse=(), pool=None, **options):
+        out = original(points, box, worse, pool, **options)
+        if options:  # the divergence caution's unbounded answer (risk=None): not the run's answer
+            return out
         calls.append({"points": [[list(k), [c if math.isfinite(c) else "inf" for c in v]] for k, v in points.items()],
                       "box": [list(b) for b in box], "cv": pool.cv if pool is not None else math.nan,
                       "dof": pool.dof if pool is not None else 0.0, "answer": list(out[0]), "fitted": out[1]})

@@ -84,6 +84,9 @@ def tune(
     design_inner: bool = DEFAULT,
     budget: int | str | None = DEFAULT,
     design_move: float = DEFAULT,
+    design_trust: bool = DEFAULT,
+    design_shrink_wall: float = DEFAULT,
+    design_shrink_fit: bool = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
     max_rounds: int = MAX_ROUNDS,
@@ -105,7 +108,9 @@ def tune(
     times, `design_steps` designs in turn, each
     `design_shrink` times as wide as the one before once it surrounds its answer, `design_split`: the vehicles fly
     distinct points; `design_inner`: the first design also flies the corners of the box half as wide, each point
-    once; `design_move`: how far the next design moves past a face of the design where its own fit's minimum lies) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic), `budget`
+    once; `design_move`: how far the next design moves past a face of the design where its own fit's minimum lies; `design_trust`: a design that moved the answer far narrows the next one
+    less; `design_shrink_wall`: how much a design beside a failed flight narrows; `design_shrink_fit`: a design with
+    few flights per coefficient narrows less) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic), `budget`
     the run's flights exactly (the passes share what the designs leave; "auto": 42 a gain; None: as many as the
     stages ask), `on_round`
     sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
@@ -132,7 +137,8 @@ def tune(
         confidence=confidence, cap=cap, answer=answer, edges=edges, directions=directions,
         design=design, design_width=design_width, design_repeats=design_repeats, design_steps=design_steps,
         design_shrink=design_shrink, design_split=design_split, design_inner=design_inner,
-        design_move=design_move, budget=budget)
+        design_move=design_move, design_trust=design_trust,
+        design_shrink_wall=design_shrink_wall, design_shrink_fit=design_shrink_fit, budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")

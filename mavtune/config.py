@@ -109,7 +109,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "budget")  # what [tuning] gives the engine's Settings
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "budget")  # what [tuning] gives the engine's Settings
 
 
 class Tuning(_Section):
@@ -210,6 +210,19 @@ class Tuning(_Section):
                                      "the gains, which start from its answer (with `design_inner` a map of the box: "
                                      "the passes' held gains start near an optimum on an edge or in a corner); the "
                                      "later designs fly after the passes, around their answer")
+    design_trust: StrictBool = Field(False, description="design: a design whose answer lies inside its box narrows "
+                                     "the next one by `design_shrink` at most down to the answer's step from the "
+                                     "box's centre (its share of the half-width, over the gains off the ranges' "
+                                     "bounds): a design that moved the answer far narrows little, so the next one "
+                                     "still reaches a narrow optimum the fit approached from afar")
+    design_shrink_wall: float = Field(0.0, ge=0.0, le=1.0, description="design: the next design's half-width over "
+                                      "a design with a failed flight within its half-width of its answer (0: "
+                                      "`design_shrink`): a design beside a "
+                                      "fly-away narrows less, so a few flights next to the wall do not lead its fit")
+    design_shrink_fit: StrictBool = Field(False, description="design: narrow by `design_shrink` to the power of the "
+                                          "next design's own flights per three coefficients of its quadratic, at "
+                                          "most 1 (4 gains' designs, each point flown once, narrow less: their "
+                                          "fit's curvature stays above the noise)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

@@ -250,6 +250,9 @@ class Settings:
     design_inner: bool = False
     design_move: float = 0.0
     design_first: bool = False
+    design_trust: bool = False
+    design_shrink_wall: float = 0.0
+    design_shrink_fit: bool = False
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -309,6 +312,13 @@ class Settings:
             raise MavtuneError(f"design_inner must be true or false, got {self.design_inner!r}")
         if self.design_first not in (True, False):
             raise MavtuneError(f"design_first must be true or false, got {self.design_first!r}")
+        if self.design_trust not in (True, False):
+            raise MavtuneError(f"design_trust must be true or false, got {self.design_trust!r}")
+        if not (float(self.design_shrink_wall) == 0.0 or 0.0 < float(self.design_shrink_wall) <= 1.0):
+            raise MavtuneError(f"design_shrink_wall {self.design_shrink_wall} is outside (0, 1] (or 0: design_shrink): "
+                               "the next design's half-width over one in whose box a flight failed")
+        if self.design_shrink_fit not in (True, False):
+            raise MavtuneError(f"design_shrink_fit must be true or false, got {self.design_shrink_fit!r}")
         if self.design_split not in (True, False, "auto"):
             raise MavtuneError(f"design_split must be true, false or \"auto\", got {self.design_split!r}")
         self.search(0.0, 1.0)  # validates
@@ -463,6 +473,9 @@ class Settings:
                         | ({"split": self.design_split} if self.design_split else {})
                         | ({"inner": True} if self.design_inner else {})
                         | ({"move": float(self.design_move)} if self.design_move else {})
+                        | ({"trust": True} if self.design_trust else {})
+                        | ({"shrink_wall": float(self.design_shrink_wall)} if self.design_shrink_wall else {})
+                        | ({"shrink_fit": True} if self.design_shrink_fit else {})
                         | ({"first": True} if self.first_design_before_passes() else {})}
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
@@ -506,6 +519,8 @@ class Tuner:
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
         self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
+        self._step: tuple[list[tuple[float, float]], tuple[float, ...], bool] | None = None  # last design's box,
+        # its answer, and whether a flight failed within its half-width of the answer (`_shrink`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
         self._shares: list[tuple[LineSearch, int, int]] = []  # budget: each line search, flights before it, its share
 
@@ -625,8 +640,33 @@ class Tuner:
             self.stop_reason = "no passes over the gains (bootstraps = 0): the designs only"
         for _ in range(s.design_count() - len(self._design_answers)):
             if self._surface(half):  # inside the design's box: the next design narrows in; on its face: it moves
-                half *= s.design_shrink
+                half *= self._shrink()
         return self.snapshot()
+
+    def _shrink(self) -> float:
+        """The next design's half-width over the last one's, once the last answered inside its box: `design_shrink`
+        (`design_shrink_wall` where a flight failed within the design's half-width of its answer: a design beside
+        a fly-away narrows less, so its fit is not led by the noise of a few flights next to the wall); with `design_shrink_fit` that
+        to the power of the next design's own flights per three coefficients of its quadratic, at most 1 (a
+        design with fewer flights than `design_split = "auto"` asks for narrows less: its fit's curvature stays
+        above the noise); with `design_trust` no narrower than the answer's step from the box's centre, in shares
+        of the box's half-width along each gain whose answer is off the ranges' bounds (a trust region: a design
+        that moved the answer far narrows little)."""
+        s = self.settings
+        shrink = float(s.design_shrink)
+        if self._step is None:
+            return shrink
+        box, best, failed = self._step
+        if failed and s.design_shrink_wall:
+            shrink = float(s.design_shrink_wall)
+        if s.design_shrink_fit:
+            flights = s.design_flights(len(self._design_answers))
+            shrink **= min(1.0, flights / (3 * surface_coefficients(len(s.space))))
+        if not s.design_trust:
+            return shrink
+        steps = [abs(b - 0.5 * (lo + hi)) / (0.5 * (hi - lo)) for (lo, hi), b in zip(box, best)
+                 if hi - lo > 1e-9 and 1e-9 < b < 1.0 - 1e-9]
+        return min(1.0, max([shrink, *steps]))
 
     def _surface(self, half: float) -> bool:
         """One step of the response surface (`design_count` in turn, each around the answer of the one before):
@@ -679,6 +719,9 @@ class Tuner:
             if names[i] in last:
                 last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
         self._design_answers.append(dict(self.gains))
+        near = half  # within this design's half-width of its answer
+        self._step = (box, tuple(best), any(not all(map(math.isfinite, c)) for k, c in flown.items()
+                                            if c and max(abs(v - b) for v, b in zip(k, best)) <= near + 1e-9))
         self._centre = None
         if s.design_move and step + 1 < s.design_count():  # the design's own fit says the minimum lies beyond a face
             self._centre, moved = surface_next_centre(flown, box, half, self.pool, s.design_move, best,
@@ -693,7 +736,7 @@ class Tuner:
         half = self.settings.design_width
         narrow = self._surface(half)
         self._centre = None  # the next design goes around the passes' answer
-        return half * self.settings.design_shrink if narrow else half
+        return half * self._shrink() if narrow else half
 
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
                     ruled: Any, best: tuple[float, ...]) -> dict[str, Any] | None:

@@ -184,6 +184,48 @@ def test_a_design_narrows_only_around_an_answer_it_surrounds(optimum, halves):
     assert [r.bracket[1] for r in result.rounds[::9]] == pytest.approx(halves)
 
 
+@pytest.mark.parametrize("trust, halves", [(False, [0.15, 0.075, 0.0375]),  # the answer moved 0.11: halved
+                                           (True, [0.15, 0.11, 0.055])])  # narrowed only to its step, then halved
+def test_a_trusted_design_narrows_no_more_than_its_answer_moved(trust, halves):
+    """`design_trust`: the first design (centred at kd 0.2) answers kd 0.31, 0.11 of its half-width 0.15 from its
+    centre: the next design is no narrower than that step (not half as wide); the next answers at its centre and
+    the one after it narrows by `design_shrink`."""
+    result = mavtune.tune(bowl((0.5, 0.31)), space=SPACE, vehicles=2, bootstraps=0, design_width=0.15,
+                          design_steps=3, design_shrink=0.5, initial={"kd": 0.2}, draws=0, budget=None,
+                          design_trust=trust)
+    assert [r.bracket[1] for r in result.rounds[::9]] == pytest.approx(halves)
+    assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((0.5, 0.31), abs=1e-6)
+
+
+@pytest.mark.parametrize("wall, halves", [(0.0, [0.15, 0.075, 0.0375]),  # design_shrink, failure or not
+                                          (0.8, [0.15, 0.12, 0.096])])  # a failed flight near the answer: 0.8
+def test_a_design_beside_a_failed_flight_narrows_by_its_own_shrink(wall, halves):
+    """`design_shrink_wall`: a design with a failed flight within its half-width of its answer (kp + kd above 1.2:
+    each design's far corner, the answer at the bowl's minimum (0.5, 0.5)) narrows the next one by that shrink
+    instead of `design_shrink`."""
+    wallcost = bowl((0.5, 0.5))
+    result = mavtune.tune(lambda gs: [math.inf if g["kp"] + g["kd"] > 1.2 else c for g, c in zip(gs, wallcost(gs))],
+                          space=SPACE, vehicles=2, bootstraps=0, design_width=0.15, design_steps=3,
+                          design_shrink=0.5, initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None,
+                          design_shrink_wall=wall)
+    assert any(not math.isfinite(f.cost) for r in result.rounds[:9] for f in r.flights)
+    assert [r.bracket[1] for r in result.rounds[::9]] == pytest.approx(halves)
+    assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((0.5, 0.5), abs=1e-6)
+
+
+@pytest.mark.parametrize("gains", [2, 4])
+def test_a_design_with_few_flights_per_coefficient_narrows_less(gains):
+    """`design_shrink_fit`: 2 gains' next design (9 points on both vehicles: 18 flights, three per coefficient of
+    its quadratic) narrows by `design_shrink`; 4 gains' (25 points once each: 25 flights for 15 coefficients) by
+    `design_shrink` ** (25 / 45)."""
+    space = {n: (0.0, 1.0) for n in ["kp", "kd", "ki", "kf"][:gains]}
+    result = mavtune.tune(lambda gs: [1.0 + sum((v - 0.5) ** 2 for v in g.values()) for g in gs], space=space,
+                          vehicles=2, bootstraps=0, design_width=0.15, design_steps=2, design_shrink=0.5,
+                          design_split="auto", initial={"kd": 0.5}, draws=0, budget=None, design_shrink_fit=True)
+    halves = sorted({r.bracket[1] for r in result.rounds}, reverse=True)
+    assert halves == pytest.approx([0.15, 0.15 * 0.5 ** (1.0 if gains == 2 else 25 / 45)])
+
+
 def test_no_passes_without_a_design_is_refused():
     from mavtune.config import Tuning
     from mavtune.errors import MavtuneError

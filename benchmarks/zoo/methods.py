@@ -197,6 +197,7 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
     return [
         Method(f"designs only (BUDGET_TUNING) {n} a gain", designs, per_gain=n),
         Method(f"designs only (BUDGET_TUNING) shrink 0.4 {n} a gain", {**designs, "design_shrink": 0.4}, per_gain=n),
+        Method(f"designs only (BUDGET_TUNING) shrink 0.6 {n} a gain", {**designs, "design_shrink": 0.6}, per_gain=n),
         Method(f"1 pass then 1 design {n} a gain", {"bootstraps": 1}, per_gain=n),
         Method(f"1 pass then 2 designs ±0.25, ±0.125, each point once {n} a gain",
                {"bootstraps": 1, "design_steps": 2, "design_width": 0.25, "design_shrink": 0.5, **split}, per_gain=n),
@@ -212,6 +213,13 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
         Method(f"map, 1 pass, then ±0.25 {n} a gain", mapped, per_gain=n),
         Method(f"map, 1 pass, then ±0.25, ±0.125 each point once {n} a gain",
                {**mapped, **split, "design_steps": 3}, per_gain=n),
+        *(Method(f"designs only, shrink 0.4 (0.4^(flights/3 coefficients)), {w} next to a failed flight {n} a gain",
+                 {**designs, "design_shrink": 0.4, "design_shrink_fit": True, "design_shrink_wall": w}, per_gain=n)
+          for w in (0.6, 0.8)),
+        Method(f"designs only, shrink 0.4 (0.4^(flights/3 coefficients)) {n} a gain",
+               {**designs, "design_shrink": 0.4, "design_shrink_fit": True}, per_gain=n),
+        *(Method(f"designs only, trust step, shrink {k} {n} a gain",
+                 {**designs, "design_shrink": k, "design_trust": True}, per_gain=n) for k in (0.4, 0.5, 0.6)),
     ]
 
 
