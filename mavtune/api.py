@@ -72,6 +72,8 @@ def tune(
     adaptive: bool = DEFAULT,
     confidence: float = DEFAULT,
     cap: int | None = DEFAULT,
+    stop_undecided: bool = DEFAULT,
+    refly: bool = DEFAULT,
     answer: str = DEFAULT,
     edges: bool = DEFAULT,
     directions: bool = DEFAULT,
@@ -84,6 +86,7 @@ def tune(
     design_inner: bool = DEFAULT,
     budget: int | str | None = DEFAULT,
     design_move: float = DEFAULT,
+    design_first: bool = DEFAULT,
     design_trust: bool = DEFAULT,
     design_shrink_wall: float = DEFAULT,
     design_shrink_fit: bool = DEFAULT,
@@ -100,23 +103,21 @@ def tune(
     `seed`). `bootstraps=None` is the paper's stop rule (capped at `max_bootstraps`), `replicates` is r of the
     groups strategy, `points` the points per iteration of nsection (None: one per slot), `adaptive` flies close
     comparisons again until the kept point is right with probability `confidence` or each point has `cap`
-    flights (None: 4 rounds' worth), `answer` is each line search's answer ("search" or "model": a local fit of
-    all its flights), `edges` whether a line search ending against an edge of its range flies the edge (an optimum
-    there can be the answer), `answer="valley"` a fit with one curvature each side of the minimum, `directions`
+    flights (None: 4 rounds' worth; `stop_undecided`: a comparison still undecided there stops the search),
+    `refly` flies a point carried into the next comparison again there, `answer` is each line search's answer
+    ("search" or "model": a local fit of all its flights), `edges` whether a line search ending against an edge of
+    its range flies the edge (an optimum there can be the answer), `answer="valley"` a fit with one curvature each side of the minimum, `directions`
     whether a line search across the gains follows every pass but the first (a valley across the gains), `design`
-    whether a designed set of gain vectors (half-width `design_width` of each range, each flown `design_repeats`
-    times, `design_steps` designs in turn, each
-    `design_shrink` times as wide as the one before once it surrounds its answer, `design_split`: the vehicles fly
-    distinct points; `design_inner`: the first design also flies the corners of the box half as wide, each point
-    once; `design_move`: how far the next design moves past a face of the design where its own fit's minimum lies; `design_trust`: a design that moved the answer far narrows the next one
-    less; `design_shrink_wall`: how much a design beside a failed flight narrows; `design_shrink_fit`: a design with
-    few flights per coefficient narrows less) follows the passes (or, with `bootstraps=0`, replaces them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic), `budget`
-    the run's flights exactly (the passes share what the designs leave; "auto": 42 a gain; None: as many as the
-    stages ask), `on_round`
-    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need more than `max_rounds` rounds are refused before anything flies, as
-    `mavtune tune` refuses them. `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle,
-    seed). A `journal` holding rounds is resumed: a cost function must give its first round the recorded costs
-    again (another function is refused), unless `resume=True` (a cost noisy by design).
+    whether a designed set of gain vectors follows the passes (or, with `bootstraps=0`, replaces them) and the answer
+    is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic);
+    the `design_*` options say how wide it is, how often each point flies, and how several designs narrow or move in
+    turn (each described in `mavtune.config.Tuning` and the configuration reference). `budget` gives the run's flights
+    exactly (the passes share what the designs leave; "auto": 42 a gain; None: as many as the stages ask), `on_round`
+    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need
+    more than `max_rounds` rounds are refused before anything flies, as `mavtune tune` refuses them.
+    `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle, seed). A `journal`
+    holding rounds is resumed: a cost function must give its first round the recorded costs again (another
+    function is refused), unless `resume=True` (a cost noisy by design).
     """
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
         raise MavtuneError(f"seed must be a whole number ≥ 0, got {seed!r}")
@@ -134,10 +135,11 @@ def tune(
         vehicles if vehicles is not None else fleet.size, space=space, method=method, epsilon=epsilon,
         bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial=initial, replicates=replicates, points=points,
         max_bootstraps=max_bootstraps, seed=seed if seed is not None else DEFAULT, adaptive=adaptive,
-        confidence=confidence, cap=cap, answer=answer, edges=edges, directions=directions,
+        confidence=confidence, cap=cap, stop_undecided=stop_undecided, refly=refly, answer=answer, edges=edges,
+        directions=directions,
         design=design, design_width=design_width, design_repeats=design_repeats, design_steps=design_steps,
         design_shrink=design_shrink, design_split=design_split, design_inner=design_inner,
-        design_move=design_move, design_trust=design_trust,
+        design_move=design_move, design_first=design_first, design_trust=design_trust,
         design_shrink_wall=design_shrink_wall, design_shrink_fit=design_shrink_fit, budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "

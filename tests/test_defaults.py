@@ -18,6 +18,15 @@ def test_api_and_cli_resolve_the_same_settings():
     assert cli.initial == Tuning().initial and cli.initial  # `initial` included
 
 
+def test_every_tuning_setting_is_an_option_of_the_api():
+    """What a [tuning] file can set, `mavtune.tune()` takes by the same name (one set of options, not two)."""
+    import inspect
+
+    from mavtune.config import SETTINGS_FIELDS
+
+    assert set(SETTINGS_FIELDS) <= set(inspect.signature(mavtune.tune).parameters)
+
+
 def test_the_paper_preset_is_one_setting_in_both():
     assert default_settings(**paper_options()) == load_config(None, PAPER_TUNING).settings()
     assert default_settings(**paper_options()) != default_settings()
