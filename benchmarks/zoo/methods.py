@@ -220,6 +220,9 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
                {**designs, "design_shrink": 0.4, "design_shrink_fit": True}, per_gain=n),
         *(Method(f"designs only, trust step, shrink {k} {n} a gain",
                  {**designs, "design_shrink": k, "design_trust": True}, per_gain=n) for k in (0.4, 0.5, 0.6)),
+        Method("designs only (BUDGET_TUNING) shrink 0.4 42 a gain", {**designs, "design_shrink": 0.4}, per_gain=42),
+        Method("map, the default's 2 passes from its answer, then ±0.15 42 a gain",
+               {**mapped, "bootstraps": 2, "design_shrink": 0.3}, per_gain=42),
     ]
 
 
