@@ -221,6 +221,10 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
         *(Method(f"designs only, trust step, shrink {k} {n} a gain",
                  {**designs, "design_shrink": k, "design_trust": True}, per_gain=n) for k in (0.4, 0.5, 0.6)),
         Method("designs only (BUDGET_TUNING) shrink 0.4 42 a gain", {**designs, "design_shrink": 0.4}, per_gain=42),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)) 42 a gain",
+               {**designs, "design_shrink": 0.4, "design_shrink_fit": True}, per_gain=42),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), 0.8 next to a failed flight 42 a gain",
+               {**designs, "design_shrink": 0.4, "design_shrink_fit": True, "design_shrink_wall": 0.8}, per_gain=42),
         Method("map, the default's 2 passes from its answer, then ±0.15 42 a gain",
                {**mapped, "bootstraps": 2, "design_shrink": 0.3}, per_gain=42),
     ]
