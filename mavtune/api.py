@@ -106,8 +106,9 @@ def tune(
     flights (None: 4 rounds' worth; `stop_undecided`: a comparison still undecided there stops the search),
     `refly` flies a point carried into the next comparison again there, `answer` is each line search's answer
     ("search" or "model": a local fit of all its flights), `edges` whether a line search ending against an edge of
-    its range flies the edge (an optimum there can be the answer), `answer="valley"` a fit with one curvature each side of the minimum, `directions`
-    whether a line search across the gains follows every pass but the first (a valley across the gains), `design`
+    its range flies the edge (an optimum there can be the answer), `answer="valley"` a fit with one curvature each
+    side of the minimum, `directions` whether a line search across the gains follows every pass but the first (a
+    valley across the gains), `design`
     whether a designed set of gain vectors follows the passes (or, with `bootstraps=0`, replaces them) and the answer
     is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic);
     the `design_*` options say how wide it is, how often each point flies, and how several designs narrow or move in

@@ -105,11 +105,13 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
     return None
 
 
+# what [tuning] gives the engine's Settings
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "budget")  # what [tuning] gives the engine's Settings
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "budget")
+
 
 
 class Tuning(_Section):

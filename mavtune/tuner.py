@@ -719,9 +719,9 @@ class Tuner:
             if names[i] in last:
                 last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
         self._design_answers.append(dict(self.gains))
-        near = half  # within this design's half-width of its answer
-        self._step = (box, tuple(best), any(not all(map(math.isfinite, c)) for k, c in flown.items()
-                                            if c and max(abs(v - b) for v, b in zip(k, best)) <= near + 1e-9))
+        failed_near = any(not all(map(math.isfinite, c)) for k, c in flown.items()  # within the design's
+                          if c and max(abs(v - b) for v, b in zip(k, best)) <= half + 1e-9)  # half-width of its answer
+        self._step = (box, tuple(best), failed_near)
         self._centre = None
         if s.design_move and step + 1 < s.design_count():  # the design's own fit says the minimum lies beyond a face
             self._centre, moved = surface_next_centre(flown, box, half, self.pool, s.design_move, best,
@@ -743,15 +743,16 @@ class Tuner:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the fit's own answer without the bound and its
         chance when the bound moved it (None when not); None when no flight near the design failed."""
-        chance = surface_fly_away(flown, box, best)
-        if chance is None:
+        fit = surface_fly_away(flown, box)
+        if fit is None:
             return None
         free, _ = surface_answer(flown, box, ruled, self.pool, risk=None)
+        chance, free_chance = (float(c) for c in fit.chance([best, free]))
         names, s = list(self.settings.space), self.settings
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
         return {"chance": chance, "risk": RISK,
                 "unbounded": {n: s.space[n][0] + (s.space[n][1] - s.space[n][0]) * u for n, u in zip(names, free)}
-                if moved else None, "unbounded_chance": surface_fly_away(flown, box, free) if moved else None}
+                if moved else None, "unbounded_chance": free_chance if moved else None}
 
     def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]], names: list[str], lo: list[float],
                        width: list[float], step: int) -> tuple[list[Gains], int | None]:

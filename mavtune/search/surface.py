@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Callable, Collection, Mapping, Sequence
 
 from mavtune.flown import within_noise
 from mavtune.search.evidence import NoisePool, point_stats
-from mavtune.search.risk import RISK, divergence
+from mavtune.search.risk import RISK, Divergence, divergence
 
 if TYPE_CHECKING:
     import numpy as np
@@ -122,15 +122,17 @@ def walled(points: Mapping[tuple[float, ...], Sequence[float]], start: Sequence[
         return False
     if not len(safe):
         return True
-    radius = np.array([0.5 * float(np.min(np.linalg.norm(safe - f, axis=1))) for f in failed])
-    return not np.all(_clear(np.asarray(start, float), np.asarray(targets, float), failed, radius))
+    return not np.all(_clear(np.asarray(start, float), np.asarray(targets, float), failed, safe))
 
 
-def _clear(base, x, walls, radius):
-    """Per row of `x`: whether the straight way from `base` to it keeps at least `radius` from each failed point of
-    `walls` (the rule `answer` and `walled` share: never past a wall)."""
+def _clear(base, x, walls, safe):
+    """Per row of `x`: whether the straight way from `base` to it keeps from each failed point of `walls` at least
+    half that point's distance to the nearest of the `safe` points (flown without failure; the rule `answer` and
+    `walled` share: never past a wall)."""
     import numpy as np
+    from scipy.spatial import cKDTree
 
+    radius = 0.5 * cKDTree(safe).query(walls)[0] if len(walls) else np.zeros(0)
     out = np.ones(len(x), bool)
     step = x - base
     length = np.maximum(np.sum(step * step, axis=1), 1e-300)
@@ -311,15 +313,12 @@ def _tricube(reach: float) -> Callable[[np.ndarray], np.ndarray]:
 
 
 def fly_away(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
-             x: Sequence[float], reach: float = REACH) -> float | None:
-    """The chance that a flight at `x` (shares of each range) diverges, as the run's flights near the design of
-    `box` fit it (`risk.divergence` under the answer's kernel: the chance `answer` keeps below `risk`); None where
-    no flight the kernel reaches failed."""
-    import numpy as np
-
+             reach: float = REACH) -> Divergence | None:
+    """The chance that a flight diverges (`Divergence.chance`, gain vectors in shares of each range), as the run's
+    flights near the design of `box` fit it (`risk.divergence` under the answer's kernel: the chance `answer` keeps
+    below `risk`); None where no flight the kernel reaches failed."""
     _, _, centre, half = _frame(box)
-    fit = divergence(points, centre, half, _tricube(reach))
-    return None if fit is None else float(fit.chance(np.asarray(x, float))[0])
+    return divergence(points, centre, half, _tricube(reach))
 
 
 def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
@@ -391,7 +390,6 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
 
     walls = every[~ok]
     base = np.asarray(fallback)  # the best point flown in the box: an answer is reached from it
-    radius = 0.5 * cKDTree(every[ok]).query(walls)[0] if len(walls) and np.any(ok) else np.zeros(len(walls))
 
     def allowed(x: np.ndarray) -> np.ndarray:
         """Each candidate's nearest flown point neither failed nor is ruled out; with failures, it lies in the
@@ -403,7 +401,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
             out &= fly_away.chance(x) <= risk
         if hull is None:
             return out
-        return out & (hull.find_simplex(x, tol=1e-9) >= 0) & _clear(base, x, walls, radius)
+        return out & (hull.find_simplex(x, tol=1e-9) >= 0) & _clear(base, x, walls, every[ok])
 
     x = (every[ok] - centre) / half
     y = means[ok]
