@@ -110,7 +110,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "budget")
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "wall_reach", "wall_keep", "budget")
 
 
 
@@ -225,6 +225,15 @@ class Tuning(_Section):
                                           "next design's own flights per three coefficients of its quadratic, at "
                                           "most 1 (4 gains' designs, each point flown once, narrow less: their "
                                           "fit's curvature stays above the noise)")
+    wall_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: the chance that a flight diverges, fitted "
+                              "to the run's flights within this many half-widths of the design's centre (0: the "
+                              "surface fit's own kernel, 2): a narrow design beside a wall sees the failed flights "
+                              "of the wider designs before it")
+    wall_keep: StrictBool = Field(False, description="design: the last design's answer is the answer before it (the "
+                                  "previous design's or the passes') where a flight within the divergence fit's "
+                                  "reach failed (`wall_reach`), unless a failed flight lies nearest it or on the way "
+                                  "to it: a narrow design beside a wall fits few safe flights and a wall it barely "
+                                  "sees")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

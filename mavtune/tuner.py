@@ -29,7 +29,7 @@ from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    fly_away as surface_fly_away, next_centre as surface_next_centre, ruled_out as surface_ruled_out,
+    fly_away as surface_fly_away, next_centre as surface_next_centre, ruled_out as surface_ruled_out, REACH,
 )
 from mavtune.search.risk import RISK
 from mavtune.strategy import Strategy
@@ -253,6 +253,8 @@ class Settings:
     design_trust: bool = False
     design_shrink_wall: float = 0.0
     design_shrink_fit: bool = False
+    wall_reach: float = 0.0
+    wall_keep: bool = False
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -319,6 +321,11 @@ class Settings:
                                "the next design's half-width over one in whose box a flight failed")
         if self.design_shrink_fit not in (True, False):
             raise MavtuneError(f"design_shrink_fit must be true or false, got {self.design_shrink_fit!r}")
+        if not 0.0 <= float(self.wall_reach) <= 10.0:
+            raise MavtuneError(f"wall_reach {self.wall_reach} is outside [0, 10]: half-widths of the design the "
+                               "divergence fit reaches (0: the surface fit's own kernel)")
+        if self.wall_keep not in (True, False):
+            raise MavtuneError(f"wall_keep must be true or false, got {self.wall_keep!r}")
         if self.design_split not in (True, False, "auto"):
             raise MavtuneError(f"design_split must be true, false or \"auto\", got {self.design_split!r}")
         self.search(0.0, 1.0)  # validates
@@ -476,6 +483,8 @@ class Settings:
                         | ({"trust": True} if self.design_trust else {})
                         | ({"shrink_wall": float(self.design_shrink_wall)} if self.design_shrink_wall else {})
                         | ({"shrink_fit": True} if self.design_shrink_fit else {})
+                        | ({"wall_reach": float(self.wall_reach)} if self.wall_reach else {})
+                        | ({"wall_keep": True} if self.wall_keep else {})
                         | ({"first": True} if self.first_design_before_passes() else {})}
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
@@ -706,7 +715,9 @@ class Tuner:
                 self.pool.add((SURFACE, tuple(a[n] for n in names)), cost)
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
         ruled = surface_ruled_out(flown, self.pool)
-        best, _ = surface_answer(flown, box, ruled, self.pool)
+        before = [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # the passes' or last design's answer
+        keep = before if s.wall_keep and step + 1 == s.design_count() and (self.searches or step) else None
+        best, _ = surface_answer(flown, box, ruled, self.pool, **self._wall(keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best)
         self.stop_reason = reason
@@ -730,6 +741,13 @@ class Tuner:
                 return False
         return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
 
+    def _wall(self, keep: list[float] | None = None) -> dict[str, Any]:
+        """`surface.answer`'s options of the wall rules (`wall_reach`, `wall_keep` with the answer `keep` before the
+        last design); none when off (the answer's own defaults)."""
+        s = self.settings
+        return ({"risk_reach": float(s.wall_reach)} if s.wall_reach else {}) | (
+            {"keep": keep} if keep is not None else {})
+
     def _first_design(self) -> float:
         """`design_first`: fly the first design (with `design_inner` a map of the box) before the passes, which start
         from its answer; the half-width of the design after the passes (narrowed as `_surface` says)."""
@@ -743,10 +761,10 @@ class Tuner:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the fit's own answer without the bound and its
         chance when the bound moved it (None when not); None when no flight near the design failed."""
-        fit = surface_fly_away(flown, box)
+        fit = surface_fly_away(flown, box, float(self.settings.wall_reach) or REACH)
         if fit is None:
             return None
-        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None)
+        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None, **self._wall())
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
         names, s = list(self.settings.space), self.settings
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))

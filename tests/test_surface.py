@@ -507,3 +507,74 @@ def test_a_plane_answers_a_range_bound_never_a_corner_of_the_design_inside_the_r
         else:
             assert got == plane
     assert replaced >= 5
+
+
+def _narrow_beside_cliff(seed: int) -> tuple[dict, list[tuple[float, float]]]:
+    """`_stochastic_cliff`'s wide design and a narrow one (±0.04, 3 × 3, each point flown 3 times, every flight
+    surviving) around (0.5, 0.4), its right face 0.04 of kp from the moving wall: the wide design's failed flights
+    lie 2.5 half-widths and more from its centre, beyond the surface fit's kernel (2)."""
+    points, _ = _stochastic_cliff(seed)
+    rng = random.Random(seed + 100)
+    for kp in (0.46, 0.5, 0.54):
+        for kd in (0.36, 0.4, 0.44):
+            c = 1.0 + 3.0 * (kp - 0.8) ** 2 + 6.0 * (kd - 0.45) ** 2
+            points[(kp, kd)] = [c * (1.0 + 0.05 * rng.gauss(0, 1)) for _ in range(3)]
+    return points, [(0.46, 0.54), (0.36, 0.44)]
+
+
+def test_a_divergence_fit_reaching_past_a_narrow_design_keeps_its_answer_off_the_wall_before_it():
+    """`risk_reach`: a narrow design beside a wall it did not fly into (its flights all survived; the wider design's
+    failed ones lie beyond its kernel) answers on its face toward the wall, where flights diverge 1 % of the time
+    and more; a divergence fit reaching 4 half-widths sees the wider design's failures and keeps the answer off."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import ruled_out
+
+    pool = NoisePool.prior(0.05, 100.0)
+    near, far = [], []
+    for seed in range(8):
+        points, box = _narrow_beside_cliff(seed)
+        chance = _stochastic_cliff(seed)[1]
+        ruled = ruled_out(points, pool)
+        near.append(chance(answer(points, box, ruled, pool)[0]))
+        far.append(chance(answer(points, box, ruled, pool, risk_reach=4.0)[0]))
+    assert sum(f < n for f, n in zip(far, near)) >= 6
+    assert sum(far) < 0.5 * sum(near) and sum(near) / len(near) > 0.005
+
+
+def test_beside_a_wall_the_answer_before_the_design_stands_where_it_was_flown_safely():
+    """`keep`: where a flight within the divergence fit's reach failed, the answer is the one before the design
+    (flown: its centre); without a failure that near, or where a failed flight lies nearest it, the fit answers."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import ruled_out
+
+    pool = NoisePool.prior(0.05, 100.0)
+    points, box = _narrow_beside_cliff(0)
+    ruled = ruled_out(points, pool)
+    fit, _ = answer(points, box, ruled, pool, risk_reach=4.0)
+    assert fit != (0.5, 0.4)
+    assert answer(points, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4)) == ((0.5, 0.4), False)
+    assert answer(points, box, ruled, pool, keep=(0.5, 0.4)) == answer(points, box, ruled, pool)  # none within 2
+    survived = {k: [c if math.isfinite(c) else 10.0 for c in v] for k, v in points.items()}
+    assert answer(survived, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4)) == answer(survived, box, ruled, pool,
+                                                                                         risk_reach=4.0)
+    walled = {**points, (0.54, 0.36): [math.inf]}  # a failed flight nearest the answer before: not answered
+    got, _ = answer(walled, box, ruled, pool, risk_reach=4.0, keep=(0.535, 0.365))
+    assert got != (0.535, 0.365)
+
+
+@pytest.mark.parametrize("bootstraps, steps", [(1, 1), (0, 2)])
+def test_only_the_last_design_keeps_the_answer_before_it_beside_a_wall(bootstraps, steps):
+    """`wall_keep`: beside a failed flight (kp + kd above 1.3: each design's far corner) the last design answers
+    the passes' answer, or the previous design's — the first of designs alone answers its own fit."""
+    wallcost = bowl((0.7, 0.6))
+    cost = lambda gs: [math.inf if g["kp"] + g["kd"] > 1.3 else c for g, c in zip(gs, wallcost(gs))]  # noqa: E731
+    common = dict(space=SPACE, vehicles=2, bootstraps=bootstraps, design_width=0.15, design_steps=steps,
+                  initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None, adaptive=False, edges=False, wall_reach=4.0)
+    kept = mavtune.tune(cost, wall_keep=True, **common)
+    fitted = mavtune.tune(cost, **common)
+    designs = [r for r in kept.rounds if r.gain == "design"]
+    assert any(not math.isfinite(f.cost) for r in designs for f in r.flights)
+    centre = designs[len(designs) - len(designs) // steps].assignments[0]  # the last design's centre: the answer
+    # before it (each design flies as many rounds, its centre first)
+    assert (kept.gains["kp"], kept.gains["kd"]) == pytest.approx((centre["kp"], centre["kd"]), abs=1e-9)
+    assert (fitted.gains["kp"], fitted.gains["kd"]) != pytest.approx((centre["kp"], centre["kd"]), abs=1e-6)

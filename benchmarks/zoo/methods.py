@@ -225,8 +225,25 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
                {**designs, "design_shrink": 0.4, "design_shrink_fit": True}, per_gain=42),
         Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), 0.8 next to a failed flight 42 a gain",
                {**designs, "design_shrink": 0.4, "design_shrink_fit": True, "design_shrink_wall": 0.8}, per_gain=42),
+        *walls(designs),
         Method("map, the default's 2 passes from its answer, then ±0.15 42 a gain",
                {**mapped, "bootstraps": 2, "design_shrink": 0.3}, per_gain=42),
+    ]
+
+
+def walls(designs: dict[str, Any]) -> list[Method]:
+    """The wall rules of the answer (lane "guard", issue 20): the divergence chance fitted over 4 half-widths of the
+    design (`wall_reach`), and the last design's answer the one before it where a flight that near failed
+    (`wall_keep`), on the designs alone at 42 flights a gain (D42fit) and on the default."""
+    fit = {**designs, "design_shrink": 0.4, "design_shrink_fit": True}
+    reach, keep = {"wall_reach": 4.0}, {"wall_reach": 4.0, "wall_keep": True}
+    return [
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), divergence fit over 4 half-widths 42 a gain",
+               {**fit, **reach}, per_gain=42),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the answer before the last design beside a "
+               "wall 42 a gain", {**fit, **keep}, per_gain=42),
+        Method("default, divergence fit over 4 half-widths", reach),
+        Method("default, the passes' answer beside a wall", keep),
     ]
 
 
