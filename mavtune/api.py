@@ -92,6 +92,7 @@ def tune(
     design_shrink_fit: bool = DEFAULT,
     wall_reach: float = DEFAULT,
     wall_keep: bool = DEFAULT,
+    composite_reach: float = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
     max_rounds: int = MAX_ROUNDS,
@@ -144,7 +145,7 @@ def tune(
         design_shrink=design_shrink, design_split=design_split, design_inner=design_inner,
         design_move=design_move, design_first=design_first, design_trust=design_trust,
         design_shrink_wall=design_shrink_wall, design_shrink_fit=design_shrink_fit, wall_reach=wall_reach,
-        wall_keep=wall_keep, budget=budget)
+        wall_keep=wall_keep, composite_reach=composite_reach, budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")

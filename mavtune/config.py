@@ -110,7 +110,8 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "wall_reach", "wall_keep", "budget")
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "wall_reach", "wall_keep", "composite_reach",
+                   "budget")
 
 
 
@@ -234,6 +235,10 @@ class Tuning(_Section):
                                   "reach failed (`wall_reach`), unless a failed flight lies nearest it or on the way "
                                   "to it: a narrow design beside a wall fits few safe flights and a wall it barely "
                                   "sees")
+    composite_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: above three gains (a composite "
+                                   "design, whose pure quadratic terms rest on its axis points alone) the surface "
+                                   "fit's kernel reaches this many half-widths of the design (0: 2, as below), so "
+                                   "the flights of the wider design before it count too")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

@@ -255,6 +255,7 @@ class Settings:
     design_shrink_fit: bool = False
     wall_reach: float = 0.0
     wall_keep: bool = False
+    composite_reach: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -324,6 +325,9 @@ class Settings:
         if not 0.0 <= float(self.wall_reach) <= 10.0:
             raise MavtuneError(f"wall_reach {self.wall_reach} is outside [0, 10]: half-widths of the design the "
                                "divergence fit reaches (0: the surface fit's own kernel)")
+        if not 0.0 <= float(self.composite_reach) <= 10.0:
+            raise MavtuneError(f"composite_reach {self.composite_reach} is outside [0, 10]: half-widths of the design "
+                               "the fit reaches above three gains (0: the fit's own kernel)")
         if self.wall_keep not in (True, False):
             raise MavtuneError(f"wall_keep must be true or false, got {self.wall_keep!r}")
         if self.design_split not in (True, False, "auto"):
@@ -485,6 +489,7 @@ class Settings:
                         | ({"shrink_fit": True} if self.design_shrink_fit else {})
                         | ({"wall_reach": float(self.wall_reach)} if self.wall_reach else {})
                         | ({"wall_keep": True} if self.wall_keep else {})
+                        | ({"composite_reach": float(self.composite_reach)} if self.composite_reach else {})
                         | ({"first": True} if self.first_design_before_passes() else {})}
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
@@ -717,7 +722,7 @@ class Tuner:
         ruled = surface_ruled_out(flown, self.pool)
         before = [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # the passes' or last design's answer
         keep = before if s.wall_keep and step + 1 == s.design_count() and (self.searches or step) else None
-        best, _ = surface_answer(flown, box, ruled, self.pool, **self._wall(keep))
+        best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best)
         self.stop_reason = reason
@@ -741,12 +746,13 @@ class Tuner:
                 return False
         return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
 
-    def _wall(self, keep: list[float] | None = None) -> dict[str, Any]:
-        """`surface.answer`'s options of the wall rules (`wall_reach`, `wall_keep` with the answer `keep` before the
-        last design); none when off (the answer's own defaults)."""
+    def _answer_options(self, keep: list[float] | None = None) -> dict[str, Any]:
+        """`surface.answer`'s options: the wall rules (`wall_reach`, `wall_keep` with the answer `keep` before the
+        last design) and a composite design's kernel (`composite_reach`); none when off (the answer's defaults)."""
         s = self.settings
+        wide = s.composite_reach and len(s.space) > 3
         return ({"risk_reach": float(s.wall_reach)} if s.wall_reach else {}) | (
-            {"keep": keep} if keep is not None else {})
+            {"keep": keep} if keep is not None else {}) | ({"reach": float(s.composite_reach)} if wide else {})
 
     def _first_design(self) -> float:
         """`design_first`: fly the first design (with `design_inner` a map of the box) before the passes, which start
@@ -761,10 +767,11 @@ class Tuner:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the fit's own answer without the bound and its
         chance when the bound moved it (None when not); None when no flight near the design failed."""
-        fit = surface_fly_away(flown, box, float(self.settings.wall_reach) or REACH)
+        options = self._answer_options()
+        fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None
-        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None, **self._wall())
+        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None, **options)
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
         names, s = list(self.settings.space), self.settings
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))

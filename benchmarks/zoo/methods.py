@@ -242,6 +242,9 @@ def walls(designs: dict[str, Any]) -> list[Method]:
                {**fit, **reach}, per_gain=42),
         Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the answer before the last design beside a "
                "wall 42 a gain", {**fit, **keep}, per_gain=42),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the answer before the last design beside a "
+               "wall, composite fit over 3.6 half-widths 42 a gain", {**fit, **keep, "composite_reach": 3.6},
+               per_gain=42),
         Method("default, divergence fit over 4 half-widths", reach),
         Method("default, the passes' answer beside a wall", keep),
     ]
