@@ -110,7 +110,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "wall_reach", "wall_keep", "composite_reach",
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "wall_span", "wall_keep", "composite_reach",
                    "budget")
 
 
@@ -226,15 +226,15 @@ class Tuning(_Section):
                                           "next design's own flights per three coefficients of its quadratic, at "
                                           "most 1 (4 gains' designs, each point flown once, narrow less: their "
                                           "fit's curvature stays above the noise)")
-    wall_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: the chance that a flight diverges, fitted "
-                              "to the run's flights within this many half-widths of the design's centre (0: the "
-                              "surface fit's own kernel, 2): a narrow design beside a wall sees the failed flights "
-                              "of the wider designs before it")
-    wall_keep: StrictBool = Field(False, description="design: the last design's answer is the answer before it (the "
-                                  "previous design's or the passes') where a flight within the divergence fit's "
-                                  "reach failed (`wall_reach`), unless a failed flight lies nearest it or on the way "
-                                  "to it: a narrow design beside a wall fits few safe flights and a wall it barely "
-                                  "sees")
+    wall_span: float = Field(0.0, ge=0.0, le=1.0, description="design: the chance that a flight diverges is fitted "
+                             "to the run's flights at least this share of each range from the design's centre (0: "
+                             "two half-widths of the design): a narrow design beside a wall sees the failed flights "
+                             "of the wider designs before it")
+    wall_keep: StrictBool = Field(False, description="design: the last design's answer is the previous design's "
+                                  "(which that design's own divergence fit bounded) where a flight within the "
+                                  "divergence fit's reach failed (`wall_span`), unless a failed flight lies nearest "
+                                  "it or on the way to it: a narrow design beside a wall fits few safe flights and a "
+                                  "wall it barely sees")
     composite_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: above three gains (a composite "
                                    "design, whose pure quadratic terms rest on its axis points alone) the surface "
                                    "fit's kernel reaches this many half-widths of the design (0: 2, as below), so "

@@ -232,21 +232,20 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
 
 
 def walls(designs: dict[str, Any]) -> list[Method]:
-    """The wall rules of the answer (lane "guard", issue 20): the divergence chance fitted over 4 half-widths of the
-    design (`wall_reach`), and the last design's answer the one before it where a flight that near failed
-    (`wall_keep`), on the designs alone at 42 flights a gain (D42fit) and on the default."""
+    """The answer's wall rules (lane "guard", issue 20): the divergence chance fitted to the flights at least 0.32 of
+    each range from the design's centre (`wall_span`: 4 half-widths of D42fit's last design, ±0.08), the last
+    design's answer the previous design's where a flight that near failed (`wall_keep`), a composite design's fit
+    over 3.6 half-widths (`composite_reach`), on the designs alone at 42 flights a gain (D42fit) and the default."""
     fit = {**designs, "design_shrink": 0.4, "design_shrink_fit": True}
-    reach, keep = {"wall_reach": 4.0}, {"wall_reach": 4.0, "wall_keep": True}
+    span, keep = {"wall_span": 0.32}, {"wall_span": 0.32, "wall_keep": True}
     return [
-        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), divergence fit over 4 half-widths 42 a gain",
-               {**fit, **reach}, per_gain=42),
-        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the answer before the last design beside a "
-               "wall 42 a gain", {**fit, **keep}, per_gain=42),
-        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the answer before the last design beside a "
-               "wall, composite fit over 3.6 half-widths 42 a gain", {**fit, **keep, "composite_reach": 3.6},
-               per_gain=42),
-        Method("default, divergence fit over 4 half-widths", reach),
-        Method("default, the passes' answer beside a wall", keep),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), divergence fit over 0.32 42 a gain",
+               {**fit, **span}, per_gain=42),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the previous design's answer beside a wall "
+               "42 a gain", {**fit, **keep}, per_gain=42),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the previous design's answer beside a wall, "
+               "composite fit over 3.6 half-widths 42 a gain", {**fit, **keep, "composite_reach": 3.6}, per_gain=42),
+        Method("default, divergence fit over 0.32", span),
     ]
 
 

@@ -343,12 +343,13 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     (the plane's minimum answered on a face of the design inside the ranges too) are the fit's variants
     benchmarks/answer_diagnostic.py --replay measures; the defaults are the measured choice. `risk_reach`: the
     divergence chance is fitted to the flights within that many half-widths of the design (None: `reach`), so a
-    narrow design sees the walls the wider ones before it flew into. With `keep` (the answer before this design:
-    the passes' or the previous design's, in shares of each range), the answer is `keep` wherever a flight within
-    that reach failed — unless a failed flight lies nearest it or on the way to it from the best point flown, or
-    it lies outside the box: a narrow design beside a wall fits few safe flights, and a wall it barely sees or sees
-    through a few unlucky failures (answer_diagnostic: the cliff's second design within 2 % of the optimum in
-    35 % of runs and no fly-away, the third, ±0.08 beside the wall, 12 % and 5 fly-aways)."""
+    narrow design sees the walls the wider ones before it flew into. With `keep` (the previous design's answer, in
+    shares of each range: bounded by that design's own divergence fit), the answer is `keep` wherever a flight
+    within that reach failed — unless a failed flight lies nearest it or on the way to it from the best point
+    flown, or it lies outside the box: a narrow design beside a wall fits few safe flights, and a wall it barely
+    sees or sees through a few unlucky failures (selection_guard.md: on the cliff the second design of the designs
+    alone answered within 2 % of the optimum in 35 % of runs and no fly-away, the third, ±0.08 beside the wall,
+    12 % and 5 fly-aways)."""
     from statistics import NormalDist
 
     import numpy as np
