@@ -51,8 +51,7 @@ from zoo.truth import WITHIN_PCT, Truth, key  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 CACHE = HERE / ".cache" / "answer"
-PREVIOUS = "previous"  # a variant's `keep`: the answer before the last design (the previous design's, or the passes'
-# where the run recorded it: one design)
+PREVIOUS = "previous"  # a variant's `keep`: the previous design's answer (`wall_keep`)
 VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options), each on the runs' own flights
     "the answer now (surface.answer's defaults)": {},
     "no plane (the quadratic and cubic alone)": {"plane_level": 0.0},
@@ -74,8 +73,8 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "divergence chance <= 1 %": {"risk": 0.01},
     "divergence fit reaching 4 half-widths": {"risk_reach": 4.0},
     "divergence fit reaching 6 half-widths": {"risk_reach": 6.0},
-    "the answer before the last design where a flight within 4 half-widths failed": {"keep": PREVIOUS,
-                                                                                      "risk_reach": 4.0},
+    "the previous design's answer beside a failed flight, divergence fit over 4 half-widths": {
+        "keep": PREVIOUS, "risk_reach": 4.0},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -197,12 +196,12 @@ def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) ->
             c = row["surface_calls"][-1]
             points = costs_of(c["points"])
             pool = NoisePool.prior(c["cv"], c["dof"]) if c["cv"] is not None and math.isfinite(c["cv"]) else None
-            if options.get("keep") == PREVIOUS:
-                before = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else c.get("keep")
-                options = {**options, "keep": before}
+            given = dict(options)
+            if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
+                given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
             x = list(surface.answer(points, [tuple(b) for b in c["box"]], surface.ruled_out(points, pool or
                                                                                              NoisePool()), pool,
-                                    **options)[0])
+                                    **given)[0])
         out.append({"plant": row["plant"], "run": row["run"], "x": x})
     judged(t, [tuple(r["x"]) for r in out], pm)
     for r in out:

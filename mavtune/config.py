@@ -232,9 +232,9 @@ class Tuning(_Section):
                              "of the wider designs before it")
     wall_keep: StrictBool = Field(False, description="design: the last design's answer is the previous design's "
                                   "(which that design's own divergence fit bounded) where a flight within the "
-                                  "divergence fit's reach failed (`wall_span`), unless a failed flight lies nearest "
-                                  "it or on the way to it: a narrow design beside a wall fits few safe flights and a "
-                                  "wall it barely sees")
+                                  "surface fit's kernel (two half-widths of the design) failed, unless a failed "
+                                  "flight lies nearest it or on the way to it: a narrow design beside a wall fits few "
+                                  "safe flights and a wall it barely sees")
     composite_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: above three gains (a composite "
                                    "design, whose pure quadratic terms rest on its axis points alone) the surface "
                                    "fit's kernel reaches this many half-widths of the design (0: 2, as below), so "

@@ -541,24 +541,23 @@ def test_a_divergence_fit_reaching_past_a_narrow_design_keeps_its_answer_off_the
     assert sum(far) < 0.5 * sum(near) and sum(near) / len(near) > 0.005
 
 
-def test_beside_a_wall_the_answer_before_the_design_stands_where_it_was_flown_safely():
-    """`keep`: where a flight within the divergence fit's reach failed, the answer is the one before the design
-    (flown: its centre); without a failure that near, or where a failed flight lies nearest it, the fit answers."""
+def test_beside_a_wall_the_previous_designs_answer_stands_where_it_was_flown_safely():
+    """`keep`: where a flight within the fit's kernel (two half-widths of the design) failed, the answer is the
+    previous design's (flown: this design's centre); with the failures farther, or a failed flight nearest it, the
+    fit answers."""
     from mavtune.search.evidence import NoisePool
     from mavtune.search.surface import ruled_out
 
     pool = NoisePool.prior(0.05, 100.0)
-    points, box = _narrow_beside_cliff(0)
-    ruled = ruled_out(points, pool)
-    fit, _ = answer(points, box, ruled, pool, risk_reach=4.0)
-    assert fit != (0.5, 0.4)
-    assert answer(points, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4)) == ((0.5, 0.4), False)
-    assert answer(points, box, ruled, pool, keep=(0.5, 0.4)) == answer(points, box, ruled, pool)  # none within 2
-    survived = {k: [c if math.isfinite(c) else 10.0 for c in v] for k, v in points.items()}
-    assert answer(survived, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4)) == answer(survived, box, ruled, pool,
-                                                                                         risk_reach=4.0)
-    walled = {**points, (0.54, 0.36): [math.inf]}  # a failed flight nearest the answer before: not answered
-    got, _ = answer(walled, box, ruled, pool, risk_reach=4.0, keep=(0.535, 0.365))
+    far, box = _narrow_beside_cliff(0)  # (the wide design's failures 2.5 half-widths and more from the centre)
+    near = {**far, (0.57, 0.38): [math.inf]}  # a flight beside the design's face toward the wall failed
+    for points in (far, near):
+        ruled = ruled_out(points, pool)
+        fit = answer(points, box, ruled, pool, risk_reach=4.0)
+        kept = answer(points, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4))
+        assert fit[0] != (0.5, 0.4) and kept == (((0.5, 0.4), False) if points is near else fit)
+    walled = {**near, (0.54, 0.36): [math.inf]}  # a failed flight nearest the previous answer: not answered
+    got, _ = answer(walled, box, ruled_out(walled, pool), pool, risk_reach=4.0, keep=(0.535, 0.365))
     assert got != (0.535, 0.365)
 
 

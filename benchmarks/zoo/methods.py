@@ -246,6 +246,7 @@ def walls(designs: dict[str, Any]) -> list[Method]:
         Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the previous design's answer beside a wall, "
                "composite fit over 3.6 half-widths 42 a gain", {**fit, **keep, "composite_reach": 3.6}, per_gain=42),
         Method("default, divergence fit over 0.32", span),
+        Method("default, the wall rules and composite fit over 3.6 half-widths", {**keep, "composite_reach": 3.6}),
     ]
 
 
