@@ -73,8 +73,9 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "divergence chance <= 1 %": {"risk": 0.01},
     "divergence fit reaching 4 half-widths": {"risk_reach": 4.0},
     "divergence fit reaching 6 half-widths": {"risk_reach": 6.0},
-    "the previous design's answer beside a failed flight, divergence fit over 4 half-widths": {
+    "the previous design's answer beside a failed flight and divergence fit over 4 half-widths": {
         "keep": PREVIOUS, "risk_reach": 4.0},
+    "kernel reach 3.6 half-widths": {"reach": 3.6},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
