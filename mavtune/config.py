@@ -212,8 +212,9 @@ class Tuning(_Section):
                                      "passes over the gains, which start from its answer (with `design_inner` a map "
                                      "of the box: the passes' held gains start near an optimum on an edge or in a "
                                      "corner); a number: that many designs fly first, each around the one before's "
-                                     "answer (at most `design_steps`); the later designs fly after the passes, "
-                                     "around their answer")
+                                     "answer (at most `design_steps`; under a budget all but the last, which flies "
+                                     "what the passes leave); the later designs fly after the passes, around their "
+                                     "answer")
     design_trust: StrictBool = Field(False, description="design: a design whose answer lies inside its box narrows "
                                      "the next one by `design_shrink` at most down to the answer's step from the "
                                      "box's centre (its share of the half-width, over the gains off the ranges' "

@@ -366,10 +366,12 @@ class Settings:
 
     def designs_before_passes(self) -> int:
         """Designs flown before the passes over the gains (`design_first`: true is the first one, a number that
-        many, at most all; none without a pass): the first a map of the box, the passes start from the last one's
-        answer."""
+        many; none without a pass): the first a map of the box, the passes start from the last one's answer. At
+        most all designs; under a budget all but the last, which flies what the passes leave (the budget exactly:
+        a line search may end before its share is spent)."""
         passes = self.bootstraps if self.bootstraps is not None else self.max_bootstraps
-        return min(int(self.design_first), self.design_count()) if passes else 0
+        most = self.design_count() - (1 if self.budget is not None else 0)
+        return max(0, min(int(self.design_first), most)) if passes else 0
 
     def line_searches(self) -> int:
         """Line searches a run of these settings may fly: one per gain and pass, and those across the gains."""

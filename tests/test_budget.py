@@ -300,3 +300,32 @@ def test_designs_first_then_a_pass_within_the_last_ones_box(gains, vehicles, ext
         assert all(lo - 1e-12 <= x <= hi + 1e-12 for x in flown)
         if rec.edge is not None and rec.edge["at_edge"]:
             assert rec.edge["last"] in (0.0, 1.0)
+
+
+@pytest.mark.parametrize("overrides, says", [
+    ({"tuning.design_first": -1}, "tuning.design_first: must be true, false or a number of designs from 0 to 100"),
+    ({"tuning.design_first": 1.5}, "tuning.design_first"),
+    ({"tuning.design_first": "two"}, "tuning.design_first"),
+    ({"tuning.design_pass_box": "yes"}, "tuning.design_pass_box"),
+])
+def test_a_count_of_designs_first_that_is_no_count_is_one_line(overrides, says):
+    with pytest.raises(MavtuneError) as err:
+        load_config(None, overrides)
+    assert says in str(err.value) and "\n" not in str(err.value)
+
+
+def test_more_designs_first_than_designs_leave_the_last_after_the_pass_under_a_budget():
+    """`design_first` at or above `design_steps`: under a budget every design but the last flies before the pass
+    and the last after it, flying what the pass leaves (the budget exactly, as the plan says: a line search may end
+    before its share is spent); without one every design flies first and the pass's answer is the run's. True and 1
+    are the same setting (one fingerprint: a journal of either resumes the other)."""
+    for options in ({"design_first": True}, {"design_first": 5, "design_steps": 2, "design_pass_box": True}):
+        s = Tuning().settings(**options)
+        assert s.designs_before_passes() == s.design_count() - 1
+        for seed in range(4):
+            result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(seed, 0.05), 2), draws=0)
+            assert result.rounds[-1].gain == "design" and result.flights == s.budget == make_plan(s).flights
+    free = Tuning().settings(design_first=5, design_steps=2, budget="none")
+    assert free.designs_before_passes() == 2
+    assert run_tuning(free, NoisyFleet(2), draws=0).rounds[-1].gain != "design"
+    assert Tuning().settings(design_first=1).fingerprint() == Tuning().settings(design_first=True).fingerprint()
