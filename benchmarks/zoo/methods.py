@@ -242,6 +242,9 @@ def hybrid(designs: dict[str, Any]) -> list[Method]:
                {**fit, "bootstraps": 1, "design_first": True, "design_shrink": 0.5}, per_gain=42),
         Method("map, 1 pass, then ±0.2, ±0.08, moved 1.5x past a face (shrink fit) 42 a gain",
                {**fit, "bootstraps": 1, "design_first": True, "design_move": 1.5}, per_gain=42),
+        *(Method(f"map, 1 pass, then ±{0.5 * k:g} (shrink fit) 42 a gain",
+                 {**fit, "bootstraps": 1, "design_first": True, "design_steps": 2, "design_shrink": k}, per_gain=42)
+          for k in (0.3, 0.4)),
         Method("map, ±0.2, 1 pass within its box, then ±0.08 (shrink fit) 42 a gain",
                {**fit, "bootstraps": 1, "design_first": 2, "design_pass_box": True}, per_gain=42),
         Method("map, ±0.2, 1 pass over the ranges, then ±0.08 (shrink fit) 42 a gain",
