@@ -182,6 +182,7 @@ def candidates() -> list[Method]:
         Method("budget 28 flights a gain, 1 pass", {"bootstraps": 1}, per_gain=28),
         *small_candidates(designs),
         *moved(),
+        Method("default, at most 112 flights (the issue's worst run; 28 a gain on 4 gains)", {"budget": 112}),
     ]
 
 
