@@ -86,10 +86,11 @@ def tune(
     design_inner: bool = DEFAULT,
     budget: int | str | None = DEFAULT,
     design_move: float = DEFAULT,
-    design_first: bool = DEFAULT,
+    design_first: bool | int = DEFAULT,
     design_trust: bool = DEFAULT,
     design_shrink_wall: float = DEFAULT,
     design_shrink_fit: bool = DEFAULT,
+    design_pass_box: bool = DEFAULT,
     wall_span: float = DEFAULT,
     wall_keep: bool = DEFAULT,
     composite_reach: float = DEFAULT,
@@ -144,8 +145,9 @@ def tune(
         design=design, design_width=design_width, design_repeats=design_repeats, design_steps=design_steps,
         design_shrink=design_shrink, design_split=design_split, design_inner=design_inner,
         design_move=design_move, design_first=design_first, design_trust=design_trust,
-        design_shrink_wall=design_shrink_wall, design_shrink_fit=design_shrink_fit, wall_span=wall_span,
-        wall_keep=wall_keep, composite_reach=composite_reach, budget=budget)
+        design_shrink_wall=design_shrink_wall, design_shrink_fit=design_shrink_fit,
+        design_pass_box=design_pass_box, wall_span=wall_span, wall_keep=wall_keep,
+        composite_reach=composite_reach, budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")

@@ -110,8 +110,8 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "wall_span", "wall_keep", "composite_reach",
-                   "budget")
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
+                   "wall_keep", "composite_reach", "budget")
 
 
 
@@ -209,10 +209,13 @@ class Tuning(_Section):
                                "inside the ranges: this many times the way from the box's centre to that face (1: "
                                "centred on the face; 2: one box width on), shortened so that no point of it lies "
                                "beyond a failed flight; 0: every next design is centred on the run's answer")
-    design_first: StrictBool = Field(False, description="design: the first design flies before the passes over "
-                                     "the gains, which start from its answer (with `design_inner` a map of the box: "
-                                     "the passes' held gains start near an optimum on an edge or in a corner); the "
-                                     "later designs fly after the passes, around their answer")
+    design_first: StrictBool | StrictInt = Field(False, description="design: the first design flies before the "
+                                     "passes over the gains, which start from its answer (with `design_inner` a map "
+                                     "of the box: the passes' held gains start near an optimum on an edge or in a "
+                                     "corner); a number: that many designs fly first, each around the one before's "
+                                     "answer (at most `design_steps`; under a budget all but the last, which flies "
+                                     "what the passes leave); the later designs fly after the passes, around their "
+                                     "answer")
     design_trust: StrictBool = Field(False, description="design: a design whose answer lies inside its box narrows "
                                      "the next one by `design_shrink` at most down to the answer's step from the "
                                      "box's centre (its share of the half-width, over the gains off the ranges' "
@@ -226,6 +229,12 @@ class Tuning(_Section):
                                           "next design's own flights per three coefficients of its quadratic, at "
                                           "most 1 (4 gains' designs, each point flown once, narrow less: their "
                                           "fit's curvature stays above the noise)")
+    design_pass_box: StrictBool = Field(False, description="design: after the designs flown first "
+                                        "(`design_first`), each line search of the passes flies within the last "
+                                        "one's half-width of the gain's answer so far (shifted inside the range), "
+                                        "not over the whole range: a trust region around the designs' answer, "
+                                        "searched at the line search's finer steps (a narrow valley between the "
+                                        "design's points)")
     wall_span: float = Field(0.0, ge=0.0, le=1.0, description="design: the chance that a flight diverges is fitted "
                              "to the run's flights at least this share of each range from the design's centre (0: "
                              "two half-widths of the design): a narrow design beside a wall sees the failed flights "
@@ -296,6 +305,13 @@ class Tuning(_Section):
     def _whole_flights(cls, v: int | str) -> int | str:
         if isinstance(v, int) and v < 1:
             raise ValueError("must be at least 1 flight, \"auto\" or \"none\"")
+        return v
+
+    @field_validator("design_first")
+    @classmethod
+    def _designs_counted(cls, v: bool | int) -> bool | int:
+        if not isinstance(v, bool) and not 0 <= v <= MAX_DESIGN_REPEATS:
+            raise ValueError(f"must be true, false or a number of designs from 0 to {MAX_DESIGN_REPEATS}")
         return v
 
     @field_validator("bootstraps")

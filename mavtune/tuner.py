@@ -102,13 +102,14 @@ class LineSearchRecord:
     stop_reason: str | None = None
     edge: dict[str, Any] | None = None  # the answer at the end of the span flown: the evidence there (edge_evidence)
     beside_failure: float | None = None  # a failed point next to the answer, if any
+    span: tuple[float, float] | None = None  # the range it searched when narrower than the gain's (design_pass_box)
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "bootstrap": self.bootstrap, "gain": self.gain, "held": self.held, "result": self.result,
             "evaluations": self.evaluations, "brackets": [list(i.bracket) for i in self.iterations],
             "bracket": list(self.bracket), "stop_reason": self.stop_reason, "edge": self.edge,
-            "beside_failure": self.beside_failure,
+            "beside_failure": self.beside_failure, **({"span": list(self.span)} if self.span else {}),
             "comparisons": [
                 {"bracket": list(i.bracket), "points": list(i.points), "means": list(i.costs), "se": list(i.se),
                  "n": list(i.n), "best": i.best, "p_correct": i.p_correct}
@@ -249,10 +250,11 @@ class Settings:
     design_split: bool | str = False
     design_inner: bool = False
     design_move: float = 0.0
-    design_first: bool = False
+    design_first: bool | int = False
     design_trust: bool = False
     design_shrink_wall: float = 0.0
     design_shrink_fit: bool = False
+    design_pass_box: bool = False
     wall_span: float = 0.0
     wall_keep: bool = False
     composite_reach: float = 0.0
@@ -313,8 +315,12 @@ class Settings:
                                "to 3 (how far past a face of the design its next one moves, in the way to that face)")
         if self.design_inner not in (True, False):
             raise MavtuneError(f"design_inner must be true or false, got {self.design_inner!r}")
-        if self.design_first not in (True, False):
-            raise MavtuneError(f"design_first must be true or false, got {self.design_first!r}")
+        if not (self.design_first in (True, False) or (type(self.design_first) is int
+                                                      and 0 <= self.design_first <= MAX_DESIGN_REPEATS)):
+            raise MavtuneError(f"design_first must be true, false or a number of designs from 0 to "
+                               f"{MAX_DESIGN_REPEATS}, got {self.design_first!r}")
+        if self.design_pass_box not in (True, False):
+            raise MavtuneError(f"design_pass_box must be true or false, got {self.design_pass_box!r}")
         if self.design_trust not in (True, False):
             raise MavtuneError(f"design_trust must be true or false, got {self.design_trust!r}")
         if not (float(self.design_shrink_wall) == 0.0 or 0.0 < float(self.design_shrink_wall) <= 1.0):
@@ -369,11 +375,14 @@ class Settings:
         return (sum(math.ceil(self.design_flights(k) / v) * v for k in range(start, count - 1))
                 + self.design_flights(count - 1))
 
-    def first_design_before_passes(self) -> bool:
-        """Whether the first design flies before the passes over the gains (`design_first`, with a pass and a
-        design): a map of the box whose answer the passes start from."""
+    def designs_before_passes(self) -> int:
+        """Designs flown before the passes over the gains (`design_first`: true is the first one, a number that
+        many; none without a pass): the first a map of the box, the passes start from the last one's answer. At
+        most all designs; under a budget all but the last, which flies what the passes leave (the budget exactly:
+        a line search may end before its share is spent)."""
         passes = self.bootstraps if self.bootstraps is not None else self.max_bootstraps
-        return bool(self.design_first) and self.design_count() > 0 and passes > 0
+        most = self.design_count() - (1 if self.budget is not None else 0)
+        return max(0, min(int(self.design_first), most)) if passes else 0
 
     def line_searches(self) -> int:
         """Line searches a run of these settings may fly: one per gain and pass, and those across the gains."""
@@ -490,7 +499,9 @@ class Settings:
                         | ({"wall_span": float(self.wall_span)} if self.wall_span else {})
                         | ({"wall_keep": True} if self.wall_keep else {})
                         | ({"composite_reach": float(self.composite_reach)} if self.composite_reach else {})
-                        | ({"first": True} if self.first_design_before_passes() else {})}
+                        | ({"first": True} if self.designs_before_passes() == 1 else
+                           {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
+                        | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
 
@@ -531,6 +542,7 @@ class Tuner:
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
+        self._pass_half: float | None = None  # the half-width of the last design flown before the passes
         self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self._step: tuple[list[tuple[float, float]], tuple[float, ...], bool] | None = None  # last design's box,
@@ -559,13 +571,19 @@ class Tuner:
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
                             designed=self.designed, divergence=self.divergence)
 
-    @staticmethod
-    def _record(bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
-        """What a line search has done: its comparisons, flights by point, bracket and stop reason."""
+    def _record(self, bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
+        """What a line search has done: its comparisons, flights by point, bracket and stop reason (and the range
+        it searched when narrower than the gain's: an end of it that is no bound of the range is no edge)."""
         done = search.done and (bool(search.history) or search.stop_reason is None)
+        edge = search.edge_evidence() if done else None
+        span = (search.lo, search.hi) if (search.lo, search.hi) != self.settings.space.get(name) else None
+        if edge is not None and span is not None and name in self.settings.space:
+            lo, hi = self.settings.space[name]
+            bound = hi if edge["side"] == "upper" else lo
+            edge = {**edge, "at_edge": edge["at_edge"] and abs(edge["last"] - bound) <= 1e-9 * (hi - lo)}
         return LineSearchRecord(bootstrap, name, held, list(search.history), result, search.evaluations,
-                                search.samples(), search.bracket, search.stop_reason,
-                                search.edge_evidence() if done else None, search.beside_failure() if done else None)
+                                search.samples(), search.bracket, search.stop_reason, edge,
+                                search.beside_failure() if done else None, span)
 
     def uncertainty(self) -> dict[str, dict[str, float]]:
         """Per tuned gain its interval, from the flights of the last line search that set it."""
@@ -581,7 +599,8 @@ class Tuner:
         out = {}
         for name, (i, rec) in last.items():
             lo, hi = s.space[name]
-            interval = resample(lambda pool: s.search(lo, hi, pool),
+            a, b = rec.span or (lo, hi)  # the range the line search flew over
+            interval = resample(lambda pool: s.search(a, b, pool),
                                 lambda search: rule.assign(search, int(s.vehicles), speculate=False),
                                 rec.samples, self.pool, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
@@ -618,12 +637,12 @@ class Tuner:
         s = self.settings
         found: list[Gains] = []
         limit = s.bootstraps if s.bootstraps is not None else s.max_bootstraps
-        half = self._first_design() if s.first_design_before_passes() else s.design_width
+        half = self._designs_first() if s.designs_before_passes() else s.design_width
         for self.bootstrap in range(1, limit + 1):
             undecided = []
             start = dict(self.gains)
             for name, (lo, hi) in s.space.items():
-                search = s.search(lo, hi, self.pool)
+                search = s.search(*self._pass_range(name), self.pool)
                 held = {n: v for n, v in self.gains.items() if n != name}
                 self._active = (self.bootstrap, name, held, search)
                 while not search.done and self._within_share(search):
@@ -721,7 +740,8 @@ class Tuner:
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
         ruled = surface_ruled_out(flown, self.pool)
         before = [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # the previous design's answer
-        keep = before if s.wall_keep and step + 1 == s.design_count() and self._design_answers else None
+        keep = before if (s.wall_keep and step + 1 == s.design_count() and self._design_answers
+                          and self._design_answers[-1] == self.gains) else None  # (not the passes' answer)
         best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half)
@@ -755,13 +775,29 @@ class Tuner:
         return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
             {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {})
 
-    def _first_design(self) -> float:
-        """`design_first`: fly the first design (with `design_inner` a map of the box) before the passes, which start
-        from its answer; the half-width of the design after the passes (narrowed as `_surface` says)."""
+    def _designs_first(self) -> float:
+        """`design_first`: fly the first designs (the first with `design_inner` a map of the box) before the passes,
+        which start from the last one's answer, each narrowed or moved as `_surface` says; the half-width of the
+        design after the passes. With `design_pass_box` the passes search within the last one's half-width."""
         half = self.settings.design_width
-        narrow = self._surface(half)
+        for _ in range(self.settings.designs_before_passes()):
+            self._pass_half = half
+            if self._surface(half):
+                half *= self._shrink()
         self._centre = None  # the next design goes around the passes' answer
-        return half * self._shrink() if narrow else half
+        return half
+
+    def _pass_range(self, name: str) -> tuple[float, float]:
+        """The range a pass's line search over gain `name` flies: the gain's range, or with `design_pass_box` after
+        designs flown first the last one's half-width either side of the gain now (a trust region around its
+        answer: a narrow valley the design's spacing cannot see, searched at the line search's finer steps),
+        shifted inside the range, not shrunk."""
+        lo, hi = self.settings.space[name]
+        if not self.settings.design_pass_box or self._pass_half is None:
+            return lo, hi
+        half = self._pass_half * (hi - lo)
+        a = min(max(self.gains[name] - half, lo), hi - 2 * half)
+        return a, min(a + 2 * half, hi)
 
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
                     ruled: Any, best: tuple[float, ...], half: float) -> dict[str, Any] | None:
@@ -790,7 +826,7 @@ class Tuner:
         if s.budget is None:
             return list(queue), None
         share = s.design_share(step, int(s.budget) - self._spent())
-        if not self.searches and s.first_design_before_passes():  # before the passes: its own flights, whole rounds
+        if step < s.designs_before_passes():  # before the passes: its own flights, whole rounds
             share = math.ceil(s.design_flights(step) / int(s.vehicles)) * int(s.vehicles)
         more = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, points[k % len(points)])}
                 for k in range(max(0, share - len(queue)))]

@@ -267,3 +267,65 @@ def test_a_first_design_flies_before_the_passes_which_start_from_its_answer(gain
     mapped = result.rounds[first].assignments[0]  # the first line search: the other gains where the map answered
     held = result.searches[0].held
     assert all(math.isclose(mapped[n], v) for n, v in held.items())
+
+
+@given(st.integers(1, 3), st.integers(1, 3), st.integers(0, 40), st.integers(0, 10**6), st.booleans())
+@settings(max_examples=15, deadline=None)
+def test_designs_first_then_a_pass_within_the_last_ones_box(gains, vehicles, extra, seed, boxed):
+    """`design_first = 2`: the map and the design around its answer fly their own flights before any line search;
+    with `design_pass_box` each line search of the pass flies only within the second design's half-width of the
+    gain where it starts (its span as wide as that design's box, inside the range; an end of it that is no bound of
+    the range is no edge), without it over the whole range; the last design flies after the pass; the run flies
+    the plan's flights, the budget exactly."""
+    s = budgeted(gains, vehicles, extra + 2 * gains * vehicles, bootstraps=1, design_first=2, design_pass_box=boxed,
+                 design_inner=True, design_width=0.5, design_steps=3, design_shrink=0.4, design_split="auto")
+    assert s.designs_before_passes() == 2 and s.fingerprint()["design"]["first"] == 2
+    result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(seed), vehicles), draws=0)
+    kinds = [r.gain for r in result.rounds]
+    first = next((i for i, k in enumerate(kinds) if k != "design"), len(kinds))
+    own = [math.ceil(s.design_flights(k) / vehicles) * vehicles for k in range(2)]
+    assert sum(len(r.flights) for r in result.rounds[:first]) == sum(own)
+    assert kinds[-1] == "design" and set(kinds[first:]) > {"design"}
+    assert result.flights == make_plan(s).flights == s.budget
+    second = [r.assignments for r in result.rounds[:first]]
+    second = [a for rnd in second for a in rnd][own[0]:]  # the second design's points (and its spare vehicles)
+    for rec in result.searches:
+        flown = [x for x, c in rec.samples.items()]
+        if not boxed:
+            assert rec.span is None and "span" not in rec.to_dict()
+            continue
+        lo, hi = rec.span or (0.0, 1.0)  # (a second design as wide as the range: the whole range)
+        extent = max(a[rec.gain] for a in second) - min(a[rec.gain] for a in second)
+        assert 0.0 <= lo < hi <= 1.0 and math.isclose(hi - lo, extent, abs_tol=1e-9)
+        assert all(lo - 1e-12 <= x <= hi + 1e-12 for x in flown)
+        if rec.edge is not None and rec.edge["at_edge"]:
+            assert rec.edge["last"] in (0.0, 1.0)
+
+
+@pytest.mark.parametrize("overrides, says", [
+    ({"tuning.design_first": -1}, "tuning.design_first: must be true, false or a number of designs from 0 to 100"),
+    ({"tuning.design_first": 1.5}, "tuning.design_first"),
+    ({"tuning.design_first": "two"}, "tuning.design_first"),
+    ({"tuning.design_pass_box": "yes"}, "tuning.design_pass_box"),
+])
+def test_a_count_of_designs_first_that_is_no_count_is_one_line(overrides, says):
+    with pytest.raises(MavtuneError) as err:
+        load_config(None, overrides)
+    assert says in str(err.value) and "\n" not in str(err.value)
+
+
+def test_more_designs_first_than_designs_leave_the_last_after_the_pass_under_a_budget():
+    """`design_first` at or above `design_steps`: under a budget every design but the last flies before the pass
+    and the last after it, flying what the pass leaves (the budget exactly, as the plan says: a line search may end
+    before its share is spent); without one every design flies first and the pass's answer is the run's. True and 1
+    are the same setting (one fingerprint: a journal of either resumes the other)."""
+    for options in ({"design_first": True}, {"design_first": 5, "design_steps": 2, "design_pass_box": True}):
+        s = Tuning().settings(**options)
+        assert s.designs_before_passes() == s.design_count() - 1
+        for seed in range(4):
+            result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(seed, 0.05), 2), draws=0)
+            assert result.rounds[-1].gain == "design" and result.flights == s.budget == make_plan(s).flights
+    free = Tuning().settings(design_first=5, design_steps=2, budget="none")
+    assert free.designs_before_passes() == 2
+    assert run_tuning(free, NoisyFleet(2), draws=0).rounds[-1].gain != "design"
+    assert Tuning().settings(design_first=1).fingerprint() == Tuning().settings(design_first=True).fingerprint()

@@ -561,15 +561,16 @@ def test_beside_a_wall_the_previous_designs_answer_stands_where_it_was_flown_saf
     assert got != (0.535, 0.365)
 
 
-@pytest.mark.parametrize("bootstraps, steps", [(0, 2), (0, 3), (1, 1)])
-def test_only_the_last_design_keeps_the_previous_designs_answer_beside_a_wall(bootstraps, steps):
+@pytest.mark.parametrize("bootstraps, steps, first", [(0, 2, False), (0, 3, False), (1, 1, False), (1, 2, True)])
+def test_only_the_last_design_keeps_the_previous_designs_answer_beside_a_wall(bootstraps, steps, first):
     """`wall_keep`: beside a failed flight (kp + kd above 1.3: each design's far corner) the last design answers the
     previous design's answer (its own centre); the designs before it answer their own fits, and a design after the
-    passes alone answers its fit (the passes' answer had no divergence bound)."""
+    passes answers its fit (the passes' answer had no divergence bound), designs flown before them or not."""
     wallcost = bowl((0.7, 0.6))
     cost = lambda gs: [math.inf if g["kp"] + g["kd"] > 1.3 else c for g, c in zip(gs, wallcost(gs))]  # noqa: E731
     common = dict(space=SPACE, vehicles=2, bootstraps=bootstraps, design_width=0.15, design_steps=steps,
-                  initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None, adaptive=False, edges=False, wall_span=0.6)
+                  initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None, adaptive=False, edges=False, wall_span=0.6,
+                  design_first=first)
     kept = mavtune.tune(cost, wall_keep=True, **common)
     fitted = mavtune.tune(cost, **common)
     designs = [r for r in kept.rounds if r.gain == "design"]

@@ -182,6 +182,7 @@ def candidates() -> list[Method]:
         Method("budget 28 flights a gain, 1 pass", {"bootstraps": 1}, per_gain=28),
         *small_candidates(designs),
         *moved(),
+        Method("default, at most 112 flights (the issue's worst run; 28 a gain on 4 gains)", {"budget": 112}),
     ]
 
 
@@ -228,6 +229,28 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
         *walls(designs),
         Method("map, the default's 2 passes from its answer, then ±0.15 42 a gain",
                {**mapped, "bootstraps": 2, "design_shrink": 0.3}, per_gain=42),
+        *hybrid(designs),
+    ]
+
+
+def hybrid(designs: dict[str, Any]) -> list[Method]:
+    """The designs' map and the default's line searches in one run at the default's 42 flights a gain (lane
+    "hybrid", issue 20): the designs find edge and corner optima, a line search a narrow curved valley."""
+    fit = {**designs, "design_shrink": 0.4, "design_shrink_fit": True}  # D42fit: map, ±0.2, ±0.08
+    return [
+        Method("map, 1 pass, then ±0.2, ±0.08 (shrink fit) 42 a gain",
+               {**fit, "bootstraps": 1, "design_first": True}, per_gain=42),
+        Method("map, 1 pass, then ±0.25, ±0.125 (shrink fit) 42 a gain",
+               {**fit, "bootstraps": 1, "design_first": True, "design_shrink": 0.5}, per_gain=42),
+        Method("map, 1 pass, then ±0.2, ±0.08, moved 1.5x past a face (shrink fit) 42 a gain",
+               {**fit, "bootstraps": 1, "design_first": True, "design_move": 1.5}, per_gain=42),
+        *(Method(f"map, 1 pass, then ±{0.5 * k:g} (shrink fit) 42 a gain",
+                 {**fit, "bootstraps": 1, "design_first": True, "design_steps": 2, "design_shrink": k}, per_gain=42)
+          for k in (0.3, 0.4)),
+        Method("map, ±0.2, 1 pass within its box, then ±0.08 (shrink fit) 42 a gain",
+               {**fit, "bootstraps": 1, "design_first": 2, "design_pass_box": True}, per_gain=42),
+        Method("map, ±0.2, 1 pass over the ranges, then ±0.08 (shrink fit) 42 a gain",
+               {**fit, "bootstraps": 1, "design_first": 2}, per_gain=42),
     ]
 
 
