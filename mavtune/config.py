@@ -235,10 +235,11 @@ class Tuning(_Section):
                                         "not over the whole range: a trust region around the designs' answer, "
                                         "searched at the line search's finer steps (a narrow valley between the "
                                         "design's points)")
-    wall_span: float = Field(0.0, ge=0.0, le=1.0, description="design: the chance that a flight diverges is fitted "
+    wall_span: float = Field(0.32, ge=0.0, le=1.0, description="design: the chance that a flight diverges is fitted "
                              "to the run's flights at least this share of each range from the design's centre (0: "
                              "two half-widths of the design): a narrow design beside a wall sees the failed flights "
-                             "of the wider designs before it")
+                             "of the wider designs before it (0.32: chosen on the zoo's select half, "
+                             "selection_guard_span.md)")
     wall_keep: StrictBool = Field(False, description="design: the last design's answer is the previous design's "
                                   "(which that design's own divergence fit bounded) where a flight within the "
                                   "surface fit's kernel (two half-widths of the design) failed, unless a failed "
