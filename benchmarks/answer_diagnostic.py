@@ -51,6 +51,7 @@ from zoo.truth import WITHIN_PCT, Truth, key  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 CACHE = HERE / ".cache" / "answer"
+PREVIOUS = "previous"  # a variant's `keep`: the previous design's answer (`wall_keep`)
 VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options), each on the runs' own flights
     "the answer now (surface.answer's defaults)": {},
     "no plane (the quadratic and cubic alone)": {"plane_level": 0.0},
@@ -70,6 +71,11 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "no divergence bound": {"risk": None},
     "divergence chance <= 0.3 %": {"risk": 0.003},
     "divergence chance <= 1 %": {"risk": 0.01},
+    "divergence fit reaching 4 half-widths": {"risk_reach": 4.0},
+    "divergence fit reaching 6 half-widths": {"risk_reach": 6.0},
+    "the previous design's answer beside a failed flight and divergence fit over 4 half-widths": {
+        "keep": PREVIOUS, "risk_reach": 4.0},
+    "kernel reach 3.6 half-widths": {"reach": 3.6},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -90,9 +96,10 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
 
     def recorded(points, box, worse=(), pool=None, **options):
         out = original(points, box, worse, pool, **options)
-        if options:  # the divergence caution's unbounded answer (risk=None): not the run's answer
-            return out
-        calls.append({"points": [[list(k), [c if math.isfinite(c) else "inf" for c in v]] for k, v in points.items()],
+        if "risk" in options and options["risk"] is None:  # the divergence caution's unbounded answer: not the
+            return out  # run's answer
+        calls.append({"keep": list(options["keep"]) if options.get("keep") is not None else None,
+                      "points": [[list(k), [c if math.isfinite(c) else "inf" for c in v]] for k, v in points.items()],
                       "box": [list(b) for b in box], "cv": pool.cv if pool is not None else math.nan,
                       "dof": pool.dof if pool is not None else 0.0, "answer": list(out[0]), "fitted": out[1]})
         return out
@@ -190,9 +197,12 @@ def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) ->
             c = row["surface_calls"][-1]
             points = costs_of(c["points"])
             pool = NoisePool.prior(c["cv"], c["dof"]) if c["cv"] is not None and math.isfinite(c["cv"]) else None
+            given = dict(options)
+            if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
+                given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
             x = list(surface.answer(points, [tuple(b) for b in c["box"]], surface.ruled_out(points, pool or
                                                                                              NoisePool()), pool,
-                                    **options)[0])
+                                    **given)[0])
         out.append({"plant": row["plant"], "run": row["run"], "x": x})
     judged(t, [tuple(r["x"]) for r in out], pm)
     for r in out:

@@ -91,6 +91,9 @@ def tune(
     design_shrink_wall: float = DEFAULT,
     design_shrink_fit: bool = DEFAULT,
     design_pass_box: bool = DEFAULT,
+    wall_span: float = DEFAULT,
+    wall_keep: bool = DEFAULT,
+    composite_reach: float = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
     max_rounds: int = MAX_ROUNDS,
@@ -143,7 +146,8 @@ def tune(
         design_shrink=design_shrink, design_split=design_split, design_inner=design_inner,
         design_move=design_move, design_first=design_first, design_trust=design_trust,
         design_shrink_wall=design_shrink_wall, design_shrink_fit=design_shrink_fit,
-        design_pass_box=design_pass_box, budget=budget)
+        design_pass_box=design_pass_box, wall_span=wall_span, wall_keep=wall_keep,
+        composite_reach=composite_reach, budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")

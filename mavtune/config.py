@@ -110,7 +110,8 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "budget")
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
+                   "wall_keep", "composite_reach", "budget")
 
 
 
@@ -234,6 +235,20 @@ class Tuning(_Section):
                                         "not over the whole range: a trust region around the designs' answer, "
                                         "searched at the line search's finer steps (a narrow valley between the "
                                         "design's points)")
+    wall_span: float = Field(0.32, ge=0.0, le=1.0, description="design: the chance that a flight diverges is fitted "
+                             "to the run's flights at least this share of each range from the design's centre (0: "
+                             "two half-widths of the design): a narrow design beside a wall sees the failed flights "
+                             "of the wider designs before it (0.32: chosen on the zoo's select half, "
+                             "selection_guard_span.md)")
+    wall_keep: StrictBool = Field(False, description="design: the last design's answer is the previous design's "
+                                  "(which that design's own divergence fit bounded) where a flight within the "
+                                  "surface fit's kernel (two half-widths of the design) failed, unless a failed "
+                                  "flight lies nearest it or on the way to it: a narrow design beside a wall fits few "
+                                  "safe flights and a wall it barely sees")
+    composite_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: above three gains (a composite "
+                                   "design, whose pure quadratic terms rest on its axis points alone) the surface "
+                                   "fit's kernel reaches this many half-widths of the design (0: 2, as below), so "
+                                   "the flights of the wider design before it count too")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

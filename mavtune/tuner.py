@@ -29,7 +29,7 @@ from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    fly_away as surface_fly_away, next_centre as surface_next_centre, ruled_out as surface_ruled_out,
+    fly_away as surface_fly_away, next_centre as surface_next_centre, ruled_out as surface_ruled_out, REACH,
 )
 from mavtune.search.risk import RISK
 from mavtune.strategy import Strategy
@@ -255,6 +255,9 @@ class Settings:
     design_shrink_wall: float = 0.0
     design_shrink_fit: bool = False
     design_pass_box: bool = False
+    wall_span: float = 0.0
+    wall_keep: bool = False
+    composite_reach: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -325,6 +328,14 @@ class Settings:
                                "the next design's half-width over one in whose box a flight failed")
         if self.design_shrink_fit not in (True, False):
             raise MavtuneError(f"design_shrink_fit must be true or false, got {self.design_shrink_fit!r}")
+        if not 0.0 <= float(self.wall_span) <= 1.0:
+            raise MavtuneError(f"wall_span {self.wall_span} is outside [0, 1]: the share of each range the divergence "
+                               "fit reaches from the design's centre at least (0: two half-widths of the design)")
+        if not 0.0 <= float(self.composite_reach) <= 10.0:
+            raise MavtuneError(f"composite_reach {self.composite_reach} is outside [0, 10]: half-widths of the design "
+                               "the fit reaches above three gains (0: the fit's own kernel)")
+        if self.wall_keep not in (True, False):
+            raise MavtuneError(f"wall_keep must be true or false, got {self.wall_keep!r}")
         if self.design_split not in (True, False, "auto"):
             raise MavtuneError(f"design_split must be true, false or \"auto\", got {self.design_split!r}")
         self.search(0.0, 1.0)  # validates
@@ -485,6 +496,9 @@ class Settings:
                         | ({"trust": True} if self.design_trust else {})
                         | ({"shrink_wall": float(self.design_shrink_wall)} if self.design_shrink_wall else {})
                         | ({"shrink_fit": True} if self.design_shrink_fit else {})
+                        | ({"wall_span": float(self.wall_span)} if self.wall_span else {})
+                        | ({"wall_keep": True} if self.wall_keep else {})
+                        | ({"composite_reach": float(self.composite_reach)} if self.composite_reach else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
@@ -725,9 +739,12 @@ class Tuner:
                 self.pool.add((SURFACE, tuple(a[n] for n in names)), cost)
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
         ruled = surface_ruled_out(flown, self.pool)
-        best, _ = surface_answer(flown, box, ruled, self.pool)
+        before = [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # the previous design's answer
+        keep = before if (s.wall_keep and step + 1 == s.design_count() and self._design_answers
+                          and self._design_answers[-1] == self.gains) else None  # (not the passes' answer)
+        best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
-        self.divergence = self._divergence(flown, box, ruled, best)
+        self.divergence = self._divergence(flown, box, ruled, best, half)
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
         for rec in last.values():  # the caution of an answer next to a failed flight is the final answer's
@@ -748,6 +765,15 @@ class Tuner:
             if moved:
                 return False
         return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
+
+    def _answer_options(self, half: float, keep: list[float] | None = None) -> dict[str, Any]:
+        """`surface.answer`'s options for a design of half-width `half`: the wall rules (`wall_span` in half-widths,
+        `wall_keep` with the previous design's answer `keep`) and a composite design's kernel (`composite_reach`);
+        none when off (the answer's defaults)."""
+        s = self.settings
+        reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
+        return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
+            {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {})
 
     def _designs_first(self) -> float:
         """`design_first`: fly the first designs (the first with `design_inner` a map of the box) before the passes,
@@ -774,14 +800,15 @@ class Tuner:
         return a, min(a + 2 * half, hi)
 
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
-                    ruled: Any, best: tuple[float, ...]) -> dict[str, Any] | None:
+                    ruled: Any, best: tuple[float, ...], half: float) -> dict[str, Any] | None:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the fit's own answer without the bound and its
         chance when the bound moved it (None when not); None when no flight near the design failed."""
-        fit = surface_fly_away(flown, box)
+        options = self._answer_options(half)
+        fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None
-        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None)
+        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None, **options)
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
         names, s = list(self.settings.space), self.settings
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))

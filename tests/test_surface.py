@@ -507,3 +507,110 @@ def test_a_plane_answers_a_range_bound_never_a_corner_of_the_design_inside_the_r
         else:
             assert got == plane
     assert replaced >= 5
+
+
+def _narrow_beside_cliff(seed: int) -> tuple[dict, list[tuple[float, float]]]:
+    """`_stochastic_cliff`'s wide design and a narrow one (±0.04, 3 × 3, each point flown 3 times, every flight
+    surviving) around (0.5, 0.4), its right face 0.04 of kp from the moving wall: the wide design's failed flights
+    lie 2.5 half-widths and more from its centre, beyond the surface fit's kernel (2)."""
+    points, _ = _stochastic_cliff(seed)
+    rng = random.Random(seed + 100)
+    for kp in (0.46, 0.5, 0.54):
+        for kd in (0.36, 0.4, 0.44):
+            c = 1.0 + 3.0 * (kp - 0.8) ** 2 + 6.0 * (kd - 0.45) ** 2
+            points[(kp, kd)] = [c * (1.0 + 0.05 * rng.gauss(0, 1)) for _ in range(3)]
+    return points, [(0.46, 0.54), (0.36, 0.44)]
+
+
+def test_a_divergence_fit_reaching_past_a_narrow_design_keeps_its_answer_off_the_wall_before_it():
+    """`risk_reach`: a narrow design beside a wall it did not fly into (its flights all survived; the wider design's
+    failed ones lie beyond its kernel) answers on its face toward the wall, where flights diverge 1 % of the time
+    and more; a divergence fit reaching 4 half-widths sees the wider design's failures and keeps the answer off."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import ruled_out
+
+    pool = NoisePool.prior(0.05, 100.0)
+    near, far = [], []
+    for seed in range(8):
+        points, box = _narrow_beside_cliff(seed)
+        chance = _stochastic_cliff(seed)[1]
+        ruled = ruled_out(points, pool)
+        near.append(chance(answer(points, box, ruled, pool)[0]))
+        far.append(chance(answer(points, box, ruled, pool, risk_reach=4.0)[0]))
+    assert sum(f < n for f, n in zip(far, near)) >= 6
+    assert sum(far) < 0.5 * sum(near) and sum(near) / len(near) > 0.005
+
+
+def test_beside_a_wall_the_previous_designs_answer_stands_where_it_was_flown_safely():
+    """`keep`: where a flight within the fit's kernel (two half-widths of the design) failed, the answer is the
+    previous design's (flown: this design's centre); with the failures farther, or a failed flight nearest it, the
+    fit answers."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.surface import ruled_out
+
+    pool = NoisePool.prior(0.05, 100.0)
+    far, box = _narrow_beside_cliff(0)  # (the wide design's failures 2.5 half-widths and more from the centre)
+    near = {**far, (0.57, 0.38): [math.inf]}  # a flight beside the design's face toward the wall failed
+    for points in (far, near):
+        ruled = ruled_out(points, pool)
+        fit = answer(points, box, ruled, pool, risk_reach=4.0)
+        kept = answer(points, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4))
+        assert fit[0] != (0.5, 0.4) and kept == (((0.5, 0.4), False) if points is near else fit)
+    walled = {**near, (0.54, 0.36): [math.inf]}  # a failed flight nearest the previous answer: not answered
+    got, _ = answer(walled, box, ruled_out(walled, pool), pool, risk_reach=4.0, keep=(0.535, 0.365))
+    assert got != (0.535, 0.365)
+
+
+@pytest.mark.parametrize("bootstraps, steps, first", [(0, 2, False), (0, 3, False), (1, 1, False), (1, 2, True)])
+def test_only_the_last_design_keeps_the_previous_designs_answer_beside_a_wall(bootstraps, steps, first):
+    """`wall_keep`: beside a failed flight (kp + kd above 1.3: each design's far corner) the last design answers the
+    previous design's answer (its own centre); the designs before it answer their own fits, and a design after the
+    passes answers its fit (the passes' answer had no divergence bound), designs flown before them or not."""
+    wallcost = bowl((0.7, 0.6))
+    cost = lambda gs: [math.inf if g["kp"] + g["kd"] > 1.3 else c for g, c in zip(gs, wallcost(gs))]  # noqa: E731
+    common = dict(space=SPACE, vehicles=2, bootstraps=bootstraps, design_width=0.15, design_steps=steps,
+                  initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None, adaptive=False, edges=False, wall_span=0.6,
+                  design_first=first)
+    kept = mavtune.tune(cost, wall_keep=True, **common)
+    fitted = mavtune.tune(cost, **common)
+    designs = [r for r in kept.rounds if r.gain == "design"]
+    assert any(not math.isfinite(f.cost) for r in designs for f in r.flights)
+    centre = designs[len(designs) - len(designs) // steps].assignments[0]  # the last design's centre: the answer
+    # before it (each design flies as many rounds, its centre first)
+    gains = (kept.gains["kp"], kept.gains["kd"])
+    if bootstraps:
+        assert kept.gains == fitted.gains
+    else:
+        assert gains == pytest.approx((centre["kp"], centre["kd"]), abs=1e-9)
+        assert (fitted.gains["kp"], fitted.gains["kd"]) != pytest.approx(gains, abs=1e-6)
+        assert [r.assignments for r in kept.rounds] == [r.assignments for r in fitted.rounds]  # (the same flights)
+
+
+def _noisy_four_gain_run(seed: int, **options) -> float:
+    """The error (largest over the gains) of designs alone on a noisy 4-gain bowl (5 % relative noise), minimum at
+    (0.4, 0.55, 0.3, 0.45): the map, then ±0.3 narrowing 0.6 a design, each point flown once."""
+    rng = random.Random(seed)
+    opt = {"kp": 0.4, "kd": 0.55, "ki": 0.3, "kf": 0.45}
+    space = {n: (0.0, 1.0) for n in opt}
+
+    def cost(gs):
+        return [(1.0 + sum(3.0 * (g[n] - o) ** 2 for n, o in opt.items()) + 2.0 * (g["kp"] - 0.4) * (g["kd"] - 0.55))
+                * (1.0 + 0.05 * rng.gauss(0, 1)) for g in gs]
+
+    result = mavtune.tune(cost, space=space, vehicles=2, bootstraps=0, design_width=0.5, design_inner=True,
+                          design_steps=3, design_shrink=0.6, design_split=True, draws=0, budget=None,
+                          seed=seed, **options)
+    return max(abs(result.gains[n] - o) for n, o in opt.items())
+
+
+def test_a_composite_design_fitted_over_the_design_before_it_answers_nearer_the_optimum():
+    """`composite_reach`: above three gains the face-centred composite design's own 25 points, each flown once, leave
+    its quadratic's pure terms to a few axis points; a kernel reaching 3.6 half-widths adds the wider design's
+    flights, and the answers lie nearer the optimum; 2 gains (a 3^2 design) are left alone."""
+    near = [_noisy_four_gain_run(seed) for seed in range(6)]
+    wide = [_noisy_four_gain_run(seed, composite_reach=3.6) for seed in range(6)]
+    assert sum(wide) < sum(near)
+    two = mavtune.tune(bowl((0.4, 0.6)), space=SPACE, vehicles=2, bootstraps=0, design_steps=2, draws=0,
+                       budget=None, composite_reach=3.6)
+    assert two.gains == mavtune.tune(bowl((0.4, 0.6)), space=SPACE, vehicles=2, bootstraps=0, design_steps=2,
+                                     draws=0, budget=None).gains

@@ -226,6 +226,7 @@ def small_candidates(designs: dict[str, Any]) -> list[Method]:
                {**designs, "design_shrink": 0.4, "design_shrink_fit": True}, per_gain=42),
         Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), 0.8 next to a failed flight 42 a gain",
                {**designs, "design_shrink": 0.4, "design_shrink_fit": True, "design_shrink_wall": 0.8}, per_gain=42),
+        *walls(designs),
         Method("map, the default's 2 passes from its answer, then ±0.15 42 a gain",
                {**mapped, "bootstraps": 2, "design_shrink": 0.3}, per_gain=42),
         *hybrid(designs),
@@ -250,6 +251,25 @@ def hybrid(designs: dict[str, Any]) -> list[Method]:
                {**fit, "bootstraps": 1, "design_first": 2, "design_pass_box": True}, per_gain=42),
         Method("map, ±0.2, 1 pass over the ranges, then ±0.08 (shrink fit) 42 a gain",
                {**fit, "bootstraps": 1, "design_first": 2}, per_gain=42),
+    ]
+
+
+def walls(designs: dict[str, Any]) -> list[Method]:
+    """The answer's wall rules (lane "guard", issue 20): the divergence chance fitted to the flights at least 0.32 of
+    each range from the design's centre (`wall_span`: 4 half-widths of D42fit's last design, ±0.08), the last
+    design's answer the previous design's where a flight that near failed (`wall_keep`), a composite design's fit
+    over 3.6 half-widths (`composite_reach`), on the designs alone at 42 flights a gain (D42fit) and the default."""
+    fit = {**designs, "design_shrink": 0.4, "design_shrink_fit": True}
+    span, keep = {"wall_span": 0.32}, {"wall_span": 0.32, "wall_keep": True}
+    return [
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), divergence fit over 0.32 42 a gain",
+               {**fit, **span}, per_gain=42),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the previous design's answer beside a wall "
+               "42 a gain", {**fit, **keep}, per_gain=42),
+        Method("designs only, shrink 0.4 (0.4^(flights/3 coefficients)), the previous design's answer beside a wall, "
+               "composite fit over 3.6 half-widths 42 a gain", {**fit, **keep, "composite_reach": 3.6}, per_gain=42),
+        Method("default, divergence fit over 0.32", span),
+        Method("default, the wall rules and composite fit over 3.6 half-widths", {**keep, "composite_reach": 3.6}),
     ]
 
 
