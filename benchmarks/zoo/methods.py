@@ -273,6 +273,9 @@ def walls(designs: dict[str, Any]) -> list[Method]:
         Method("map, 1 pass, then ±0.2, ±0.08 (shrink fit), the wall rules and composite fit over 3.6 half-widths "
                "42 a gain", {**fit, "bootstraps": 1, "design_first": True, **keep, "composite_reach": 3.6},
                per_gain=42),  # lane hybrid's best structure with lane guard's rules (the lead, session 12)
+        Method("map, 1 pass, then ±0.225, ±0.1 (shrink 0.45 fit), the wall rules and composite fit over 3.6 "
+               "half-widths 42 a gain", {**fit, "bootstraps": 1, "design_first": True, **keep, "composite_reach": 3.6,
+                                         "design_shrink": 0.45}, per_gain=42),
     ]
 
 
