@@ -38,10 +38,13 @@ def test_a_vehicle_run_answers_nearest_stock_within_noise(tmp_path):
     flown = [p["gains"] for p in summary["points"]]
     best = answer["best"]
     assert best["gains"] in flown and float(best["se"]) >= 0
-    if answer["moved"]:  # a flown point, nearer stock than the plain optimum, within one se of the best's cost
+    if answer["moved"]:  # a flown point, the nearest stock of those within one se of the best's cost
         chosen = answer["chosen"]
         assert chosen["gains"] == answer["gains"] and chosen["gains"] in flown
-        assert chosen["distance_from_stock"] < chosen["plain_distance_from_stock"]
+        if all(p["mean_cost"] is not None and math.isfinite(float(p["mean_cost"])) for p in summary["points"]):
+            d_best = math.dist([best["gains"][n] for n in STOCK], list(STOCK.values()))
+            assert chosen["distance_from_stock"] <= d_best + 1e-9  # the best is one of the points it chose among
+        # (not nearer stock than the plain optimum: that one, the surface's minimum, need not have been flown)
         assert float(chosen["cost"]) - float(best["cost"]) <= math.hypot(float(chosen["se"]), float(best["se"])) + 1e-9
     else:
         assert answer["gains"] == plain["gains"]
