@@ -272,11 +272,12 @@ def markdown(doc: dict[str, Any]) -> str:
     if doc.get("selection"):
         lines += ["", "## The choice (selection half: even runs)", "",
                   "| configuration | mean within 2 % over plants | worst plant | flights mean | worst run | fly-away "
-                  "answers | lowest coverage | eligible |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+                  "answers | lowest coverage | flight goals, no fly-away | significantly worse than a peer |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
         for s in doc["selection"]["scores"]:
             lines.append(f"| {s['label']} | {s['within_mean']:.0%} | {s['within_min']:.0%} | {s['flights_mean']:.1f} | "
                          f"{s['flights_max']} | {s['fly_away_answers']} | {_f(s['coverage_min'], '.0%')} | "
-                         f"{'yes' if s['eligible'] else 'no'} |")
+                         f"{'yes' if s['eligible'] else 'no'} | {'; '.join(s.get('peer_losses') or []) or 'nowhere'} |")
         lines.append(f"\nChosen: **{doc['selection']['chosen']}** (rule: `zoo.stats.choose`).")
     return "\n".join(lines) + "\n"
 
@@ -352,7 +353,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     labels = [m.label for m in methods]
     doc: dict[str, Any] = {"default": default.label, "default_tuning": default.tuning}
     if args.half == "select":
-        chosen, scores = stats.choose(res["table"], [m.label for m in methods if not m.peer])
+        chosen, scores = stats.choose(res["table"], [m.label for m in methods if not m.peer], res["rows"])
         doc["selection"] = {"chosen": chosen, "scores": scores}
         doc["choice_note"] = f"This is the selection half; the configuration chosen here is {chosen}."
     else:

@@ -1,7 +1,8 @@
 """The Python API: `tune()`, whose every option left out takes the value `mavtune tune` takes with no flag.
 
 Both start from one definition of the default, `mavtune.config.Tuning()`; the paper's exact setting is the
-preset `mavtune.config.PAPER_TUNING` (what `mavtune reproduce` flies), as keyword arguments `paper_options()`.
+preset `mavtune.config.PAPER_TUNING` (what `mavtune reproduce` flies), as keyword arguments `paper_options()`; any
+named preset (`mavtune.config.PRESETS`) as `preset_options(name)`.
 """
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from mavtune.config import PAPER_TUNING, Tuning
+from mavtune.config import Tuning, preset_fields
 from mavtune.errors import MavtuneError
 from mavtune.fleet import CallableFleet, Evaluate, Fleet, Gains
 from mavtune.search.interval import DRAWS
@@ -26,12 +27,17 @@ class _Default:
 DEFAULT: Any = _Default()
 
 
-def paper_options() -> dict[str, Any]:
-    """The paper's setting (`PAPER_TUNING`) as keyword arguments of `tune()`."""
-    out = {key.removeprefix("tuning."): value for key, value in PAPER_TUNING.items()}
+def preset_options(name: str) -> dict[str, Any]:
+    """A named preset (`mavtune.config.PRESETS`: paper, budget, passes) as keyword arguments of `tune()`."""
+    out = preset_fields(name)
     if out.get("bootstraps") == "auto":
         out["bootstraps"] = None
     return out
+
+
+def paper_options() -> dict[str, Any]:
+    """The paper's setting (`PAPER_TUNING`) as keyword arguments of `tune()`."""
+    return preset_options("paper")
 
 
 def default_settings(vehicles: int | None = None, **given: Any) -> Settings:

@@ -41,7 +41,8 @@ PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`
 
 BUDGET_TUNING: dict[str, Any] = {  # a fixed budget of flights, exact before take-off (issue 20; not the default)
     "tuning.bootstraps": 0, "tuning.design_width": 0.5, "tuning.design_steps": 3, "tuning.design_shrink": 0.5,
-    "tuning.design_split": "auto", "tuning.design_inner": True, "tuning.budget": "none"}
+    "tuning.design_split": "auto", "tuning.design_inner": True, "tuning.budget": "none",
+    "tuning.design_shrink_fit": False, "tuning.wall_keep": False}
 """No passes over the gains: three response-surface designs, the first a map of the whole box (its corners, face
 centres, centre and the corners of the box half as wide, each point flown once), each next one around the fit's
 answer and half as wide once it surrounds that answer; 50 flights for 2 gains on 2 vehicles (13 + 18 + 18 and a
@@ -59,15 +60,32 @@ unseen plants (quality_unseen_fly.md: 132 runs to 100; the heavy-lift figure-8 a
 mends an optimum beside fly-away gains (gusts, the cliff) and loses precision on smooth costs (each point of its
 first design is flown once); `design_inner = false, design_shrink = 0.4` restores the first preset."""
 
-PRESETS: dict[str, dict[str, Any]] = {"paper": PAPER_TUNING, "budget": BUDGET_TUNING}
+PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
+    "tuning.bootstraps": 2, "tuning.design_width": 0.15, "tuning.design_steps": 1, "tuning.design_shrink": 1.0,
+    "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
+    "tuning.design_shrink_fit": False, "tuning.wall_keep": False}
+"""The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
+same budget of 42 flights a gain: the default until session 13. On the zoo's report half (quality.md) it is more
+often within 2 % of the optimum on the analytic valley and the nominal simulator, less often where the optimum lies
+on an edge, in a corner or along a ridge beside fly-away gains, and significantly worse than CMA-ES on the unknown
+heavier vehicle."""
+
+PRESETS: dict[str, dict[str, Any]] = {"paper": PAPER_TUNING, "budget": BUDGET_TUNING, "passes": PASSES_TUNING}
 """The named settings `--preset` gives (`mavtune tune --preset budget`), each [tuning] overrides over the file's."""
+
+
+def preset_fields(name: str) -> dict[str, Any]:
+    """A named preset (`PRESETS`) as `Tuning` fields: `Tuning.model_validate({**preset_fields("passes"), ...})`."""
+    return {key.removeprefix("tuning."): value for key, value in PRESETS[name].items()}
 
 
 BUDGET_PER_GAIN = 42
 """The default budget (`[tuning] budget = "auto"`): flights per gain tuned on 2 vehicles (84 for 2 gains, 168 for
 4; as many rounds on more vehicles, each round of a bigger swarm flying more): the smallest of 28, 35, 42 and 56 a
 gain that was not significantly worse than the unbudgeted default over the zoo's selection half
-(benchmarks/results/selection_budget_default.md, selection_budget_curve*.md)."""
+(benchmarks/results/selection_budget_default.md, selection_budget_curve*.md). At least the designs' own flights
+and AUTO_PASS_ROUNDS rounds for each line search (from 6 gains on 1 or 2 vehicles: the designs grow as 2^d)."""
+AUTO_PASS_ROUNDS = 2
 
 
 def resolved_budget(budget: Any, space: dict, design: bool, bootstraps: Any, vehicles: int = 2) -> int | None:
@@ -110,48 +128,42 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "design_open", "design_pass_box", "wall_span",
                    "wall_keep", "composite_reach", "budget")
 
 
 
 class Tuning(_Section):
-    """What is tuned and how. The paper's search (EQL, shoe-lacing, 2 bootstraps, initial kd 0.2) with a coarser
-    tolerance (ε 0.2), reuse, adaptive averaging (confidence 0.85, at most 6 flights a point per comparison), the
-    answer of each line search fitted to all its flights (`answer = "model"`) and a line search ending against its
-    range's edge flying the edge (`edges`); then the response surface (`design`): a 3^d design of ±0.15 of each
-    range around the passes' answer (9 points × the vehicles a point) and the answer is the minimum of one quadratic
-    in every gain fitted to the flights near it (of a plane where the flights do not reject a plane and its minimum
-    lies on a bound of the ranges; of a cubic where they reject the quadratic), inside the flown design; all within
-    a budget of 42 flights a gain (`budget = "auto"`: 84 for 2 gains, 168 for 4), flown
-    exactly and known before take-off: the passes share what the design does not need, the design flies the rest.
-    The budget was chosen on the plant zoo of benchmarks/quality.py (selection half, even runs, 40 a plant:
-    benchmarks/results/selection_budget_default.md): against the same configuration without a budget (121 flights
-    on mean over the zoo, worst 262, the plan's count only expected) a tie over the zoo (paired sign test: the
-    budget better in 226 runs, worse in 244, p 0.43; 44 % of runs within 2 % of the optimum on mean over the plants
-    against 46 %), significantly worse on one plant (mavsim ArduPilot: 28 % against 42 %; nominal 55 % against 78 %,
-    not significant), better than CMA-ES (272 runs to 208) and TPE (292 to 188) at its flights; 91 flights on mean
-    over the zoo, worst 168 (4 gains). 28 and 35 flights a gain were significantly worse than no budget (20 runs a
-    plant: selection_budget_curve.md, selection_budget_curve35.md; the passes' line searches end before their
-    tolerance and the design around their answer is too narrow to reach an optimum on an edge); 56 a gain tied
-    too, at as many flights as no budget. Before the budget the design was chosen the same way
-    (benchmarks/results/selection.md: 43 % within 2 % against 37 % without the design, p 8.7e-05). This is the one
-    default: `mavtune tune` with no flags and `mavtune.tune()` with no options both take it (`settings()`).
-    `budget = "none"` flies each stage's asking (the default before the budget). `PAPER_TUNING` restores the
-    paper's exact setting. `BUDGET_TUNING` is a fixed budget without passes (three designs from a map of the whole
-    box: 50 flights for 2 gains), measured in benchmarks/results/selection_fly.md and quality_fly.md. Since the
-    answer takes a plane where the flights do not reject it and its minimum lies on a range's bound
-    (benchmarks/results/answer_diagnostic_plane_faces.md, select half replayed, 20 runs a plant): the PX4 cascade
-    25 % of runs within 2 % instead of 5 %, no plant worse; a plane on every face of the design scored higher there
-    (selection_corner_paired.md: PX4 38 %, ArduPilot 68 %, the corner box 42 %) but lost an optimum mid-design on
-    the unseen light step (85 % -> 25 %).
+    """What is tuned and how. The default: a map of the gain box first (a response-surface design over the whole box:
+    its corners, face centres and centre and the corners of the box half as wide, each point flown once), then one
+    pass of line searches over the gains from the map's answer (the paper's EQL with a coarser tolerance, ε 0.2;
+    reuse; adaptive averaging, confidence 0.85, at most 6 flights a point per comparison; each line search's answer
+    fitted to all its flights, `answer = "model"`; a line search ending against its range's edge flies the edge,
+    `edges`), then two designs around the run's answer, ±0.2 and ±0.08 of each range (`design_shrink` 0.4, less
+    where a design has fewer than three flights per coefficient of its quadratic: `design_shrink_fit`). The answer
+    is the minimum of one quadratic in every gain fitted to the flights near the last design (a plane where the
+    flights do not reject a plane and its minimum lies on a bound of the ranges; a cubic where they reject the
+    quadratic), inside the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight
+    the previous design's answer stands); all within a budget of 42 flights a gain (`budget = "auto"`: 84 for 2
+    gains, 168 for 4), flown exactly and known before take-off.
+    Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs, 40 a plant:
+    benchmarks/results/selection_default13.md) by `zoo.stats.choose`: of the configurations never significantly worse
+    than CMA-ES or TPE on a plant and better than both over the zoo, the highest mean share of runs within 2 % of the
+    optimum (51 % over the 13 plants). The default before it (2 passes, then one design of ±0.15, the same budget: 44 %)
+    was significantly worse than CMA-ES on the unknown heavier vehicle and than TPE on gusts; against it this one is
+    better over the zoo (paired sign test 287 runs to 225, p 0.007; on the heavy vehicle, gusts, the corner box,
+    the analytic edge and mavsim's ArduPilot cascade) and worse on 60 ms more latency (12 to 28) and the analytic
+    valley (13 to 27), where the second line search of the passes found a narrow valley the map and one pass miss.
+    This is the one default: `mavtune tune` with no flags and `mavtune.tune()` with no options both take it
+    (`settings()`). `PAPER_TUNING` restores the paper's exact setting; `BUDGET_TUNING` is the designs alone (50
+    flights for 2 gains); `PASSES_TUNING` (`--preset passes`) the default before (2 passes, then one design).
     """
 
     space: dict[str, tuple[float, float]] = Field(default_factory=lambda: {"kp": (0.0, 1.0), "kd": (0.0, 1.0)})
     """The gains to tune, each with its [low, high] range, tuned in this order (the simulator's are normalised)."""
     method: str = "eql"
     epsilon: float = Field(0.2, ge=MIN_EPSILON, lt=0.5)
-    bootstraps: StrictInt | Literal["auto"] = 2
+    bootstraps: StrictInt | Literal["auto"] = 1
     """Passes over the gains (line searches); "auto": the paper's stop rule; 0 (with `design`): the designs only."""
     max_bootstraps: StrictInt = Field(10, ge=1, le=MAX_BOOTSTRAPS)
     """With `bootstraps = "auto"`: the most passes over the gains before it stops anyway."""
@@ -183,24 +195,24 @@ class Tuning(_Section):
                                 "fitted to the run's flights near it (a plane where the flights do not reject a "
                                 "plane, a cubic where they reject the quadratic), inside the flown design (response "
                                 "surface)")
-    design_width: float = Field(0.15, gt=0.0, le=0.5, description="design: the design's half-width, a share of "
+    design_width: float = Field(0.5, gt=0.0, le=0.5, description="design: the design's half-width, a share of "
                                  "each gain's range (the design is shifted inside the ranges, not shrunk)")
     design_repeats: StrictInt = Field(1, ge=1, le=MAX_DESIGN_REPEATS, description="design: times each design point is flown "
                                        "(by as many vehicles as the strategy puts on a point)")
-    design_steps: StrictInt = Field(1, ge=1, le=MAX_DESIGN_REPEATS, description="design: designs flown in turn, "
+    design_steps: StrictInt = Field(3, ge=1, le=MAX_DESIGN_REPEATS, description="design: designs flown in turn, "
                                      "each around the answer of the one before (a valley or a far optimum is followed "
                                      "one design's width at a time)")
-    design_shrink: float = Field(1.0, gt=0.0, le=1.0, description="design: each design's half-width over the one "
+    design_shrink: float = Field(0.4, gt=0.0, le=1.0, description="design: each design's half-width over the one "
                                   "before, once the fit's answer lies inside it or on a range's bound (a trust "
                                   "region: an answer on a face of the box inside the ranges moves the next design "
                                   "as wide; below 1 the later designs narrow in, less bias from a cost that is no "
                                   "quadratic)")
-    design_split: StrictBool | Literal["auto"] = Field(False, description="design: the vehicles of a round fly "
+    design_split: StrictBool | Literal["auto"] = Field("auto", description="design: the vehicles of a round fly "
                                      "distinct points of the design, each point once a repeat (one fit over more "
                                      "points averages the noise as well as repeats of fewer), instead of every vehicle "
                                      "the strategy puts on a point; \"auto\": so while a design has more than about "
                                      "three flights per coefficient of its quadratic (3 gains or more)")
-    design_inner: StrictBool = Field(False, description="design: the first design also flies the corners of the "
+    design_inner: StrictBool = Field(True, description="design: the first design also flies the corners of the "
                                      "box half as wide (2^d points more), each of its points once (a map of the "
                                      "box: a wide first design's corners and faces miss a narrow valley, or an "
                                      "optimum beside a fly-away region)")
@@ -209,7 +221,7 @@ class Tuning(_Section):
                                "inside the ranges: this many times the way from the box's centre to that face (1: "
                                "centred on the face; 2: one box width on), shortened so that no point of it lies "
                                "beyond a failed flight; 0: every next design is centred on the run's answer")
-    design_first: StrictBool | StrictInt = Field(False, description="design: the first design flies before the "
+    design_first: StrictBool | StrictInt = Field(True, description="design: the first design flies before the "
                                      "passes over the gains, which start from its answer (with `design_inner` a map "
                                      "of the box: the passes' held gains start near an optimum on an edge or in a "
                                      "corner); a number: that many designs fly first, each around the one before's "
@@ -225,10 +237,11 @@ class Tuning(_Section):
                                       "a design with a failed flight within its half-width of its answer (0: "
                                       "`design_shrink`): a design beside a "
                                       "fly-away narrows less, so a few flights next to the wall do not lead its fit")
-    design_shrink_fit: StrictBool = Field(False, description="design: narrow by `design_shrink` to the power of the "
+    design_shrink_fit: StrictBool = Field(True, description="design: narrow by `design_shrink` to the power of the "
                                           "next design's own flights per three coefficients of its quadratic, at "
                                           "most 1 (4 gains' designs, each point flown once, narrow less: their "
                                           "fit's curvature stays above the noise)")
+    design_open: StrictBool | Literal["step"] = Field(False, description="screen")
     design_pass_box: StrictBool = Field(False, description="design: after the designs flown first "
                                         "(`design_first`), each line search of the passes flies within the last "
                                         "one's half-width of the gain's answer so far (shifted inside the range), "
@@ -240,7 +253,7 @@ class Tuning(_Section):
                              "two half-widths of the design): a narrow design beside a wall sees the failed flights "
                              "of the wider designs before it (0.32: chosen on the zoo's select half, "
                              "selection_guard_span.md)")
-    wall_keep: StrictBool = Field(False, description="design: the last design's answer is the previous design's "
+    wall_keep: StrictBool = Field(True, description="design: the last design's answer is the previous design's "
                                   "(which that design's own divergence fit bounded) where a flight within the "
                                   "surface fit's kernel (two half-widths of the design) failed, unless a failed "
                                   "flight lies nearest it or on the way to it: a narrow design beside a wall fits few "
@@ -330,10 +343,16 @@ class Tuning(_Section):
         values = {name: getattr(self, name) for name in SETTINGS_FIELDS} | given
         if "initial" not in given and "initial" not in self.model_fields_set:
             values["initial"] = {k: v for k, v in values["initial"].items() if k in values["space"]}
+        auto = values["budget"] == "auto"
         values["budget"] = resolved_budget(values["budget"], values["space"], values["design"], values["bootstraps"],
                                            values["vehicles"])
         values["bootstraps"] = None if values["bootstraps"] == "auto" else values["bootstraps"]
-        return Settings(**{k: dict(v) if isinstance(v, dict) else v for k, v in values.items()})
+        values = {k: dict(v) if isinstance(v, dict) else v for k, v in values.items()}
+        if auto and values["budget"] is not None:  # many gains: the designs' flights and two rounds a line search
+            floor = Settings(**(values | {"budget": None}))
+            values["budget"] = max(values["budget"], floor.budget_minimum()
+                                   + AUTO_PASS_ROUNDS * floor.line_searches() * int(values["vehicles"]))
+        return Settings(**values)
 
     def ignored(self) -> list[str]:
         """Settings given that this strategy or method does not use (said as warnings, never silently)."""

@@ -15,7 +15,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains
@@ -133,12 +133,13 @@ class TuningResult:
     in_progress: LineSearchRecord | None = None  # the line search under way when the run stopped, if any
     designed: Gains = field(default_factory=dict)  # the response surface's answer, when a design was flown
     divergence: dict[str, Any] | None = None  # the design's answer near failed flights: `Tuner.divergence`
+    open_face: Gains = field(default_factory=dict)  # gains the last design answered on its box's face inside the range
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each: an answer still moving between
         bootstraps by more than the search's tolerance, an interval spanning most of its range, a gain whose last
         line search held the others more than half the tolerance from where they ended (`stale`), an answer next
-        to a flight that failed."""
+        to a flight that failed, a last design that answered on its box's face inside the range (`open_face`)."""
         out = []
         space, epsilon = self.settings.get("space", {}), self.settings.get("epsilon", math.nan)
         last = {s.gain: s for s in self.searches}
@@ -170,6 +171,11 @@ class TuningResult:
             if wall is not None:
                 out.append(f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed (diverged): no "
                            "gain beyond it was answered, but the margin to it is one step of the search")
+        if self.open_face and all(self.gains.get(n) == v for n, v in self.designed.items()):
+            faces = ", ".join(f"{n} = {v:.4g}" for n, v in self.open_face.items())
+            out.append(f"the last design answered {faces} on the edge of the box it flew, inside the range: it did "
+                       "not surround its answer, so the optimum may lie beyond (a design around the answer, or a "
+                       "larger budget, would tell)")
         risk = self.divergence or {}
         if risk and self.designed and all(self.gains.get(n) == v for n, v in self.designed.items()):
             chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
@@ -254,6 +260,7 @@ class Settings:
     design_trust: bool = False
     design_shrink_wall: float = 0.0
     design_shrink_fit: bool = False
+    design_open: bool | str = False
     design_pass_box: bool = False
     wall_span: float = 0.0
     wall_keep: bool = False
@@ -496,6 +503,7 @@ class Settings:
                         | ({"trust": True} if self.design_trust else {})
                         | ({"shrink_wall": float(self.design_shrink_wall)} if self.design_shrink_wall else {})
                         | ({"shrink_fit": True} if self.design_shrink_fit else {})
+                        | ({"open": self.design_open} if self.design_open else {})
                         | ({"wall_span": float(self.wall_span)} if self.wall_span else {})
                         | ({"wall_keep": True} if self.wall_keep else {})
                         | ({"composite_reach": float(self.composite_reach)} if self.composite_reach else {})
@@ -544,6 +552,7 @@ class Tuner:
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
         self._pass_half: float | None = None  # the half-width of the last design flown before the passes
         self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
+        self.open_face: Gains = {}  # the gains the last design answered on its box's face inside the range (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self._step: tuple[list[tuple[float, float]], tuple[float, ...], bool] | None = None  # last design's box,
         # its answer, and whether a flight failed within its half-width of the answer (`_shrink`)
@@ -569,7 +578,7 @@ class Tuner:
                             bootstraps=self.bootstrap, stop_reason=stop_reason,
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
-                            designed=self.designed, divergence=self.divergence)
+                            designed=self.designed, divergence=self.divergence, open_face=dict(self.open_face))
 
     def _record(self, bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason (and the range
@@ -743,8 +752,19 @@ class Tuner:
         keep = before if (s.wall_keep and step + 1 == s.design_count() and self._design_answers
                           and self._design_answers[-1] == self.gains) else None  # (not the passes' answer)
         best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
+        if (s.design_open and step + 1 == s.design_count() and self._step is not None and any(_open_face(box, best))
+                and not _failed_within(flown, self._step[0])):  # the fit's minimum lies past the last box: the box
+            wide, _, _ = self._step  # before reaches on (where none of its kernel's flights failed)
+            if s.design_open == "step":  # one half-width past each open face, within the box before
+                box = [(max(wa, a - half) if abs(b - a) <= 1e-9 else a, min(wc, c + half) if abs(b - c) <= 1e-9 else c)
+                       for (a, c), (wa, wc), b in zip(box, wide, best)]
+            else:
+                box, half = [(min(a, wa), max(c, wc)) for (a, c), (wa, wc) in zip(box, wide)], max(
+                    0.5 * (c - a) for a, c in wide)
+            best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half)
+        self.open_face = {n: self.gains[n] for n, on in zip(names, _open_face(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
         for rec in last.values():  # the caution of an answer next to a failed flight is the final answer's
@@ -970,6 +990,18 @@ class Tuner:
         if not same:
             raise MavtuneError(f"journal round {record.index} does not match this run's round "
                                f"(recorded {record.assignments}, now {assignments}); use a new journal")
+
+
+def _open_face(box: Sequence[tuple[float, float]], x: Sequence[float]) -> list[bool]:
+    """Per gain: whether `x` (shares of each range) lies on a face of `box` that is not a bound of the range."""
+    return [c - a > 1e-9 and min(abs(b - a), abs(b - c)) <= 1e-9 and 1e-9 < b < 1.0 - 1e-9
+            for (a, c), b in zip(box, x)]
+
+
+def _failed_within(points: dict[tuple[float, ...], list[float]], box: Sequence[tuple[float, float]]) -> bool:
+    """Whether a failed flight lies within two half-widths of `box` from its centre (the surface fit's kernel)."""
+    return any(c and not all(map(math.isfinite, c))
+               and all(abs(v - 0.5 * (a + b)) <= (b - a) + 1e-9 for v, (a, b) in zip(k, box)) for k, c in points.items())
 
 
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import mavtune
-from mavtune.config import Tuning, load_config
+from mavtune.config import Tuning, load_config, preset_fields
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Status
 from mavtune.journal import Journal
@@ -24,6 +24,12 @@ def noisy_bowl(seed: int, noise: float = 0.2):
     """A bowl in every gain with relative noise, drawn in the order flown (a run's own stream)."""
     draw = random.Random(seed)
     return lambda gs: [(1 + sum((v - 0.3) ** 2 for v in g.values())) * (1 + noise * draw.gauss(0, 1)) for g in gs]
+
+
+def passes(**given) -> Settings:
+    """The settings of `PASSES_TUNING` (2 passes, then one design: the default before issue 20) with `given`: for the
+    tests of a mechanism of that structure (a budget's share for 4 line searches, a single design after them)."""
+    return Tuning.model_validate(preset_fields("passes")).settings(**given)
 
 
 def budgeted(gains: int, vehicles: int, extra: int, **options) -> Settings:
@@ -61,7 +67,7 @@ def test_adaptive_averaging_spends_only_what_the_share_leaves():
     asks for, so every one reaches its tolerance (none ends for want of flights) within its share."""
     plain = Tuning().settings(adaptive=False)
     need = sum(math.ceil(n / plain.strategy_rule.slots(2)) * 2 for n in plain.search(0.0, 1.0).needs())
-    s = Tuning().settings(budget=18 + 4 * need + 6)  # 4 line searches non-adaptive, 6 flights to spare
+    s = passes(budget=18 + 4 * need + 6)  # 4 line searches non-adaptive, 6 flights to spare
     draw = random.Random(1)
     result = run_tuning(s, mavtune.fleet.CallableFleet(lambda gs: [draw.random() for _ in gs], 2), draws=0)
     assert len(result.searches) == 4 and all(x.stop_reason is None for x in result.searches)
@@ -70,7 +76,8 @@ def test_adaptive_averaging_spends_only_what_the_share_leaves():
 
 
 def test_a_search_whose_share_is_spent_answers_from_its_flights_and_says_so():
-    s = budgeted(2, 2, 10)  # 28 flights for 4 line searches: each ends before its tolerance
+    s = budgeted(2, 2, 10)  # 10 flights for 2 line searches (60 less the map's 14 and the designs' 36): each ends
+    # before its tolerance
     result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(3), 2), draws=0)
     ended = [x for x in result.searches if x.stop_reason]
     assert ended and all("share of the budget was spent" in x.stop_reason for x in ended)
@@ -136,7 +143,7 @@ def test_resume_inside_a_budgeted_run_is_identical(tmp_path_factory, crash_at, f
     """A crash (or a battery swap) at any round: the resumed run replays the journal and flies the same rounds,
     the last one short of vehicles included, to the same gains."""
     vehicles, budget = fleet_budget
-    s = Tuning().settings(vehicles=vehicles, budget=budget)
+    s = passes(vehicles=vehicles, budget=budget)  # (budgets with a share for 4 line searches)
     reference = run_tuning(s, NoisyFleet(vehicles), draws=0)
     crash_at = min(crash_at, len(reference.rounds) - 1)
     path = tmp_path_factory.mktemp("j") / "journal.sqlite"
@@ -177,9 +184,11 @@ def test_a_budget_is_in_the_journal_and_its_absence_leaves_old_journals_resumabl
 
 
 @pytest.mark.parametrize("overrides, says", [
-    ({"tuning.budget": 10}, "budget 10 is below the 18 flights of the design on 2 vehicles; give at least 18"),
-    ({"tuning.budget": 30, "tuning.vehicles": 4}, "give at least 36 (or design_split = true"),
-    ({"tuning.budget": 40, "tuning.space": {g: [0.0, 1.0] for g in GAINS}}, "give at least 50"),
+    # the default's designs, each but the last in whole rounds: the map's 13 points once (14), then 9 points on 2
+    # vehicles each, twice (18 + 18); on 4 vehicles 16 + 20 + 18; for 4 gains 41 points once (42), then 25 (26 + 25)
+    ({"tuning.budget": 10}, "budget 10 is below the 50 flights of the designs on 2 vehicles; give at least 50"),
+    ({"tuning.budget": 30, "tuning.vehicles": 4}, "give at least 54 (or design_split = true"),
+    ({"tuning.budget": 40, "tuning.space": {g: [0.0, 1.0] for g in GAINS}}, "give at least 93"),
     ({"tuning.budget": 60, "tuning.design": False}, "budget needs design = true"),
     ({"tuning.budget": 60, "tuning.bootstraps": "auto"}, "budget needs a fixed number of passes"),
     ({"tuning.budget": 0}, "tuning.budget: must be at least 1 flight"),
@@ -194,15 +203,15 @@ def test_a_budget_no_run_can_fly_is_one_line(overrides, says):
 
 
 def test_the_least_budget_flies_the_design_alone():
-    s = Tuning().settings(budget=18)
+    s = Tuning().settings(budget=50)  # the map's 14 flights and two designs of 18
     result = run_tuning(s, NoisyFleet(2), draws=0)
-    assert {r.gain for r in result.rounds} == {"design"} and result.flights == 18
+    assert {r.gain for r in result.rounds} == {"design"} and result.flights == 50
     assert all(x.stop_reason and "share of the budget" in x.stop_reason for x in result.searches)
 
 
 def test_the_cli_plans_and_flies_a_budget_given_in_a_file(tmp_path):
     """`[tuning] budget` in a file: `mavtune plan` states the flights and rounds exactly, `mavtune tune` flies
-    them; a budget below the design's flights is one line naming the least."""
+    them; a budget below the designs' flights is one line naming the least."""
     import json
 
     from tests.test_fuzz import cli
@@ -216,7 +225,7 @@ def test_the_cli_plans_and_flies_a_budget_given_in_a_file(tmp_path):
     code, _, _ = cli("tune", "--config", str(good), "-q", "--out", str(tmp_path / "run"))
     assert code == 0 and json.loads((tmp_path / "run" / "result.json").read_text())["flights"] == 57
     code, _, err = cli("plan", "--config", str(bad))
-    assert code == 2 and len(err.strip().splitlines()) == 1 and "give at least 18" in err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "give at least 50" in err
 
 
 def test_the_default_budget_is_42_flights_a_gain_and_the_presets_keep_flying_without_one(tmp_path):
@@ -320,7 +329,7 @@ def test_more_designs_first_than_designs_leave_the_last_after_the_pass_under_a_b
     before its share is spent); without one every design flies first and the pass's answer is the run's. True and 1
     are the same setting (one fingerprint: a journal of either resumes the other)."""
     for options in ({"design_first": True}, {"design_first": 5, "design_steps": 2, "design_pass_box": True}):
-        s = Tuning().settings(**options)
+        s = passes(**options)  # one design (design_first = true is at design_steps), or 5 first of 2
         assert s.designs_before_passes() == s.design_count() - 1
         for seed in range(4):
             result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(seed, 0.05), 2), draws=0)

@@ -63,7 +63,8 @@ def test_agent_takes_c_for_its_config_like_the_readme():
     (["plan", "--battery-s", "inf"], "flight.battery_s: must be a finite number"),
     (["plan", "--epsilon", "1e-9"], "tuning.epsilon"),
     (["plan", "-n", "1000000"], "tuning.vehicles"),
-    (["plan", "--epsilon", "0.001", "--budget", "none"], "at least 4013 rounds"),  # 4004 of the line searches, 9 of the design
+    (["plan", "--epsilon", "0.001", "--budget", "none", "--preset", "passes"], "at least 4013 rounds"),  # 4004 of
+    # the line searches (2 passes), 9 of the design
 ])
 def test_bad_input_is_one_line_with_status_2(args, says):
     code, _, err = cli(*args)
@@ -71,7 +72,8 @@ def test_bad_input_is_one_line_with_status_2(args, says):
 
 
 def test_a_long_plan_flies_only_when_the_cap_is_raised():
-    code, out, _ = cli("plan", "--epsilon", "0.004", "--no-adaptive", "--max-rounds", "5000", "--budget", "none")
+    code, out, _ = cli("plan", "--epsilon", "0.004", "--no-adaptive", "--max-rounds", "5000", "--budget", "none",
+                       "--preset", "passes")  # (the rounds of 2 passes' line searches)
     assert code == 0 and "rounds 1013" in out  # 1004 of the line searches, 9 of the design
 
 
@@ -90,8 +92,8 @@ def test_ignored_settings_are_warned_and_recorded(tmp_path):
 
 def test_one_vehicle_is_one_vehicle():
     code, out, _ = cli("plan", "-n", "1", "--epsilon", "0.125", "--no-adaptive", "--budget", "none")
-    assert code == 0 and "1 sim vehicle ·" in out and "(1 vehicle × 49 rounds" in out  # 36 + 4 at the edges
-    # + 9 of the design
+    assert code == 0 and "1 sim vehicle ·" in out and "(1 vehicle × 51 rounds" in out  # 18 + 2 at the edges
+    # (1 pass) + 31 of the designs (13 + 9 + 9 points)
 
 
 def test_the_round_line_labels_each_vehicle_and_gives_the_mean():

@@ -69,4 +69,4 @@ def test_a_named_preset_is_its_settings_over_the_file_and_under_the_flags(tmp_pa
     assert out.exit_code == 0 and f"flights {budget.flights} " in " ".join(out.output.split())
     assert run_app(["plan", "--preset", "fast"]) == 2
     err = capsys.readouterr().err
-    assert "--preset must be one of paper, budget, got 'fast'" in err and "Traceback" not in err
+    assert "--preset must be one of paper, budget, passes, got 'fast'" in err and "Traceback" not in err

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import mavtune
+from mavtune.config import preset_fields
 from mavtune.errors import MavtuneError
 from mavtune.search.evidence import NoisePool
 from mavtune.search.surface import design, next_centre
@@ -17,6 +18,8 @@ from mavtune.tuner import Settings
 
 SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
 OPTIMUM = (0.85, 0.8)
+PASSES = preset_fields("passes")  # the default before issue 20 (no map
+# first, no narrowing, wall_keep off): designs of one width, as the engine's `Settings` that plans them defaults to
 
 
 def diagonal_valley(gs):
@@ -39,8 +42,8 @@ def designs(result):
 def test_a_moving_design_reaches_a_diagonal_valleys_minimum_where_a_design_on_the_face_stops_short(move):
     """Two designs ±0.15 from (0.5, 0.5): the first's fit has its minimum on its corner (0.65, 0.65); the second
     centred there (today's rule) cannot reach (0.85, 0.8), one moved past the corner surrounds and answers it."""
-    options = dict(space=SPACE, vehicles=2, bootstraps=0, design_width=0.15, design_steps=2, design_shrink=1.0,
-                   design_split=True, initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None)
+    options = dict(PASSES, space=SPACE, vehicles=2, bootstraps=0, design_width=0.15, design_steps=2,
+                   design_shrink=1.0, design_split=True, initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None)
     short = mavtune.tune(diagonal_valley, design_move=0.0, **options)
     moved = mavtune.tune(diagonal_valley, design_move=move, **options)
     assert max(abs(short.gains[g] - o) for g, o in zip(SPACE, OPTIMUM)) > 0.04  # stopped on the second box's face
@@ -145,8 +148,8 @@ def test_moving_designs_fly_exactly_the_planned_flights_and_answer_short_of_a_wa
         return [math.inf if g["kp"] > wall else (1.0 + (g["kp"] - 1.2) ** 2 + (g["kd"] - opt_kd) ** 2)
                 * (1 + 0.05 * draw.gauss(0, 1)) for g in gs]
 
-    options = dict(bootstraps=0, design_width=0.15, design_steps=steps, design_shrink=1.0, design_split=True,
-                   design_move=move, budget=None)
+    options = dict(PASSES, bootstraps=0, design_width=0.15, design_steps=steps, design_shrink=1.0,
+                   design_split=True, design_move=move, budget=None)
     plan = make_plan(Settings(space=SPACE, vehicles=vehicles, design=True, **options))
     result = mavtune.tune(cost, space=SPACE, vehicles=vehicles, initial={"kp": 0.3, "kd": 0.5}, draws=0, **options)
     assert result.flights == plan.flights == plan.rounds_max * vehicles

@@ -103,3 +103,20 @@ def test_parameters_in_files_lie_within_what_was_flown(tmp_path, answer):
         lo, hi = (binding.value(x) for x in flown[gain])
         assert lo - 1e-9 <= written[binding.param] <= hi + 1e-9
         assert out["tuned_params"]["v"][binding.param] == pytest.approx(written[binding.param], rel=1e-6)
+
+
+@pytest.mark.parametrize("optimum, open_face", [((0.9, 0.2), {"kp"}), ((0.55, 0.22), set())])
+def test_a_last_design_that_does_not_surround_its_answer_is_cautioned(optimum, open_face):
+    """A design around the start (no passes, one design ±0.1) on a noise-free bowl: an optimum beyond its box is
+    answered on the box's face and said; one inside it is not."""
+    def bowl(assignments):
+        return [1.0 + (g["kp"] - optimum[0]) ** 2 + (g["kd"] - optimum[1]) ** 2 for g in assignments]
+
+    result = mavtune.tune(bowl, space=SPACE, bootstraps=0, design_first=False, design_inner=False, design_steps=1,
+                          design_width=0.1, vehicles=2, draws=0)
+    assert set(result.open_face) == open_face
+    said = [c for c in result.cautions() if "did not surround its answer" in c]
+    if open_face:
+        assert result.gains["kp"] == pytest.approx(0.6) and len(said) == 1 and "kp = 0.6 " in said[0]
+    else:
+        assert not said and result.gains["kp"] == pytest.approx(optimum[0], abs=0.01)

@@ -7,6 +7,7 @@ from hypothesis import given, settings, strategies as st
 from typer.testing import CliRunner
 
 import mavtune
+from mavtune.api import default_settings
 from mavtune.cli import app
 from mavtune.plan import make_plan
 from mavtune.tuner import Settings
@@ -54,7 +55,7 @@ def test_runs_stay_within_the_plan(method, strategy, half, reuse, kp0, kd0, epsi
     kwargs = dict(space=SPACE, method=method, epsilon=epsilon, strategy=strategy, vehicles=vehicles, reuse=reuse,
                   adaptive=adaptive, answer=answer, confidence=confidence, cap=cap if adaptive else None, edges=edges,
                   directions=directions, design=design)
-    plan = make_plan(Settings(**kwargs, bootstraps=2))
+    plan = make_plan(default_settings(**kwargs, bootstraps=2, budget=None))  # the settings tune() flies
     result = mavtune.tune(evaluate, bootstraps=2, draws=0, budget=None, **kwargs)  # no interval: only the rounds count here
     if adaptive:  # the worst case is stated before take-off and bounds every run
         assert plan.adaptive and plan.rounds <= plan.rounds_max
@@ -67,8 +68,8 @@ def test_plan_command_prints_the_numbers():
                                    "--no-adaptive", "--budget", "none"])
     assert out.exit_code == 0, out.output
     text = " ".join(out.output.split())
-    assert "rounds 10 (guaranteed at most 34" in text  # 28 of the method's comparisons, 4 at a range's edge, and
-    # the design's 9 points on 8 vehicles: 2 rounds
+    assert "rounds 10 (guaranteed at most 22" in text  # 14 of the method's comparisons (1 pass), 2 at a range's
+    # edge, and the designs' 13, 9 and 9 points on 8 vehicles: 2 rounds each
     assert "flights 80" in text and "1 min 30 s" in text and "batteries 2 per vehicle" in text
 
 

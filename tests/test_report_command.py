@@ -17,6 +17,8 @@ from test_cli_resume import LONG, MAVTUNE, folder_bytes, rounds_in, run_cli
 
 FIGURES = ("tuning.png", "timeline.png")
 SHORT = ["-q", "--bootstraps", "1", "--epsilon", "0.25", "--no-adaptive", "--seed", "3"]
+MAP = 7  # rounds of the default's map of the box (13 points on 2 vehicles), flown before the first line search
+STAGE = MAP + 2  # a stage that stops inside the first line search: its figure is drawn, its bracket in progress
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +32,7 @@ def finished(tmp_path_factory):
 @pytest.fixture(scope="module")
 def stage(tmp_path_factory):
     folder = tmp_path_factory.mktemp("stage") / "run"
-    code, err = run_cli("tune", *SHORT, "--stage-rounds", "3", "--out", str(folder))
+    code, err = run_cli("tune", *SHORT, "--stage-rounds", str(STAGE), "--out", str(folder))
     assert code == 0, err
     return folder
 
@@ -64,10 +66,10 @@ def test_the_redrawn_report_is_the_one_the_run_wrote(request, tmp_path, which):
 
 def test_a_stage_report_shows_the_gains_so_far_not_final(stage):
     text = (stage / "report.md").read_text()
-    assert "in progress after 3 rounds" in text and "## Gains so far (not final)" in text
+    assert f"in progress after {STAGE} rounds" in text and "## Gains so far (not final)" in text
     assert "## Final gains\n" not in text and "## Line searches so far" in text
-    lo, hi = result_of(stage)["in_progress"]["bracket"]  # where the search stands after round 2, not as planned
-    assert f"in progress: bracket [{lo:.4g}, {hi:.4g}] after round 2" in text
+    lo, hi = result_of(stage)["in_progress"]["bracket"]  # where the search stands after its 2nd round, not as planned
+    assert f"in progress: bracket [{lo:.4g}, {hi:.4g}] after round {STAGE - 1}" in text
 
 
 def test_a_run_killed_before_result_json_gets_one_saying_so(stage, tmp_path):
@@ -78,8 +80,8 @@ def test_a_run_killed_before_result_json_gets_one_saying_so(stage, tmp_path):
     assert code == 0, err
     result = result_of(folder)
     assert result["status"] == "error" and "without writing result.json" in result["error"]
-    assert result["rounds"] == 3 and result["report"] == "report.md" and result["gains"] is None
-    assert "stopped after 3 rounds" in (folder / "report.md").read_text()
+    assert result["rounds"] == STAGE and result["report"] == "report.md" and result["gains"] is None
+    assert f"stopped after {STAGE} rounds" in (folder / "report.md").read_text()
     assert (folder / "journal.sqlite").read_bytes() == journal
 
 
@@ -109,7 +111,7 @@ def fewer_rounds_in_result(folder: Path) -> None:
     (damage_round, "round 1 does not match its checksum"),
     (lambda f: (f / "config.json").unlink(), "has no config.json"),
     (other_settings, "seed was 3, now 99"),
-    (fewer_rounds_in_result, "records 2 rounds but the journal 3"),
+    (fewer_rounds_in_result, f"records 2 rounds but the journal {STAGE}"),
     (lambda f: (f / "result.json").write_text("{"), "result.json is unreadable"),
 ])
 def test_a_folder_that_cannot_be_reported_is_refused_in_one_line_untouched(stage, tmp_path, spoil, says):
@@ -137,7 +139,7 @@ def test_ctrl_c_mid_run_leaves_a_report_of_the_journal_s_rounds_and_report_draws
                             stderr=subprocess.PIPE, text=True)
     journal = folder / "journal.sqlite"
     deadline = time.monotonic() + 90
-    while time.monotonic() < deadline and proc.poll() is None and (not journal.exists() or rounds_in(journal) < 5):
+    while time.monotonic() < deadline and proc.poll() is None and (not journal.exists() or rounds_in(journal) < STAGE):
         time.sleep(0.01)
     proc.send_signal(signal.SIGINT)
     sent = time.monotonic()
@@ -147,7 +149,7 @@ def test_ctrl_c_mid_run_leaves_a_report_of_the_journal_s_rounds_and_report_draws
     assert took < 10, took  # 2 s on an idle machine (benchmarks/results/ctrl_c_exit.md); this one is shared
     kept = rounds_in(journal)
     result = result_of(folder)
-    assert kept >= 5 and result["status"] == "interrupted" and result["rounds"] == kept
+    assert kept >= STAGE and result["status"] == "interrupted" and result["rounds"] == kept
     assert result["report"] == "report.md" and result["report_figures"] is False
     assert "mavtune report" in result["figures_missing"] and f"mavtune report {folder}" in err
     text = (folder / "report.md").read_text()
@@ -186,11 +188,11 @@ def test_figures_that_cannot_be_drawn_leave_the_text_report(monkeypatch, tmp_pat
 
     monkeypatch.setattr(figure, "plot_tuning", full_disk)
     folder = tmp_path / "run"
-    code, err = run_cli("tune", *SHORT, "--stage-rounds", "2", "--out", str(folder))
+    code, err = run_cli("tune", *SHORT, "--stage-rounds", str(STAGE), "--out", str(folder))
     assert code == 0, err
     result = result_of(folder)
     assert result["report"] == "report.md" and result["report_figures"] is False
     assert "No space left on device" in result["figures_missing"] and "mavtune report" in result["figures_missing"]
     text = (folder / "report.md").read_text()
-    assert "in progress after 2 rounds" in text and "Text only" in text
+    assert f"in progress after {STAGE} rounds" in text and "Text only" in text
     assert not any((folder / name).exists() for name in FIGURES)

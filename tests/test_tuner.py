@@ -9,10 +9,14 @@ from hypothesis import given, settings, strategies as st
 
 import mavtune
 from mavtune.api import paper_options
+from mavtune.config import preset_fields
 from mavtune.errors import MavtuneError
 
 # the paper's search (reuse is given by each test)
 PAPER = {**{k: v for k, v in paper_options().items() if k != "reuse"}, "space": {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}}
+# passes of line searches first, then one design (the default before issue 20): for the tests of a line search's
+# own mechanisms (a NaN it compares, the rounds it asks for, a direction after the second pass)
+PASSES = preset_fields("passes")
 
 
 def bowl(kp0=0.9, kd0=0.33):
@@ -99,7 +103,7 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
     def evaluate(assignments):
         return [math.nan if g["kp"] == 0.125 else (g["kp"] - 0.1) ** 2 for g in assignments]
 
-    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, vehicles=1, bootstraps=1, epsilon=0.125)
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, vehicles=1, epsilon=0.125, **{**PASSES, "bootstraps": 1})
     assert math.isnan(result.rounds[0].costs[0])
     assert result.rounds[0].flights[0].status is mavtune.Status.FAILED
     assert result.rounds[1].assignments[0]["kp"] == 0.875
@@ -138,15 +142,17 @@ def test_the_api_refuses_what_the_cli_refuses_before_anything_flies():
         return [1.0] * len(assignments)
 
     with pytest.raises(MavtuneError, match="at least 40013 rounds, more than max_rounds = 2000") as info:
-        mavtune.tune(evaluate, epsilon=1e-4, budget=None)  # (a budget bounds the flights whatever ε asks)
+        mavtune.tune(evaluate, epsilon=1e-4, budget=None, **PASSES)  # (a budget bounds the flights whatever ε asks)
     assert "\n" not in str(info.value) and not flown
     plain = dict(adaptive=False, edges=False, budget=None)  # no re-flights, no comparison at an edge: exactly
     # the rounds of the search
-    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=8, **plain)
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, max_rounds=8,
+                          **{**PASSES, **plain, "bootstraps": 1})
     assert len(result.rounds) == 8  # EQL's 5 evaluations at ε = 0.25, one a round, and the design's 3 points (one
     # gain, both vehicles at a point): allowed at max_rounds = 8
     with pytest.raises(MavtuneError, match="at least 8 rounds, more than max_rounds = 7"):
-        mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, bootstraps=1, max_rounds=7, budget=None)
+        mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, epsilon=0.25, max_rounds=7, budget=None,
+                     **{**PASSES, "bootstraps": 1})
 
 
 def test_wrong_number_of_costs_is_named():
@@ -226,7 +232,7 @@ def valley(slope=0.8, kp0=0.85, kd0=0.75):
 def test_a_line_search_along_each_pass_follows_a_valley_across_the_gains():
     """Coordinate searches crawl along a diagonal valley; Powell's direction (a line search along the second
     pass's net move) reaches far closer to its minimum, and its answer is a point of the line it flew."""
-    options = dict(vehicles=2, adaptive=False, answer="search", draws=0, bootstraps=2)
+    options = dict(PASSES, vehicles=2, adaptive=False, answer="search", draws=0, bootstraps=2)
     without = mavtune.tune(valley(), **options)
     with_dir = mavtune.tune(valley(), directions=True, **options)
     cost = lambda g: valley()([g])[0]  # noqa: E731
@@ -244,5 +250,5 @@ def test_a_line_search_along_each_pass_follows_a_valley_across_the_gains():
 def test_no_direction_when_the_pass_did_not_move():
     """A pass that moved less than the tolerance has no direction to follow: no extra line search."""
     result = mavtune.tune(bowl(0.5, 0.2), vehicles=2, adaptive=False, draws=0, directions=True, epsilon=0.2,
-                          initial={"kd": 0.2})
+                          initial={"kd": 0.2}, **PASSES)  # (2 passes: a direction could follow the second)
     assert all(r.gain != "direction" for r in result.rounds)

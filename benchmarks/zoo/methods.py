@@ -150,15 +150,32 @@ def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str
             "uncertainty": {}, "budget": budget, "cpu_s": time.process_time() - cpu}
 
 
+def previous_default() -> dict[str, Any]:
+    """The default until session 13 (PASSES_TUNING: 2 passes, then one design of ±0.15 at 42 flights a gain): every
+    candidate but the first was written as fields over it, and keeps that meaning (and its label) over any later
+    default."""
+    from mavtune.config import preset_fields
+
+    return preset_fields("passes")
+
+
 def candidates() -> list[Method]:
-    """The configurations the default is chosen from (the first is today's default; `--half select`; the second the
+    """The configurations the default is chosen from (`--half select`): the first is today's default
+    (config.Tuning()), every other one fields over the default before session 13 (`previous_default()`; the second is the
     default before the budget, chosen on benchmarks/results/selection_budget_default.md). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
-    from mavtune.config import BUDGET_TUNING
+    today, *older = _candidates()
+    base = previous_default()
+    return [today, Method("previous default (2 passes, then ±0.15; session 12)", base),
+            *(Method(m.label, {**base, **m.tuning}, m.peer, m.per_gain) for m in older)]
+
+
+def _candidates() -> list[Method]:
+    from mavtune.config import preset_fields
 
     none = {"budget": "none"}  # the configurations chosen among before budgets: each flies what it asks for
     fixed = {**none, "adaptive": False, "edges": False, "bootstraps": 1}  # a budget known before take-off
-    designs = {k.removeprefix("tuning."): v for k, v in BUDGET_TUNING.items()}  # no passes: 3 designs, exact plan
+    designs = preset_fields("budget")  # no passes: 3 designs, exact plan
     first = {**designs, "design_inner": False, "design_shrink": 0.4}  # the first BUDGET_TUNING: the 3^d box first
     moving = {**none, "design_steps": 2, "design_split": True,
               "design_move": 1.5}  # the design's flights before the budget, in two designs
@@ -273,6 +290,13 @@ def walls(designs: dict[str, Any]) -> list[Method]:
         Method("map, 1 pass, then ±0.2, ±0.08 (shrink fit), the wall rules and composite fit over 3.6 half-widths "
                "42 a gain", {**fit, "bootstraps": 1, "design_first": True, **keep, "composite_reach": 3.6},
                per_gain=42),  # lane hybrid's best structure with lane guard's rules (the lead, session 12)
+        Method("map, 1 pass, then ±0.2, ±0.08 (shrink fit), the previous design's answer beside a wall 42 a gain",
+               {**fit, "bootstraps": 1, "design_first": True, **keep}, per_gain=42),  # session 13: C without the
+        # composite fit (C's 4 gains 92 % within 2 % against A's 100 %, selection_combo.md)
+        Method("default, the last answer within the design before where the last fit's minimum lies past its box",
+               {**fit, "bootstraps": 1, "design_first": True, **keep, "design_open": True}, per_gain=42),  # session 13
+        Method("default, the last answer one half-width past its box's face where the last fit's minimum lies past "
+               "it", {**fit, "bootstraps": 1, "design_first": True, **keep, "design_open": "step"}, per_gain=42),
         Method("map, 1 pass, then ±0.225, ±0.1 (shrink 0.45 fit), the wall rules and composite fit over 3.6 "
                "half-widths 42 a gain", {**fit, "bootstraps": 1, "design_first": True, **keep, "composite_reach": 3.6,
                                          "design_shrink": 0.45}, per_gain=42),

@@ -72,10 +72,32 @@ def summarise(rows: list[dict[str, Any]], optimum: list[float], gains: tuple[str
             "truth_se_median_pct": float(np.median([r["excess_se_pct"] for r in rows])) if n else math.nan}
 
 
-def choose(table: dict[str, dict[str, dict[str, Any]]], labels: list[str]) -> tuple[str, list[dict[str, Any]]]:
+PEERS = ("CMA-ES", "TPE (optuna)")
+
+
+def peer_losses(rows: dict[str, dict[str, list[dict[str, Any]]]], label: str) -> list[str]:
+    """Where `label` loses to a peer: each plant (and the zoo as a whole) on which the paired sign test says it is
+    significantly worse than CMA-ES or TPE at the same flights, or the zoo where it is not significantly better
+    (issue 20's goal against the peers); [] where no peer was run."""
+    out = []
+    for peer in PEERS:
+        if not any(peer in rows[p] for p in rows):
+            continue
+        out += [f"{p}: {peer}" for p in rows if peer in rows[p] and label in rows[p]
+                and sign_test(rows[p][label], rows[p][peer])["verdict"] == "worse"]
+        zoo = sign_test([r for p in rows for r in rows[p].get(label, [])], [r for p in rows for r in rows[p][peer]])
+        if zoo["verdict"] != "better":
+            out.append(f"zoo: {peer} ({zoo['verdict']})")
+    return out
+
+
+def choose(table: dict[str, dict[str, dict[str, Any]]], labels: list[str],
+           rows: dict[str, dict[str, list[dict[str, Any]]]] | None = None) -> tuple[str, list[dict[str, Any]]]:
     """The default from the selection seeds: among the configurations meeting the flight goals over the zoo
-    (mean <= 56, worst <= 112) with no fly-away answer — all of them if none does — the highest mean share of
-    runs within 2 % over the plants; ties to fewer flights. Returns the label and every candidate's score."""
+    (mean <= 56, worst <= 112) with no fly-away answer — all of them if none does — those that meet the goal
+    against the peers (`peer_losses`: never significantly worse than CMA-ES or TPE on a plant, better over the zoo;
+    all of them if none does, or with no peer run), then the highest mean share of runs within 2 % over the plants;
+    ties to fewer flights. Returns the label and every candidate's score."""
     scores = []
     for lb in labels:
         per = [table[p][lb] for p in table if lb in table[p]]
@@ -87,11 +109,13 @@ def choose(table: dict[str, dict[str, dict[str, Any]]], labels: list[str]) -> tu
                        "within_min": float(min(s["within"] for s in per)), "flights_mean": flights,
                        "flights_max": max(s["flights_max"] for s in per),
                        "fly_away_answers": sum(s["fly_away_answers"] for s in per),
-                       "coverage_min": min((s["coverage"] for s in per if s["coverage"] is not None), default=None)})
+                       "coverage_min": min((s["coverage"] for s in per if s["coverage"] is not None), default=None),
+                       "peer_losses": peer_losses(rows, lb) if rows is not None else []})
     for s in scores:
         s["eligible"] = (s["flights_mean"] <= FLIGHTS_MEAN_GOAL and s["flights_max"] <= FLIGHTS_WORST_GOAL
                          and s["fly_away_answers"] == 0)
     pool = [s for s in scores if s["eligible"]] or scores
+    pool = [s for s in pool if not s["peer_losses"]] or pool
     best = max(pool, key=lambda s: (round(s["within_mean"], 6), -s["flights_mean"]))
     return best["label"], scores
 
@@ -109,7 +133,7 @@ def goals(table: dict[str, dict[str, dict[str, Any]]], default: str, paired: dic
     out.append({"goal": "every plant: within 2 % in >= 90 % of runs, or the best of all methods",
                 "measured": "; ".join(f"{p} {table[p][default]['within']:.0%}" for p in plants)
                 + (f". Missed: {', '.join(miss)}" if miss else ""), "met": not miss})
-    for peer in ("CMA-ES", "TPE (optuna)"):
+    for peer in PEERS:
         z = paired.get(f"zoo:{peer}")
         if z is None:
             continue

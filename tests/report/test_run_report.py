@@ -44,11 +44,15 @@ def test_callable_fleet_without_traces_three_gains_three_vehicles(tmp_path):
     assert "no altitude traces were recorded" in text
     rows = _table_rows(text, "## Rounds")
     assert len(rows) == len(result.rounds)
-    # per-vehicle points and costs are those of the flights
-    first = result.rounds[0]
-    assert rows[0][0] == "0" and rows[0][2] == first.gain
-    assert [float(c) for c in rows[0][4:7]] == pytest.approx([f.gains[first.gain] for f in first.flights], rel=1e-4)
-    assert [float(c) for c in rows[0][7:10]] == pytest.approx(first.costs, rel=1e-4)
+    # per-vehicle points and costs are those of the flights: a line search's the gain it searches, a design's
+    # (the default's map of the box flies first) every gain
+    k, first = next((k, r) for k, r in enumerate(result.rounds) if r.gain in result.gains)
+    assert rows[k][0] == str(k) and rows[k][2] == first.gain
+    assert [float(c) for c in rows[k][4:7]] == pytest.approx([f.gains[first.gain] for f in first.flights], rel=1e-4)
+    assert [float(c) for c in rows[k][7:10]] == pytest.approx(first.costs, rel=1e-4)
+    design = result.rounds[0]
+    assert design.gain == "design" and rows[0][4] == ", ".join(f"{design.flights[0].gains[g]:.4g}" for g in "abc")
+    assert [float(c) for c in rows[0][7:10]] == pytest.approx(design.costs, rel=1e-4)
     for name, value in result.gains.items():
         assert re.search(rf"\| {name} \| {value:.6g} \|", text)
     plan = _table_rows(text, "## Plan vs actual")

@@ -66,7 +66,9 @@ def test_the_report_of_a_vehicle_run_names_the_parameters_in_their_units(tmp_pat
     if math.isfinite(se) and se > 0:
         assert float(kp[3]) == pytest.approx(2.0 * se, rel=0.05)
     header, rows = _table(text, "## Rounds")
-    assert rows[0][2] == "PSC_POSZ_P (kp)" and rows[0][3] == "[1, 3]"  # the bracket in PSC_POSZ_P
+    search = next(r for r in rows if r[2] != "design")  # (the default's map of the box flies first)
+    assert search[2] == "PSC_POSZ_P (kp)" and search[3] == "[1, 3]"  # the bracket in PSC_POSZ_P
+    assert rows[0][2] == "design" and rows[0][4] == "2, 4.5"  # a design's point: every gain in its units
     assert "kp ∈ [0, 1] (PSC_POSZ_P 1 to 3)" in text
     assert re.search(r"\| # \| bracket \(PSC_POSZ_P\) \| points \(PSC_POSZ_P\) \|", text)
 
