@@ -128,7 +128,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "design_open", "design_pass_box", "wall_span",
+                   "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
                    "wall_keep", "composite_reach", "budget")
 
 
@@ -241,7 +241,6 @@ class Tuning(_Section):
                                           "next design's own flights per three coefficients of its quadratic, at "
                                           "most 1 (4 gains' designs, each point flown once, narrow less: their "
                                           "fit's curvature stays above the noise)")
-    design_open: StrictBool | Literal["step"] = Field(False, description="screen")
     design_pass_box: StrictBool = Field(False, description="design: after the designs flown first "
                                         "(`design_first`), each line search of the passes flies within the last "
                                         "one's half-width of the gain's answer so far (shifted inside the range), "

@@ -260,7 +260,6 @@ class Settings:
     design_trust: bool = False
     design_shrink_wall: float = 0.0
     design_shrink_fit: bool = False
-    design_open: bool | str = False
     design_pass_box: bool = False
     wall_span: float = 0.0
     wall_keep: bool = False
@@ -503,7 +502,6 @@ class Settings:
                         | ({"trust": True} if self.design_trust else {})
                         | ({"shrink_wall": float(self.design_shrink_wall)} if self.design_shrink_wall else {})
                         | ({"shrink_fit": True} if self.design_shrink_fit else {})
-                        | ({"open": self.design_open} if self.design_open else {})
                         | ({"wall_span": float(self.wall_span)} if self.wall_span else {})
                         | ({"wall_keep": True} if self.wall_keep else {})
                         | ({"composite_reach": float(self.composite_reach)} if self.composite_reach else {})
@@ -752,16 +750,6 @@ class Tuner:
         keep = before if (s.wall_keep and step + 1 == s.design_count() and self._design_answers
                           and self._design_answers[-1] == self.gains) else None  # (not the passes' answer)
         best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
-        if (s.design_open and step + 1 == s.design_count() and self._step is not None and any(_open_face(box, best))
-                and not _failed_within(flown, self._step[0])):  # the fit's minimum lies past the last box: the box
-            wide, _, _ = self._step  # before reaches on (where none of its kernel's flights failed)
-            if s.design_open == "step":  # one half-width past each open face, within the box before
-                box = [(max(wa, a - half) if abs(b - a) <= 1e-9 else a, min(wc, c + half) if abs(b - c) <= 1e-9 else c)
-                       for (a, c), (wa, wc), b in zip(box, wide, best)]
-            else:
-                box, half = [(min(a, wa), max(c, wc)) for (a, c), (wa, wc) in zip(box, wide)], max(
-                    0.5 * (c - a) for a, c in wide)
-            best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half)
         self.open_face = {n: self.gains[n] for n, on in zip(names, _open_face(box, best)) if on}
@@ -996,12 +984,6 @@ def _open_face(box: Sequence[tuple[float, float]], x: Sequence[float]) -> list[b
     """Per gain: whether `x` (shares of each range) lies on a face of `box` that is not a bound of the range."""
     return [c - a > 1e-9 and min(abs(b - a), abs(b - c)) <= 1e-9 and 1e-9 < b < 1.0 - 1e-9
             for (a, c), b in zip(box, x)]
-
-
-def _failed_within(points: dict[tuple[float, ...], list[float]], box: Sequence[tuple[float, float]]) -> bool:
-    """Whether a failed flight lies within two half-widths of `box` from its centre (the surface fit's kernel)."""
-    return any(c and not all(map(math.isfinite, c))
-               and all(abs(v - 0.5 * (a + b)) <= (b - a) + 1e-9 for v, (a, b) in zip(k, box)) for k, c in points.items())
 
 
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,

@@ -293,10 +293,6 @@ def walls(designs: dict[str, Any]) -> list[Method]:
         Method("map, 1 pass, then ±0.2, ±0.08 (shrink fit), the previous design's answer beside a wall 42 a gain",
                {**fit, "bootstraps": 1, "design_first": True, **keep}, per_gain=42),  # session 13: C without the
         # composite fit (C's 4 gains 92 % within 2 % against A's 100 %, selection_combo.md)
-        Method("default, the last answer within the design before where the last fit's minimum lies past its box",
-               {**fit, "bootstraps": 1, "design_first": True, **keep, "design_open": True}, per_gain=42),  # session 13
-        Method("default, the last answer one half-width past its box's face where the last fit's minimum lies past "
-               "it", {**fit, "bootstraps": 1, "design_first": True, **keep, "design_open": "step"}, per_gain=42),
         Method("map, 1 pass, then ±0.225, ±0.1 (shrink 0.45 fit), the wall rules and composite fit over 3.6 "
                "half-widths 42 a gain", {**fit, "bootstraps": 1, "design_first": True, **keep, "composite_reach": 3.6,
                                          "design_shrink": 0.45}, per_gain=42),
