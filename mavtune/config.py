@@ -149,8 +149,8 @@ class Tuning(_Section):
     Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs, 40 a plant:
     benchmarks/results/selection_default13.md) by `zoo.stats.choose`: of the configurations never significantly worse
     than CMA-ES or TPE on a plant and better than both over the zoo, the highest mean share of runs within 2 % of the
-    optimum (51 % over the 13 plants). The default before it (2 passes, then one design of ±0.15, the same budget: 44 %)
-    was significantly worse than CMA-ES on the unknown heavier vehicle and than TPE on gusts; against it this one is
+    optimum (51 % over the 13 plants). The default before it (2 passes, then one design of ±0.15, the same budget:
+    44 %) was significantly worse than CMA-ES on the unknown heavier vehicle and than TPE on gusts; against it this one is
     better over the zoo (paired sign test 287 runs to 225, p 0.007; on the heavy vehicle, gusts, the corner box,
     the analytic edge and mavsim's ArduPilot cascade) and worse on 60 ms more latency (12 to 28) and the analytic
     valley (13 to 27), where the second line search of the passes found a narrow valley the map and one pass miss.

@@ -27,8 +27,8 @@ def noisy_bowl(seed: int, noise: float = 0.2):
 
 
 def passes(**given) -> Settings:
-    """The settings of `PASSES_TUNING` (2 passes, then one design: the default before issue 20) with `given`: for the
-    tests of a mechanism of that structure (a budget's share for 4 line searches, a single design after them)."""
+    """The settings of `PASSES_TUNING` (2 passes, then one design: the default until session 13) with `given`: for
+    the tests of a mechanism of that structure (a budget's share for 4 line searches, a single design after them)."""
     return Tuning.model_validate(preset_fields("passes")).settings(**given)
 
 

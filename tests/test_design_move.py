@@ -18,8 +18,9 @@ from mavtune.tuner import Settings
 
 SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
 OPTIMUM = (0.85, 0.8)
-PASSES = preset_fields("passes")  # the default before issue 20 (no map
-# first, no narrowing, wall_keep off): designs of one width, as the engine's `Settings` that plans them defaults to
+# the default until session 13 (no map first, no narrowing, wall_keep off): designs of one width, as the engine's
+# `Settings` that plans them defaults to
+PASSES = preset_fields("passes")
 
 
 def diagonal_valley(gs):

@@ -20,9 +20,10 @@ from mavtune.tuner import Settings
 SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
 FIXED = dict(design=True, adaptive=False, edges=False, bootstraps=1, draws=0, budget=None)  # (no budget: each
 # stage flies what it asks for)
-PASSES = preset_fields("passes")  # the default before issue 20 (the
-# passes, then one 3^d design flown by both vehicles, no map, no narrowing, wall_keep off): the structure the tests
-# of one design's mechanisms (how it narrows, keeps an answer, is planned) are written against
+# the default until session 13 (the passes, then one 3^d design flown by both vehicles, no map, no narrowing,
+# wall_keep off): the structure the tests of one design's mechanisms (how it narrows, keeps an answer, is planned)
+# are written against
+PASSES = preset_fields("passes")
 
 
 def bowl(opt, coupling=0.0):

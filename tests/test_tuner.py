@@ -14,7 +14,7 @@ from mavtune.errors import MavtuneError
 
 # the paper's search (reuse is given by each test)
 PAPER = {**{k: v for k, v in paper_options().items() if k != "reuse"}, "space": {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}}
-# passes of line searches first, then one design (the default before issue 20): for the tests of a line search's
+# passes of line searches first, then one design (the default until session 13): for the tests of a line search's
 # own mechanisms (a NaN it compares, the rounds it asks for, a direction after the second pass)
 PASSES = preset_fields("passes")
 

@@ -12,9 +12,10 @@ import mavtune
 from mavtune.config import preset_fields
 from mavtune.search.evidence import NoisePool, p_best, point_stats
 
-PASSES = preset_fields("passes")  # the default before issue 20: two passes
-# of line searches, then one design around their answer (the line searches' held gains, moves between passes and
-# samples beside a wall that the tests of their intervals and cautions are written against)
+# the default until session 13: two passes of line searches, then one design around their answer (the line
+# searches' held gains, moves between passes and samples beside a wall that the tests of their intervals and
+# cautions are written against)
+PASSES = preset_fields("passes")
 
 
 def test_point_error_from_its_own_replicates_then_from_the_pooled_noise():

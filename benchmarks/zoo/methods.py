@@ -161,9 +161,9 @@ def previous_default() -> dict[str, Any]:
 
 def candidates() -> list[Method]:
     """The configurations the default is chosen from (`--half select`): the first is today's default
-    (config.Tuning()), every other one fields over the default before session 13 (`previous_default()`; the second is the
-    default before the budget, chosen on benchmarks/results/selection_budget_default.md). The paper's setting
-    (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
+    (config.Tuning()), every other one fields over the default before session 13 (`previous_default()`; the second
+    is that default, the third the default before the budget, chosen on selection_budget_default.md). The paper's
+    setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
     return [today, Method("previous default (2 passes, then ±0.15; session 12)", base),
