@@ -155,8 +155,9 @@ def test_frozen_agent_is_noticed_by_the_lease_and_the_run_completes(procs, tmp_p
     import os
     import signal
 
-    config = tmp_path / "search.toml"  # the search's own answer: a lost flight changes no comparison (see above)
-    config.write_text('[tuning]\nanswer = "search"\n')
+    config = tmp_path / "search.toml"  # the search's own answer: a lost flight changes no comparison (see above);
+    # the line searches alone, as the twin below flies them (a design would answer from a fit of the flights)
+    config.write_text('[tuning]\nanswer = "search"\ndesign = false\n')
     _, out, twin = start_swarm(procs, tmp_path, 2, seed=4, noise_free=True, min_flight_s=0.2, result_timeout_s=30,
                                extra=["--bootstraps", "1", "--config", str(config)])
     assert procs.wait_log("v1", "round 3: FLYING", 60)
