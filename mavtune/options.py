@@ -27,8 +27,8 @@ BudgetOpt = typer.Option(None, "--budget", help="The run's flights, all vehicles
 MaxRoundsOpt = typer.Option(None, "--max-rounds", help="Refuse a plan of more rounds than this [2000]; raise it "
                             "to fly a longer plan anyway.")
 PresetOpt = typer.Option(None, "--preset", help="Named settings over the file's [tuning]: paper (the paper's exact "
-                         "search) | budget (designs only: flights fixed before take-off) | passes (two passes of line searches, "
-                         "then one design: the default until session 13). Flags still win.")
+                         "search) | budget (designs only: flights fixed before take-off) | passes (two passes of line "
+                         "searches, then one design: the default until session 13). Flags still win.")
 SchedulerOpt = typer.Option(None, "--scheduler", help="Run the campaign's chunks on the Dask cluster whose "
                             "scheduler listens here (tcp://HOST:8786); default: in this process.")
 

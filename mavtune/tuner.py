@@ -15,7 +15,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains
@@ -29,7 +29,8 @@ from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    fly_away as surface_fly_away, next_centre as surface_next_centre, ruled_out as surface_ruled_out, REACH,
+    fly_away as surface_fly_away, next_centre as surface_next_centre, open_faces as surface_open_faces,
+    ruled_out as surface_ruled_out, REACH,
 )
 from mavtune.search.risk import RISK
 from mavtune.strategy import Strategy
@@ -752,7 +753,7 @@ class Tuner:
         best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half)
-        self.open_face = {n: self.gains[n] for n, on in zip(names, _open_face(box, best)) if on}
+        self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
         for rec in last.values():  # the caution of an answer next to a failed flight is the final answer's
@@ -978,12 +979,6 @@ class Tuner:
         if not same:
             raise MavtuneError(f"journal round {record.index} does not match this run's round "
                                f"(recorded {record.assignments}, now {assignments}); use a new journal")
-
-
-def _open_face(box: Sequence[tuple[float, float]], x: Sequence[float]) -> list[bool]:
-    """Per gain: whether `x` (shares of each range) lies on a face of `box` that is not a bound of the range."""
-    return [c - a > 1e-9 and min(abs(b - a), abs(b - c)) <= 1e-9 and 1e-9 < b < 1.0 - 1e-9
-            for (a, c), b in zip(box, x)]
 
 
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,

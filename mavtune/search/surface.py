@@ -98,14 +98,20 @@ def next_centre(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequen
     if move >= 1.0:
         inside = {k: c for k, c in points.items() if all(lo - 1e-9 <= v <= hi + 1e-9 for v, (lo, hi) in zip(k, box))}
         guide, _ = answer(inside, box, ruled_out(inside, pool) if pool is not None else (), pool, reach=LOCAL_REACH)
-        if any(hi - lo > 1e-9 and min(abs(g - lo), abs(g - hi)) <= 1e-9 and 1e-9 < g < 1 - 1e-9
-               for (lo, hi), g in zip(box, guide)):
+        if any(open_faces(box, guide)):
             for t in [move - 0.25 * k for k in range(int((move - 1.0) / 0.25 + 1e-9) + 1)]:
                 target = tuple(min(max(c + t * (g - c), 0.0), 1.0) for c, g in zip(centre, guide))
                 if not walled(points, guide, design(target, half, inner)):
                     return target, True
     here = tuple(float(v) for v in answer_now)
     return (centre, False) if walled(points, here, design(here, half, inner)) else (here, False)
+
+
+def open_faces(box: Sequence[tuple[float, float]], x: Sequence[float]) -> list[bool]:
+    """Per gain: whether `x` (shares of each range) lies on a face of `box` that is not a bound of the range (the
+    fit's minimum there lies past the design: it did not surround it)."""
+    return [hi - lo > 1e-9 and min(abs(g - lo), abs(g - hi)) <= 1e-9 and 1e-9 < g < 1 - 1e-9
+            for (lo, hi), g in zip(box, x)]
 
 
 def walled(points: Mapping[tuple[float, ...], Sequence[float]], start: Sequence[float],
