@@ -52,6 +52,9 @@ class Plan:
     adaptive: bool = False  # rounds is the expected case, rounds_max the cap in every comparison
     rounds_min: int | None = None  # adaptive: the expected rounds when every comparison is clear (no re-flight)
     budget: int | None = None  # the run's flights exactly (`Settings.budget`), its last round maybe not full
+    map_points: int = 0  # the map of the box flown first (`design_first` with `design_inner`): its points,
+    map_rounds: int = 0  # the rounds they take (the first of the run)
+    map_corners: int = 0  # and its corners where every gain is at a bound of its range (0: the map is narrower)
 
     @property
     def flights(self) -> int:
@@ -102,6 +105,10 @@ class Plan:
                "the budget: the passes' line searches fly a share, the response surface's designs the rest)"),
             f"flight time   {clock(self.flight_time_s)} ({self.round_s:g} s a round: {self.primitive_s:g} s "
             f"primitive + {self.settle_s:g} s settle)",
+            *([f"first         rounds 1–{self.map_rounds}: a map of the box, {counted(self.map_points, 'point')} once "
+               f"each" + (f", among them its {self.map_corners} corners, every gain at a bound of its range (narrow "
+                          f"[tuning] space where a bound could be unsafe to fly)" if self.map_corners else "")]
+              if self.map_rounds else []),
             f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each "
             f"({self.rounds_per_battery} rounds a pack)" + (f"; {self.batteries_max} for {self.rounds_max} rounds"
                                                             if self.batteries_max != self.batteries else ""),
@@ -220,10 +227,11 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
     exact: the designs alone; with a `budget`, exact too: its flights, in as many rounds as it fills); refused
     (MavtuneError) when the rehearsals would take more than `work_limit` steps (default `PLAN_WORK`)."""
     bootstraps = settings.bootstraps if settings.bootstraps is not None else settings.max_bootstraps
+    first = _first_map(settings)
     if settings.budget is not None:  # exact whatever the costs: the line searches' shares, the designs the rest
         rounds = settings.fewest_rounds()
         return Plan(rounds, rounds, settings.vehicles, settings.budget, bootstraps, primitive_s, settle_s, battery_s,
-                    budget=settings.budget)
+                    budget=settings.budget, **first)
     # every gain's line search has the same shape relative to its range: rehearse one, count it per gain
     lo, hi = 0.0, 1.0
     minimisers = [(i + 0.5) / MINIMISER_PROBES for i in range(MINIMISER_PROBES)]
@@ -249,4 +257,15 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
         rounds, clear = rounds + surface, None if clear is None else clear + surface
     return Plan(rounds, per_search_max * searches + surface, settings.vehicles, evaluations,
                 bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None,
-                adaptive=settings.adaptive_rule is not None and searches > 0, rounds_min=clear)
+                adaptive=settings.adaptive_rule is not None and searches > 0, rounds_min=clear, **first)
+
+
+def _first_map(settings: Settings) -> dict[str, int]:
+    """The map of the box a run flies first (`design_first` with `design_inner`): its points, its rounds and its
+    corners at the bounds of the ranges (a map as wide as the box: `design_width` 0.5); nothing without one."""
+    if not (settings.design_count() and settings.designs_before_passes() and settings.design_inner_at(0)):
+        return {}
+    points, vehicles = settings.design_points(0), int(settings.vehicles)
+    corners = 2 ** len(settings.space) if float(settings.design_width) >= 0.5 else 0
+    return {"map_points": points, "map_rounds": math.ceil(settings.design_flights(0) / vehicles),
+            "map_corners": corners}

@@ -508,7 +508,7 @@ def plan_panel(config: Config, plan: Plan) -> str:
     t = config.tuning
     head = (f"[bold]plan[/]  {t.method} ε={t.epsilon:g} over {', '.join(t.space)} · "
             f"{counted(t.vehicles, config.fleet.kind + ' vehicle')} · strategy {t.strategy}{'' if t.reuse else ' (no reuse)'}")
-    return head + "\n" + "\n".join("  " + line for line in plan.describe().splitlines())
+    return head + "\n" + "\n".join("  " + escape(line) for line in plan.describe().splitlines())
 
 
 def _result_table(result: TuningResult) -> Table:

@@ -72,6 +72,29 @@ def test_plan_command_prints_the_numbers():
     # edge, and the designs' 13, 9 and 9 points on 8 vehicles: 2 rounds each
     assert "flights 80" in text and "1 min 30 s" in text and "batteries 2 per vehicle" in text
 
+def test_the_plan_says_the_first_rounds_fly_the_corners_of_the_box_and_they_do():
+    """The default maps the box first, its corners included (every gain at a bound): an engineer must know before
+    take-off that the extremes of the ranges are flown in the first rounds, and which rounds those are."""
+    flown: list[dict] = []
+
+    def evaluate(assignments):  # a bowl; every flight recorded in order
+        flown.extend(assignments)
+        return [(g["kp"] - 0.3) ** 2 + (g["kd"] - 0.6) ** 2 + 0.01 for g in assignments]
+
+    plan = make_plan(default_settings(space=SPACE))
+    assert (plan.map_points, plan.map_rounds, plan.map_corners) == (13, 7, 4)
+    mavtune.tune(evaluate, space=SPACE, draws=0)
+    first = {(g["kp"], g["kd"]) for g in flown[:plan.map_rounds * 2]}  # 2 vehicles a round
+    assert {(0.0, 0.0), (0.0, 1.0), (1.0, 0.0), (1.0, 1.0)} <= first and len(first) == plan.map_points
+    out = CliRunner().invoke(app, ["plan"])
+    assert out.exit_code == 0, out.output
+    text = " ".join(out.output.split())
+    assert "first rounds 1–7: a map of the box, 13 points once each, among them its 4 corners" in text
+    assert "narrow [tuning] space" in text  # (the markup escaped: rich would take [tuning] for a style)
+    passes = CliRunner().invoke(app, ["plan", "--preset", "passes"])
+    assert passes.exit_code == 0 and "map of the box" not in passes.output  # the line searches start at once
+
+
 
 def test_adaptive_plan_says_the_expected_and_the_worst_case():
     plain = make_plan(Settings(space=SPACE, initial={"kd": 0.2}))
