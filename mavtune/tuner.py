@@ -182,7 +182,11 @@ class TuningResult:
             chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
             said = f"fitted to the run's flights, some of which diverged, a flight at the answer diverges with " \
                    f"chance {chance:.2%}"
-            if chance > bound:
+            if chance > bound and risk.get("kept"):
+                out.append(f"{said}, above the {bound:.1%} an answer keeps to: it is the design before's answer, kept "
+                           "beside the wall (that design's flights put it under the bound; the last one's, nearer the "
+                           "wall, do not): fly narrower ranges away from the failed flights before trusting it")
+            elif chance > bound:
                 out.append(f"{said}, above the {bound:.1%} an answer keeps to, which no point flown in the design "
                            "meets: fly the design away from the failed flights (narrower ranges) before trusting it")
             elif free:
@@ -752,7 +756,10 @@ class Tuner:
                           and self._design_answers[-1] == self.gains) else None  # (not the passes' answer)
         best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
-        self.divergence = self._divergence(flown, box, ruled, best, half)
+        kept = keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))
+        self.divergence = self._divergence(flown, box, ruled, best, half, keep)
+        if self.divergence is not None:
+            self.divergence["kept"] = kept
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
@@ -809,11 +816,13 @@ class Tuner:
         return a, min(a + 2 * half, hi)
 
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
-                    ruled: Any, best: tuple[float, ...], half: float) -> dict[str, Any] | None:
+                    ruled: Any, best: tuple[float, ...], half: float,
+                    keep: list[float] | None = None) -> dict[str, Any] | None:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
-        flights fit it, the bound on that chance (`risk.RISK`), and the fit's own answer without the bound and its
-        chance when the bound moved it (None when not); None when no flight near the design failed."""
-        options = self._answer_options(half)
+        flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
+        (the previous design's answer `keep` included) and its chance when the bound moved it (None when not); None
+        when no flight near the design failed. (`_surface` adds whether the answer is `keep`: "kept".)"""
+        options = self._answer_options(half, keep)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None

@@ -172,6 +172,18 @@ def _finite_stats(points: Mapping[tuple[float, ...], Sequence[float]], pool: Noi
     return {x: (st.mean, st.se) for x, st in stats.items() if math.isfinite(st.mean) and math.isfinite(st.se)}
 
 
+def _outdone(points: Mapping[tuple[float, ...], Sequence[float]], x: tuple[float, ...],
+             rivals: Sequence[tuple[float, ...]], pool: NoisePool | None) -> bool:
+    """Whether the flights tell one of `rivals` better than the point `x` (at `LEVEL`, corrected for the rivals
+    kept): an answer is not kept beside a wall when the design flew far lower costs on the safe side of it."""
+    if pool is None or not math.isfinite(pool.cv):
+        return False
+    from statistics import NormalDist
+
+    stats = _finite_stats({q: points[q] for q in {*rivals, x}}, pool)
+    return x in stats and x not in within_noise(stats, NormalDist().inv_cdf(0.5 + 0.5 * LEVEL), LEVEL)
+
+
 def beside_wall(points: Mapping[tuple[float, ...], Sequence[float]], x: Sequence[float],
                 reach: float) -> tuple[float, ...] | None:
     """The failed point nearest `x` when the answer `x` lies next to it: within `reach` (the design's span), or
@@ -352,7 +364,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     narrow design sees the walls the wider ones before it flew into. With `keep` (the previous design's answer, in
     shares of each range: bounded by that design's own divergence fit), the answer is `keep` wherever a flight
     within the fit's kernel (`reach`) failed — unless a failed flight lies nearest it or on the way to it from the best point
-    flown, or it lies outside the box: a narrow design beside a wall fits few safe flights, and a wall it barely
+    flown, or it lies outside the box, or the flights tell a point of the box clear of the bound better (`_outdone`: the
+    60 ms latency plant's valley, found by the last design and lost to the answer before it): a narrow design beside a wall fits few safe flights, and a wall it barely
     sees or sees through a few unlucky failures (answer_diagnostic_guard.md: replayed on the designs alone's 40
     cliff runs, with `risk_reach` 4, within 2 % of the optimum in 48 % of runs and 1 fly-away answer, against 12 %
     and 5)."""
@@ -421,7 +434,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
 
     if keep is not None and np.any(~ok & (tricube(np.atleast_2d((every - centre) / half)) > 0)):
         k = np.asarray(keep, float)  # beside a wall: the answer before this design stands, where flown safely
-        if np.all((k >= lo - 1e-9) & (k <= hi + 1e-9)) and allowed(k[None], ok, False)[0]:
+        if (np.all((k >= lo - 1e-9) & (k <= hi + 1e-9)) and allowed(k[None], ok, False)[0]
+                and not _outdone(points, keys[int(tree.query(k)[1])], [q for q, o in zip(keys, pick) if o], pool)):
             return tuple(float(v) for v in k), False
     x = (every[ok] - centre) / half
     y = means[ok]
