@@ -57,6 +57,20 @@ def test_gains_that_diverge_before_the_primitive_starts_are_failed_not_lost():
     assert flight.info["samples"] == 0 and flight.info["restored_last_safe"] is True
 
 
+def test_gains_that_fly_but_cannot_calm_the_hover_give_way_to_the_originals_before_the_next_flight():
+    """A corner of ArduCopter's 4-gain box (PSC_POSZ_P 3, PSC_VELZ_P 1, PSC_ACCZ_P 0.2, PSC_ACCZ_I 0.2) flies the
+    primitive within the abort limits, then drifts in the hover and never calms: the next flight waited for calm on
+    those gains and was lost, and every one after it (ArduCopter SITL, the default's map of the box: 5 rounds lost,
+    the run stopped). The originals go back, the next flight flies, and later flights need nothing of the kind."""
+    corner, middle = {"kp": 1.0, "kd": 0.0, "ka": 0.0, "ki": 0.0}, {"kp": 0.5, "kd": 0.5, "ka": 0.5, "ki": 0.5}
+    with mavsim(autopilot="ardupilot") as url:
+        with MavlinkVehicle(url, fast_config(gain_set="altitude-inner")) as vehicle:
+            flights = [vehicle.fly(g, k) for k, g in enumerate([corner, middle, middle])]
+            assert vehicle.last_safe_params == vehicle.param_values(middle)
+    assert [f.status for f in flights] == [Status.OK] * 3, [f.info.get("reason") for f in flights]
+    assert [f.info.get("restored_original") for f in flights] == [None, True, None]
+
+
 def test_keep_tuned_leaves_the_tuned_gains_and_extra_assignments_are_lost():
     with mavsim(autopilot="px4") as url:
         fleet = MavlinkFleet([url], fast_config(keep_tuned=True))

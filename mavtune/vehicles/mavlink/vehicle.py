@@ -421,6 +421,21 @@ class MavlinkVehicle:
         finally:
             self.link.remove_position_listener(samples.put)
 
+    def _unsettled_gains(self) -> bool:
+        """The gains on the vehicle, not its own, could not bring it back to a calm hover (`_recover`): put the
+        originals back and make them the last safe gains (the next flight after a recovery hovers `recover_s` first,
+        as after an abort); True when that was done and confirmed. A corner of the gain box (ArduCopter: PSC_VELZ_P
+        1, PSC_ACCZ_P 0.2, PSC_ACCZ_I 0.2) can fly the primitive inside the abort limits yet drift in the hover."""
+        if all(self.current_params.get(n) == v for n, v in self.original_params.items()):
+            return False
+        log.warning("%s: the last gains do not hold a calm hover; the original gains go back before the next "
+                    "flight", self.name)
+        if not self._restore(self.original_params, "the original gains"):
+            return False
+        self.last_safe_params = dict(self.original_params)
+        self._aborted = True
+        return True
+
     def _fly_primitive(self) -> tuple[str | None, list[tuple[float, float, float]]]:
         """Settle, then fly the loop's primitive; (abort reason or None, samples (t_s, reference_m, position_m):
         altitude up, or the position along the horizontal axis)."""
@@ -499,6 +514,9 @@ class MavlinkVehicle:
             if problem:
                 return lost("mode_switch_failed", problem)
         reason = self._recover()
+        if reason == "not_calm" and self._unsettled_gains():
+            info["restored_original"] = True  # the last flight's gains flew it within the limits but do not calm
+            reason = self._recover()  # the hover: its own gains do (else every later round would be lost)
         if reason:
             return lost(reason, "the vehicle did not come back to a calm hover before the gain change")
         self._aborted = False
