@@ -7,7 +7,10 @@ the engine itself (e.g. the answer's rule) is measured by running quality.py onc
 wind and noise), and the sign test over the zoo.
 
     python benchmarks/paired_engines.py NEW/selection.json OLD/selection.json --name selection_corner \
-        [--label-new ...] [--label-old ...]
+        [--label-new ...] [--label-old ...] [--method-new LABEL] [--method-old LABEL] [--note ...]
+
+Each side pairs its result's default, or the method `--method-new` / `--method-old` names (a result where the
+configuration now default ran under another label).
 """
 
 from __future__ import annotations
@@ -26,9 +29,9 @@ from zoo.truth import WITHIN_PCT  # noqa: E402
 HERE = Path(__file__).resolve().parent
 
 
-def default_runs(doc: dict[str, Any]) -> dict[str, list[dict[str, Any]]]:
-    """Per plant, the runs of the result's default (the method quality.py reported as the default)."""
-    label = doc["default"]
+def default_runs(doc: dict[str, Any], label: str | None = None) -> dict[str, list[dict[str, Any]]]:
+    """Per plant, the runs of the method `label` (None: the one quality.py reported as the result's default)."""
+    label = label or doc["default"]
     return {p: per[label] for p, per in doc["runs"].items() if label in per}
 
 
@@ -36,9 +39,11 @@ def share(rows: list[dict[str, Any]], f) -> float:
     return sum(1 for r in rows if f(r)) / len(rows) if rows else math.nan
 
 
-def compare(new: dict[str, Any], old: dict[str, Any]) -> dict[str, Any]:
-    """Per plant both engines' within-2 % share, coverage, fly-aways and the paired sign test (new against old)."""
-    a, b = default_runs(new), default_runs(old)
+def compare(new: dict[str, Any], old: dict[str, Any], method_new: str | None = None,
+            method_old: str | None = None) -> dict[str, Any]:
+    """Per plant both engines' within-2 % share, coverage, fly-aways and the paired sign test (new against old), of
+    each result's default or the methods named."""
+    a, b = default_runs(new, method_new), default_runs(old, method_old)
     table, every_a, every_b = {}, [], []
     for plant in a:
         if plant not in b:
@@ -49,16 +54,17 @@ def compare(new: dict[str, Any], old: dict[str, Any]) -> dict[str, Any]:
         every_a += ra
         every_b += rb
         table[plant] = {"runs": len(runs), "sign": sign_test(ra, rb), **{
-            f"{k}_{side}": v for side, rows, cov in (("new", ra, new), ("old", rb, old)) for k, v in (
+            f"{k}_{side}": v for side, rows, cov, label in (("new", ra, new, method_new), ("old", rb, old, method_old))
+            for k, v in (
                 ("within", share(rows, lambda r: r["excess_pct"] <= WITHIN_PCT)),
-                ("coverage", cov["table"][plant][cov["default"]].get("coverage")),
+                ("coverage", cov["table"][plant][label or cov["default"]].get("coverage")),
                 ("fly_away", sum(1 for r in rows if r.get("fly_away", 0) > 0)))}}
     return {"table": table, "zoo": sign_test(every_a, every_b)}
 
 
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["meta"]
-    lines = [f"# {m['title']}", "", f"Command: `{m['command']}`.", "",
+    lines = [f"# {m['title']}", "", *([m["note"], ""] if m.get("note") else []), f"Command: `{m['command']}`.", "",
              f"New: `{m['new_command']}` (mavtune source hash `{m['new_engine']}`, {m['new_started']} to "
              f"{m['new_finished']}). Old: `{m['old_command']}` (hash `{m['old_engine']}`, {m['old_started']} to "
              f"{m['old_finished']}). Machine: {m['machine']}.", "",
@@ -91,17 +97,23 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("old", type=Path, help="quality.py's json of the engine before it")
     ap.add_argument("--label-new", default="new")
     ap.add_argument("--label-old", default="old")
+    ap.add_argument("--method-new", default=None, help="the method of the new result to pair (default: its default)")
+    ap.add_argument("--method-old", default=None, help="the method of the old result to pair (default: its default)")
+    ap.add_argument("--note", default="", help="what changed between the two engines, said under the title")
     ap.add_argument("--title", default="A change of the engine against the code before it, on the same zoo runs")
     ap.add_argument("--out", type=Path, default=HERE / "results")
     ap.add_argument("--name", required=True, help="results file name (markdown + json)")
     args = ap.parse_args(argv)
     new, old = (json.loads(p.read_text()) for p in (args.new, args.old))
-    doc = compare(new, old)
+    for doc_, method, side in ((new, args.method_new, "new"), (old, args.method_old, "old")):
+        if method is not None and not default_runs(doc_, method):
+            sys.exit(f"error: the {side} result has no runs of the method {method!r}")
+    doc = compare(new, old, args.method_new, args.method_old)
 
     def engine(d: dict[str, Any]) -> str:
         return d["meta"].get("engine", "?")
 
-    doc["meta"] = {"title": args.title, "command": "python benchmarks/paired_engines.py " + " ".join(
+    doc["meta"] = {"title": args.title, "note": args.note, "command": "python benchmarks/paired_engines.py " + " ".join(
         argv if argv is not None else sys.argv[1:]), "label_new": args.label_new, "label_old": args.label_old,
         "new_command": new["meta"]["command"], "old_command": old["meta"]["command"],
         "new_engine": engine(new), "old_engine": engine(old),
