@@ -91,3 +91,14 @@ def test_two_engines_results_are_paired_run_by_run(tmp_path):
     assert row["runs"] == 4 and (row["sign"]["a_better"], row["sign"]["b_better"], row["sign"]["ties"]) == (2, 1, 1)
     assert row["within_new"] == 0.5 and row["within_old"] == 0.5
     assert doc["zoo"]["runs"] == 4 and "| p | 4 | 50% | 50% |" in (tmp_path / "paired.md").read_text()
+    old_doc = result([9.0, 9.0, 9.0, 9.0], "o")  # the configuration under another label in the old result
+    old_doc["runs"]["p"]["candidate"] = result([4.0, 1.0, 6.0, 2.0], "o")["runs"]["p"]["default (config.Tuning())"]
+    old_doc["table"]["p"]["candidate"] = {"coverage": 0.5}
+    old.write_text(json.dumps(old_doc))
+    doc = module.main([str(new), str(old), "--method-old", "candidate", "--note", "why", "--out", str(tmp_path),
+                       "--name", "paired"])
+    row = doc["table"]["p"]
+    assert (row["sign"]["a_better"], row["sign"]["b_better"], row["coverage_old"]) == (2, 1, 0.5)
+    assert (tmp_path / "paired.md").read_text().splitlines()[2] == "why"
+    with pytest.raises(SystemExit):
+        module.main([str(new), str(old), "--method-old", "no such method", "--out", str(tmp_path), "--name", "x"])
