@@ -26,6 +26,11 @@ SHORT = dict(bootstraps=1, epsilon=0.25, adaptive=False)  # a known number of ro
 # adaptive averaging flies close comparisons again, 40+ rounds with the balanced cost, past the test's bound
 
 
+# ONE_LEFT: a test that takes one of the two vehicles away after round 2 flies the rest of the run on one, each
+# point of the default's designs flown by it twice in turn (57 rounds of ~10 s at real time with an 8 s primitive:
+# past the test's 600 s); a 4 s primitive keeps it inside
+
+
 def px4_config(**changes) -> MavlinkConfig:
     """PX4 at real time: the autopilot's own defaults, timeouts roomy enough for a loaded machine. A primitive
     aborted for a position gap stops the setpoint stream, and PX4's offboard-loss failsafe then lands the vehicle for
@@ -108,7 +113,7 @@ def test_pilot_taking_over_gets_the_originals_and_the_run_goes_on(tmp_path):
         urls = [v.tuner_url for v in vehicles]
         took = []
         with after_rounds(tmp_path, 2, lambda: took.append(switch_to_hold(vehicles[0]))) as done:
-            result = tune_mavlink(urls, tmp_path, px4_config(), vehicles=2, **SHORT)
+            result = tune_mavlink(urls, tmp_path, px4_config(primitive_s=4.0), vehicles=2, **SHORT)  # (ONE_LEFT)
         assert done.is_set() and took == [True]
         assert_restored(urls)
     assert result["status"] == "finished" and result["restored"] is True
@@ -122,7 +127,7 @@ def test_px4_killed_mid_flight_the_run_goes_on_and_the_journal_keeps_every_round
     with px4_vehicles(2) as vehicles:
         urls = [v.tuner_url for v in vehicles]
         with after_rounds(tmp_path, 2, vehicles[0].kill):
-            result = tune_mavlink(urls, tmp_path, px4_config(), vehicles=2, **SHORT)
+            result = tune_mavlink(urls, tmp_path, px4_config(primitive_s=4.0), vehicles=2, **SHORT)  # (ONE_LEFT)
         assert_restored(urls[1:])
     assert result["status"] == "finished" and result["restored"] is False  # the dead one could not confirm
     assert recorded_rounds(tmp_path) == result["rounds"]
