@@ -29,7 +29,7 @@ from zoo.truth import WITHIN_PCT  # noqa: E402
 HERE = Path(__file__).resolve().parent
 
 
-def default_runs(doc: dict[str, Any], label: str | None = None) -> dict[str, list[dict[str, Any]]]:
+def method_runs(doc: dict[str, Any], label: str | None = None) -> dict[str, list[dict[str, Any]]]:
     """Per plant, the runs of the method `label` (None: the one quality.py reported as the result's default)."""
     label = label or doc["default"]
     return {p: per[label] for p, per in doc["runs"].items() if label in per}
@@ -43,7 +43,7 @@ def compare(new: dict[str, Any], old: dict[str, Any], method_new: str | None = N
             method_old: str | None = None) -> dict[str, Any]:
     """Per plant both engines' within-2 % share, coverage, fly-aways and the paired sign test (new against old), of
     each result's default or the methods named."""
-    a, b = default_runs(new, method_new), default_runs(old, method_old)
+    a, b = method_runs(new, method_new), method_runs(old, method_old)
     table, every_a, every_b = {}, [], []
     for plant in a:
         if plant not in b:
@@ -68,8 +68,8 @@ def markdown(doc: dict[str, Any]) -> str:
              f"New: `{m['new_command']}` (mavtune source hash `{m['new_engine']}`, {m['new_started']} to "
              f"{m['new_finished']}). Old: `{m['old_command']}` (hash `{m['old_engine']}`, {m['old_started']} to "
              f"{m['old_finished']}). Machine: {m['machine']}.", "",
-             "Each row pairs the same runs (the same vehicles, wind and noise) of the two engines' default: within "
-             "2 % of the optimum, the 90 % interval's coverage, fly-away answers, and the paired sign test (runs "
+             "Each row pairs the same runs (the same vehicles, wind and noise) of the two engines' default (or the "
+             "methods named): within 2 % of the optimum, the 90 % interval's coverage, fly-away answers, and the paired sign test (runs "
              "where the new answer's true excess is lower – higher, ties left out).", "",
              f"| plant | runs | within 2 %: {m['label_new']} | {m['label_old']} | coverage new / old | "
              "fly-away new / old | sign test new–old (p) | verdict |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     args = ap.parse_args(argv)
     new, old = (json.loads(p.read_text()) for p in (args.new, args.old))
     for doc_, method, side in ((new, args.method_new, "new"), (old, args.method_old, "old")):
-        if method is not None and not default_runs(doc_, method):
+        if method is not None and not method_runs(doc_, method):
             sys.exit(f"error: the {side} result has no runs of the method {method!r}")
     doc = compare(new, old, args.method_new, args.method_old)
 
