@@ -69,8 +69,8 @@ def markdown(doc: dict[str, Any]) -> str:
              f"{m['new_finished']}). Old: `{m['old_command']}` (hash `{m['old_engine']}`, {m['old_started']} to "
              f"{m['old_finished']}). Machine: {m['machine']}.", "",
              "Each row pairs the same runs (the same vehicles, wind and noise) of the two engines' default (or the "
-             "methods named): within 2 % of the optimum, the 90 % interval's coverage, fly-away answers, and the paired sign test (runs "
-             "where the new answer's true excess is lower – higher, ties left out).", "",
+             "methods named): within 2 % of the optimum, the 90 % interval's coverage, fly-away answers, and the "
+             "paired sign test (runs where the new answer's true excess is lower – higher, ties left out).", "",
              f"| plant | runs | within 2 %: {m['label_new']} | {m['label_old']} | coverage new / old | "
              "fly-away new / old | sign test new–old (p) | verdict |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for p, s in doc["table"].items():
