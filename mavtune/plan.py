@@ -263,7 +263,7 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
 def _first_map(settings: Settings) -> dict[str, int]:
     """The map of the box a run flies first (`design_first` with `design_inner`): its points, its rounds and its
     corners at the bounds of the ranges (a map as wide as the box: `design_width` 0.5); nothing without one."""
-    if not (settings.design_count() and settings.designs_before_passes() and settings.design_inner_at(0)):
+    if not (settings.designs_before_passes() and settings.design_inner_at(0)):
         return {}
     points, vehicles = settings.design_points(0), int(settings.vehicles)
     corners = 2 ** len(settings.space) if float(settings.design_width) >= 0.5 else 0

@@ -172,13 +172,14 @@ class TuningResult:
             if wall is not None:
                 out.append(f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed (diverged): no "
                            "gain beyond it was answered, but the margin to it is one step of the search")
-        if self.open_face and all(self.gains.get(n) == v for n, v in self.designed.items()):
+        designed = bool(self.designed) and all(self.gains.get(n) == v for n, v in self.designed.items())
+        if self.open_face and designed:  # (the design's verdicts are the answer's only while it is the design's)
             faces = ", ".join(f"{n} = {v:.4g}" for n, v in self.open_face.items())
             out.append(f"the last design answered {faces} on the edge of the box it flew, inside the range: it did "
                        "not surround its answer, so the optimum may lie beyond (a design around the answer, or a "
                        "larger budget, would tell)")
         risk = self.divergence or {}
-        if risk and self.designed and all(self.gains.get(n) == v for n, v in self.designed.items()):
+        if risk and designed:
             chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
             said = f"fitted to the run's flights, some of which diverged, a flight at the answer diverges with " \
                    f"chance {chance:.2%}"
@@ -756,10 +757,7 @@ class Tuner:
                           and self._design_answers[-1] == self.gains) else None  # (not the passes' answer)
         best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
-        kept = keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))
         self.divergence = self._divergence(flown, box, ruled, best, half, keep)
-        if self.divergence is not None:
-            self.divergence["kept"] = kept
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
@@ -820,8 +818,8 @@ class Tuner:
                     keep: list[float] | None = None) -> dict[str, Any] | None:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
-        (the previous design's answer `keep` included) and its chance when the bound moved it (None when not); None
-        when no flight near the design failed. (`_surface` adds whether the answer is `keep`: "kept".)"""
+        (the previous design's answer `keep` included) and its chance when the bound moved it (None when not), and
+        whether the answer is `keep` ("kept"); None when no flight near the design failed."""
         options = self._answer_options(half, keep)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
@@ -832,7 +830,8 @@ class Tuner:
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
         return {"chance": chance, "risk": RISK,
                 "unbounded": {n: s.space[n][0] + (s.space[n][1] - s.space[n][0]) * u for n, u in zip(names, free)}
-                if moved else None, "unbounded_chance": free_chance if moved else None}
+                if moved else None, "unbounded_chance": free_chance if moved else None,
+                "kept": keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))}
 
     def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]], names: list[str], lo: list[float],
                        width: list[float], step: int) -> tuple[list[Gains], int | None]:

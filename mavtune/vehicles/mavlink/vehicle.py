@@ -421,12 +421,17 @@ class MavlinkVehicle:
         finally:
             self.link.remove_position_listener(samples.put)
 
-    def _unsettled_gains(self) -> bool:
+    @property
+    def _off_originals(self) -> bool:
+        """Whether the gains on the vehicle (as last confirmed) are not its originals."""
+        return any(self.current_params.get(k) != v for k, v in self.original_params.items())
+
+    def _originals_for_the_hover(self) -> bool:
         """The gains on the vehicle, not its own, could not bring it back to a calm hover (`_recover`): put the
         originals back and make them the last safe gains (the next flight after a recovery hovers `recover_s` first,
         as after an abort); True when that was done and confirmed. A corner of the gain box (ArduCopter: PSC_VELZ_P
         1, PSC_ACCZ_P 0.2, PSC_ACCZ_I 0.2) can fly the primitive inside the abort limits yet drift in the hover."""
-        if all(self.current_params.get(n) == v for n, v in self.original_params.items()):
+        if not self._off_originals:
             return False
         log.warning("%s: the last gains do not hold a calm hover; the original gains go back before the next "
                     "flight", self.name)
@@ -514,7 +519,7 @@ class MavlinkVehicle:
             if problem:
                 return lost("mode_switch_failed", problem)
         reason = self._recover()
-        if reason == "not_calm" and self._unsettled_gains():
+        if reason == "not_calm" and self._originals_for_the_hover():
             info["restored_original"] = True  # the last flight's gains flew it within the limits but do not calm
             reason = self._recover()  # the hover: its own gains do (else every later round would be lost)
         if reason:
@@ -632,8 +637,7 @@ class MavlinkVehicle:
         if self._closed:
             return
         try:
-            if not self._finished and (self._in_control or any(
-                    self.current_params.get(k) != v for k, v in self.original_params.items())):
+            if not self._finished and (self._in_control or self._off_originals):
                 self.finish()
         finally:
             self._closed = True
