@@ -73,6 +73,13 @@ class Plan:
         return self.rounds_max * self.round_s
 
     @property
+    def rounds_one_left(self) -> int | None:
+        """A budget's rounds if one vehicle leaves at take-off: the others fly its flights, so the run takes longer
+        (exact on 2 vehicles; on more, a design point flown by every vehicle may take a round more; None: one
+        vehicle, or no budget)."""
+        return math.ceil(self.budget / (self.vehicles - 1)) if self.budget is not None and self.vehicles > 1 else None
+
+    @property
     def rounds_per_battery(self) -> int:
         """Whole rounds one battery pack flies (a round never straddles two packs)."""
         return max(1, int(self.battery_s // self.round_s))
@@ -109,6 +116,11 @@ class Plan:
                f"each" + (f", among them its {self.map_corners} corners, every gain at a bound of its range (narrow "
                           f"[tuning] space where a bound could be unsafe to fly)" if self.map_corners else "")]
               if self.map_rounds else []),
+            *([f"one leaves    the others fly its flights: about {self.rounds_one_left} rounds "
+               f"({clock(self.rounds_one_left * self.round_s)}"
+               + (f", {math.ceil(self.rounds_one_left / self.rounds_per_battery)} batteries each"
+                  if math.ceil(self.rounds_one_left / self.rounds_per_battery) > self.batteries else "")
+               + ") if it leaves at take-off, fewer later"] if self.rounds_one_left is not None else []),
             f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each "
             f"({self.rounds_per_battery} rounds a pack)" + (f"; {self.batteries_max} for {self.rounds_max} rounds"
                                                             if self.batteries_max != self.batteries else ""),

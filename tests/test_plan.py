@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import random
+
 import pytest
 from hypothesis import given, settings, strategies as st
 from typer.testing import CliRunner
@@ -94,6 +96,45 @@ def test_the_plan_says_the_first_rounds_fly_the_corners_of_the_box_and_they_do()
     passes = CliRunner().invoke(app, ["plan", "--preset", "passes"])
     assert passes.exit_code == 0 and "map of the box" not in passes.output  # the line searches start at once
 
+
+
+class OneLeaves:
+    """A fleet of `vehicles` on a noisy bowl, one of which leaves before round `leave` (0: at take-off)."""
+
+    def __init__(self, vehicles: int, leave: int):
+        self.vehicles, self.leave = vehicles, leave
+        self.size = vehicles - 1 if leave == 0 else vehicles
+
+    def fly(self, assignments, round_id):
+        assert len(assignments) <= self.size
+        flights = [mavtune.fleet.Flight(f"v{i}", g, (1.3 + (g["kp"] - 0.7) ** 2 + (g["kd"] - 0.4) ** 2)
+                                        * (1 + 0.2 * random.Random(round_id * 1000 + i).gauss(0, 1)))
+                   for i, g in enumerate(assignments)]
+        if round_id + 1 >= self.leave:
+            self.size = self.vehicles - 1
+        return flights
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize("vehicles", [2, 3, 4])
+def test_the_plan_says_how_long_the_run_takes_when_a_vehicle_leaves(vehicles):
+    """A vehicle that leaves a budgeted run leaves its flights to the others: the plan says before take-off how many
+    rounds that takes (an engineer packs batteries for it); exact on 2 vehicles, within a round or two on more."""
+    s = default_settings(space=SPACE, vehicles=vehicles)
+    plan = make_plan(s)
+    stretched = -(-s.budget // (vehicles - 1))
+    assert plan.rounds_one_left == stretched > plan.rounds
+    for leave in (0, 10):
+        result = mavtune.tuner.run_tuning(s, OneLeaves(vehicles, leave), draws=0)
+        assert result.flights == s.budget
+        assert plan.rounds < len(result.rounds) <= plan.rounds_one_left + (0 if vehicles == 2 else 2)
+        if leave == 0:
+            assert len(result.rounds) >= plan.rounds_one_left
+    text = " ".join(CliRunner().invoke(app, ["plan", "--vehicles", str(vehicles)]).output.split())
+    assert f"one leaves the others fly its flights: about {stretched} rounds" in text
+    assert make_plan(default_settings(space=SPACE, vehicles=1)).rounds_one_left is None
 
 
 def test_adaptive_plan_says_the_expected_and_the_worst_case():
