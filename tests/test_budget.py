@@ -338,3 +338,15 @@ def test_more_designs_first_than_designs_leave_the_last_after_the_pass_under_a_b
     assert free.designs_before_passes() == 2
     assert run_tuning(free, NoisyFleet(2), draws=0).rounds[-1].gain != "design"
     assert Tuning().settings(design_first=1).fingerprint() == Tuning().settings(design_first=True).fingerprint()
+
+
+@pytest.mark.parametrize("extra", [0, 2, 4])
+def test_a_budget_that_starves_the_line_searches_still_states_every_interval(extra):
+    """A budget a few flights above the designs' leaves each line search a flight or two, too few to resample: the
+    interval then comes from what the run's other flights rule out, never 'unknown' beside a gain that was tuned."""
+    s = budgeted(2, 2, extra)
+    result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(extra), 2))
+    for name, value in result.gains.items():
+        u = result.uncertainty[name]
+        assert math.isfinite(u["lo"]) and math.isfinite(u["hi"]), (name, u)
+        assert u["lo"] <= value <= u["hi"]

@@ -170,16 +170,20 @@ def edge_reach(samples: dict[float, list[float]], bounds: tuple[float, float]) -
 
 def joint(interval: Interval, region: tuple[float, float] | None, moves: list[float], tolerance: float,
           bounds: tuple[float, float], edge: tuple[float, float] | None = None, shift: float = 0.0) -> Interval:
-    """A coordinate search's interval beyond "with the other gains held": the resampled one, joined with the span
-    no flight of the run rules out (`plausible_region`, every gain free), with the answer itself, back to the
-    previous answer (flight noise moves an answer too) and on in the direction the answer moved by what it may
-    still go (`ahead`; to the range's bound when that is unbounded); to a bound where the line's cost still falls
-    at its outermost flown point (`edge`: `edge_reach`); to both bounds when the other gains moved since its line
-    search by more than half the tolerance (`shift`: `stale`, a share of their ranges; `tolerance` is this
-    gain's, in its units). `moves`: the answer's, from the start value to each line search's."""
+    """A coordinate search's interval beyond "with the other gains held": the resampled one (that span alone where
+    its line search flew too few points to resample), joined with the span no flight of the run rules out
+    (`plausible_region`, every gain free), with the answer itself, back to the previous answer (flight noise moves
+    an answer too) and on in the direction the answer moved by what it may still go (`ahead`; to the range's bound
+    when that is unbounded); to a bound where the line's cost still falls at its outermost flown point (`edge`:
+    `edge_reach`); to both bounds when the other gains moved since its line search by more than half the tolerance
+    (`shift`: `stale`, a share of their ranges; `tolerance` is this gain's, in its units). `moves`: the answer's,
+    from the start value to each line search's."""
     moved = moves[-1] if len(moves) >= 2 else math.nan  # since the gain's previous line search
     if not math.isfinite(interval.lo):
-        return replace(interval, moved=moved)
+        if region is None:
+            return replace(interval, moved=moved)
+        interval = replace(interval, lo=region[0], hi=region[1])  # a line search too short to resample (a budget
+        # that left it a flight or two): the run's other flights still bound the gain
     lo, hi = min(interval.lo, interval.value), max(interval.hi, interval.value)
     if region is not None:
         lo, hi = min(lo, region[0]), max(hi, region[1])
