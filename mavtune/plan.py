@@ -84,15 +84,19 @@ class Plan:
         """Whole rounds one battery pack flies (a round never straddles two packs)."""
         return max(1, int(self.battery_s // self.round_s))
 
+    def packs(self, rounds: int) -> int:
+        """Battery packs per vehicle for `rounds` rounds."""
+        return math.ceil(rounds / self.rounds_per_battery)
+
     @property
     def batteries(self) -> int:
         """Battery packs per vehicle for the planned rounds."""
-        return math.ceil(self.rounds / self.rounds_per_battery)
+        return self.packs(self.rounds)
 
     @property
     def batteries_max(self) -> int:
         """Battery packs per vehicle for the guaranteed rounds."""
-        return math.ceil(self.rounds_max / self.rounds_per_battery)
+        return self.packs(self.rounds_max)
 
     def describe(self) -> str:
         lines = [
@@ -116,11 +120,9 @@ class Plan:
                f"each" + (f", among them its {self.map_corners} corners, every gain at a bound of its range (narrow "
                           f"[tuning] space where a bound could be unsafe to fly)" if self.map_corners else "")]
               if self.map_rounds else []),
-            *([f"one leaves    the others fly its flights: about {self.rounds_one_left} rounds "
-               f"({clock(self.rounds_one_left * self.round_s)}"
-               + (f", {math.ceil(self.rounds_one_left / self.rounds_per_battery)} batteries each"
-                  if math.ceil(self.rounds_one_left / self.rounds_per_battery) > self.batteries else "")
-               + ") if it leaves at take-off, fewer later"] if self.rounds_one_left is not None else []),
+            *([f"one leaves    the others fly its flights: about {left} rounds ({clock(left * self.round_s)}"
+               + (f", {self.packs(left)} batteries each" if self.packs(left) > self.batteries else "")
+               + ") if it leaves at take-off, fewer later"] if (left := self.rounds_one_left) is not None else []),
             f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each "
             f"({self.rounds_per_battery} rounds a pack)" + (f"; {self.batteries_max} for {self.rounds_max} rounds"
                                                             if self.batteries_max != self.batteries else ""),

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import random
-
 import pytest
 from hypothesis import given, settings, strategies as st
 from typer.testing import CliRunner
@@ -13,6 +11,7 @@ from mavtune.api import default_settings
 from mavtune.cli import app
 from mavtune.plan import make_plan
 from mavtune.tuner import Settings
+from tests.test_budget import NoisyFleet
 
 SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
 
@@ -97,25 +96,20 @@ def test_the_plan_says_the_first_rounds_fly_the_corners_of_the_box_and_they_do()
     assert passes.exit_code == 0 and "map of the box" not in passes.output  # the line searches start at once
 
 
-
-class OneLeaves:
-    """A fleet of `vehicles` on a noisy bowl, one of which leaves before round `leave` (0: at take-off)."""
+class OneLeaves(NoisyFleet):
+    """NoisyFleet's vehicles, one of which leaves before round `leave` (0: at take-off)."""
 
     def __init__(self, vehicles: int, leave: int):
+        super().__init__(vehicles)
         self.vehicles, self.leave = vehicles, leave
         self.size = vehicles - 1 if leave == 0 else vehicles
 
     def fly(self, assignments, round_id):
         assert len(assignments) <= self.size
-        flights = [mavtune.fleet.Flight(f"v{i}", g, (1.3 + (g["kp"] - 0.7) ** 2 + (g["kd"] - 0.4) ** 2)
-                                        * (1 + 0.2 * random.Random(round_id * 1000 + i).gauss(0, 1)))
-                   for i, g in enumerate(assignments)]
+        flights = super().fly(assignments, round_id)
         if round_id + 1 >= self.leave:
             self.size = self.vehicles - 1
         return flights
-
-    def close(self):
-        pass
 
 
 @pytest.mark.parametrize("vehicles", [2, 3, 4])
