@@ -755,7 +755,11 @@ class Tuner:
         before = [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # the previous design's answer
         keep = before if (s.wall_keep and step + 1 == s.design_count() and self._design_answers
                           and self._design_answers[-1] == self.gains) else None  # (not the passes' answer)
-        best, _ = surface_answer(flown, box, ruled, self.pool, **self._answer_options(half, keep))
+        start = step < s.designs_before_passes()  # where the passes start from, not the run's answer: no bound on
+        # the divergence chance there (a map's coarse fit over failures at the box's edges sent its answer to the far
+        # corner however badly that flew: the 60 ms latency plant, session 15); every design after the passes keeps it
+        options = self._answer_options(half, keep) | ({"risk": None} if start else {})
+        best, _ = surface_answer(flown, box, ruled, self.pool, **options)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half, keep)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}

@@ -324,7 +324,7 @@ def _stochastic_cliff(seed: int):
     return evaluate, lambda g: NormalDist().cdf((g["kp"] - 0.5 * g["kd"] - 0.4) / 0.03)
 
 
-@pytest.mark.parametrize("seed", [0, 2, 6])  # (seeds where the bound moved the last design's answer, not `wall_keep`)
+@pytest.mark.parametrize("seed", [2, 11, 14])  # (seeds where the bound moved the last design's answer, not `wall_keep`)
 def test_an_answer_the_divergence_bound_moved_says_so_with_both_chances(seed):
     """Beside a moving wall, the bound on the fitted divergence chance moves the answer off the fit's minimum: the
     cautions say the answer's fitted chance, where the fit would have answered and its chance there (truly
