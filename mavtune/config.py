@@ -144,7 +144,8 @@ class Tuning(_Section):
     is the minimum of one quadratic in every gain fitted to the flights near the last design (a plane where the
     flights do not reject a plane and its minimum lies on a bound of the ranges; a cubic where they reject the
     quadratic), inside the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight
-    the previous design's answer stands); all within a budget of 42 flights a gain (`budget = "auto"`: 84 for 2
+    the previous design's answer stands; the map's answer, where the passes start, is not bounded by the fitted
+    divergence chance, every later design's is); all within a budget of 42 flights a gain (`budget = "auto"`: 84 for 2
     gains, 168 for 4), flown exactly and known before take-off.
     Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs, 40 a plant:
     benchmarks/results/selection_default13.md) by `zoo.stats.choose`: of the configurations never significantly worse
