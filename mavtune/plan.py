@@ -99,6 +99,7 @@ class Plan:
         return self.packs(self.rounds_max)
 
     def describe(self) -> str:
+        left = self.rounds_one_left
         lines = [
             f"bootstraps    {self.bootstraps}" + (" at most (the paper's stop rule may end the run sooner)"
                                                    if self.stop_rule else ""),
@@ -122,7 +123,7 @@ class Plan:
               if self.map_rounds else []),
             *([f"one leaves    the others fly its flights: about {left} rounds ({clock(left * self.round_s)}"
                + (f", {self.packs(left)} batteries each" if self.packs(left) > self.batteries else "")
-               + ") if it leaves at take-off, fewer later"] if (left := self.rounds_one_left) is not None else []),
+               + ") if it leaves at take-off, fewer later"] if left is not None else []),
             f"batteries     {self.batteries} per vehicle of {clock(self.battery_s)} each "
             f"({self.rounds_per_battery} rounds a pack)" + (f"; {self.batteries_max} for {self.rounds_max} rounds"
                                                             if self.batteries_max != self.batteries else ""),
