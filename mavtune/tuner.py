@@ -32,7 +32,7 @@ from mavtune.search.surface import (
     fly_away as surface_fly_away, next_centre as surface_next_centre, open_faces as surface_open_faces,
     ruled_out as surface_ruled_out, REACH,
 )
-from mavtune.search.risk import RISK
+from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
@@ -186,7 +186,8 @@ class TuningResult:
             if chance > bound and risk.get("kept"):
                 out.append(f"{said}, above the {bound:.1%} an answer keeps to: it is the design before's answer, kept "
                            "beside the wall (that design's flights put it under the bound; the last one's, nearer the "
-                           "wall, do not): fly narrower ranges away from the failed flights before trusting it")
+                           f"wall, do not, though under the {KEEP_RISK:.0%} a kept answer may have): fly narrower "
+                           "ranges away from the failed flights before trusting it")
             elif chance > bound:
                 out.append(f"{said}, above the {bound:.1%} an answer keeps to, which no point flown in the design "
                            "meets: fly the design away from the failed flights (narrower ranges) before trusting it")

@@ -567,6 +567,28 @@ def test_beside_a_wall_the_previous_designs_answer_stands_where_it_was_flown_saf
     assert got != (0.535, 0.365)
 
 
+def test_the_previous_answer_beside_a_wall_yields_where_this_designs_flights_put_it_above_the_ceiling():
+    """`keep_risk`: the previous design's answer stands beside a wall only while this design's own divergence fit
+    puts it at most at `risk.KEEP_RISK` (1 %); with every flight of the design's column toward the wall failed, the
+    fit puts it at 6 %, and the answer is the fit's, farther from the wall (unseen damping wall, run 21: kept at
+    2.8 % by the fit, 5 % by the plant's truth)."""
+    from mavtune.search.evidence import NoisePool
+    from mavtune.search.risk import KEEP_RISK
+    from mavtune.search.surface import fly_away, ruled_out
+
+    pool = NoisePool.prior(0.05, 100.0)
+    points, box = _narrow_beside_cliff(0)
+    points = {**points, (0.57, 0.38): [math.inf]}
+    for kd in (0.36, 0.4, 0.44):  # the design's column at kp 0.54, nearest the wall: one flight of each failed
+        points[(0.54, kd)] = [points[(0.54, kd)][0], math.inf]
+    ruled = ruled_out(points, pool)
+    fit = fly_away(points, box, 4.0)
+    assert fit.chance([(0.5, 0.4)])[0] > KEEP_RISK
+    got, _ = answer(points, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4))
+    assert got != (0.5, 0.4) and got[0] < 0.5 and fit.chance([got])[0] < fit.chance([(0.5, 0.4)])[0] / 3
+    assert answer(points, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4), keep_risk=None)[0] == (0.5, 0.4)
+
+
 @pytest.mark.parametrize("factor, kept", [(0.97, True), (0.5, False)])
 def test_the_previous_answer_beside_a_wall_yields_to_a_point_the_flights_tell_far_better(factor, kept):
     """`keep` stands beside a wall only while no point of the design safe from it is told better by the flights:

@@ -20,6 +20,8 @@ if TYPE_CHECKING:
     import numpy as np
 
 RISK = 0.001  # the most divergence chance (by the run's flights) an answer may have
+KEEP_RISK = 0.01  # the most chance, by the last design's own flights, at which the design before's answer still
+# stands beside a wall (`surface.answer`'s `keep`): a kept answer the run's flights put at 1 in 100 is not handed out
 SLOPE_SD = 65.0  # the slopes' prior sd, log-odds per share of a gain's range (a wall going from a 10 % to a 90 %
 # chance over 7 % of the range is one sd steep)
 

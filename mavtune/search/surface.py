@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Callable, Collection, Mapping, Sequence
 
 from mavtune.flown import within_noise
 from mavtune.search.evidence import NoisePool, point_stats
-from mavtune.search.risk import RISK, Divergence, divergence
+from mavtune.search.risk import KEEP_RISK, RISK, Divergence, divergence
 
 if TYPE_CHECKING:
     import numpy as np
@@ -345,7 +345,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            log: bool = False, cubic_level: float = CUBIC_LEVEL,
            plane_level: float = PLANE_LEVEL, slope_level: float = 0.0, plane_inside: bool = False,
            risk: float | None = RISK, risk_reach: float | None = None,
-           keep: Sequence[float] | None = None) -> tuple[tuple[float, ...], bool]:
+           keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK) -> tuple[tuple[float, ...], bool]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
@@ -364,7 +364,9 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     narrow design sees the walls the wider ones before it flew into. With `keep` (the previous design's answer, in
     shares of each range: bounded by that design's own divergence fit), the answer is `keep` wherever a flight
     within the fit's kernel (`reach`) failed — unless a failed flight lies nearest it or on the way to it from the best
-    point flown, or it lies outside the box, or the flights tell a point of the box clear of the bound better
+    point flown, or it lies outside the box, or this design's own divergence fit puts it above `keep_risk` (None: no
+    ceiling; the unseen damping wall's run 21 kept an answer that fit put at 2.8 %, truly 5 %), or the flights tell
+    a point of the box clear of the bound better
     (`_outdone`: the 60 ms latency plant's valley, found by the last design and lost to the answer before it): a
     narrow design beside a wall fits few safe flights, and a wall it barely sees or sees through a few unlucky
     failures (answer_diagnostic_guard.md: replayed on the designs alone's 40 cliff runs, with `risk_reach` 4, within
@@ -402,6 +404,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     tricube = _tricube(reach)
     near = _tricube(risk_reach or reach)
     fly_away = divergence(points, centre, half, near) if risk is not None and not np.all(ok) else None
+    fitted = fly_away  # (`keep`'s ceiling reads it even where the bound below chooses nothing)
     if fly_away is not None:
         likely = fly_away.chance(every) > risk
         if np.all(likely[pick]):  # no point flown in the box has a chance that low (one failure amid survivors
@@ -435,6 +438,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     if keep is not None and np.any(~ok & (tricube(np.atleast_2d((every - centre) / half)) > 0)):
         k = np.asarray(keep, float)  # beside a wall: the answer before this design stands, where flown safely
         if (np.all((k >= lo - 1e-9) & (k <= hi + 1e-9)) and allowed(k[None], ok, False)[0]
+                and (fitted is None or keep_risk is None or fitted.chance(k[None])[0] <= keep_risk)
                 and not _outdone(points, keys[int(tree.query(k)[1])], [q for q, o in zip(keys, pick) if o], pool)):
             return tuple(float(v) for v in k), False
     x = (every[ok] - centre) / half
