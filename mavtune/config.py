@@ -256,7 +256,8 @@ class Tuning(_Section):
     wall_keep: StrictBool = Field(True, description="design: the last design's answer is the previous design's "
                                   "(which that design's own divergence fit bounded) where a flight within the "
                                   "surface fit's kernel (two half-widths of the design) failed, unless a failed "
-                                  "flight lies nearest it or on the way to it: a narrow design beside a wall fits few "
+                                  "flight lies nearest it or on the way to it, or the last design's own divergence "
+                                  "fit puts it above 1 % (risk.KEEP_RISK): a narrow design beside a wall fits few "
                                   "safe flights and a wall it barely sees")
     composite_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: above three gains (a composite "
                                    "design, whose pure quadratic terms rest on its axis points alone) the surface "
