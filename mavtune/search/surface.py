@@ -363,14 +363,14 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     divergence chance is fitted to the flights within that many half-widths of the design (None: `reach`), so a
     narrow design sees the walls the wider ones before it flew into. With `keep` (the previous design's answer, in
     shares of each range: bounded by that design's own divergence fit), the answer is `keep` wherever a flight
-    within the fit's kernel (`reach`) failed — unless a failed flight lies nearest it or on the way to it from the best
-    point flown, or it lies outside the box, or this design's own divergence fit puts it above `keep_risk` (None: no
-    ceiling; the unseen damping wall's run 21 kept an answer that fit put at 2.8 %, truly 5 %), or the flights tell
-    a point of the box clear of the bound better
-    (`_outdone`: the 60 ms latency plant's valley, found by the last design and lost to the answer before it): a
-    narrow design beside a wall fits few safe flights, and a wall it barely sees or sees through a few unlucky
-    failures (answer_diagnostic_guard.md: replayed on the designs alone's 40 cliff runs, with `risk_reach` 4, within
-    2 % of the optimum in 48 % of runs and 1 fly-away answer, against 12 % and 5)."""
+    within the fit's kernel (`reach`) failed — unless a failed flight lies nearest it or on the way to it from the
+    best point flown, or it lies outside the box, or this design's own divergence fit puts it above `keep_risk`
+    (None: no ceiling; the unseen damping wall's run 21 kept an answer that fit put at 2.8 %, truly 5 %), or the
+    flights tell a point of the box clear of the bound better (`_outdone`: the 60 ms latency plant's valley, found
+    by the last design and lost to the answer before it): a narrow design beside a wall fits few safe flights, and
+    a wall it barely sees or sees through a few unlucky failures (answer_diagnostic_guard.md: replayed on the
+    designs alone's 40 cliff runs, with `risk_reach` 4, within 2 % of the optimum in 48 % of runs and 1 fly-away
+    answer, against 12 % and 5)."""
     from statistics import NormalDist
 
     import numpy as np
