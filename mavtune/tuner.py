@@ -137,64 +137,73 @@ class TuningResult:
     open_face: Gains = field(default_factory=dict)  # gains the last design answered on its box's face inside the range
 
     def cautions(self) -> list[str]:
-        """What a user must know before trusting the gains, one line each: an answer still moving between
-        bootstraps by more than the search's tolerance, an interval spanning most of its range, a gain whose last
-        line search held the others more than half the tolerance from where they ended (`stale`), an answer next
-        to a flight that failed, a last design that answered on its box's face inside the range (`open_face`)."""
-        out = []
+        """What a user must know before trusting the gains, one line each (`caution_kinds` names them)."""
+        return [text for _, text in self.caution_kinds()]
+
+    def caution_kinds(self) -> list[tuple[str, str]]:
+        """Each caution as (kind, line): an answer still moving between bootstraps by more than the search's
+        tolerance ("moving"), an interval spanning most of its range ("wide"), a gain whose last line search held
+        the others more than half the tolerance from where they ended ("stale"), an answer next to a flight that
+        failed ("beside failure"), a last design that answered on its box's face inside the range ("open face"),
+        the answer's fitted divergence chance where flights near it diverged ("divergence")."""
+        out: list[tuple[str, str]] = []
+
+        def say(kind: str, text: str) -> None:
+            out.append((kind, text))
+
         space, epsilon = self.settings.get("space", {}), self.settings.get("epsilon", math.nan)
         last = {s.gain: s for s in self.searches}
         for name, u in self.uncertainty.items():
             lo, hi = space.get(name, (math.nan, math.nan))
             width, moved = hi - lo, u.get("moved", math.nan)
             if math.isfinite(moved) and abs(moved) > epsilon * width:
-                out.append(f"{name} still moved {moved:+.3g} between its last two line searches, more than the "
-                           f"search's tolerance {epsilon * width:.3g}: the coordinate search has not settled (its "
-                           "interval reaches the range's bound in that direction; another bootstrap would tell)")
+                say("moving", f"{name} still moved {moved:+.3g} between its last two line searches, more than the "
+                    f"search's tolerance {epsilon * width:.3g}: the coordinate search has not settled (its interval "
+                    "reaches the range's bound in that direction; another bootstrap would tell)")
             ulo, uhi = u.get("lo", math.nan), u.get("hi", math.nan)
             if width > 0 and uhi - ulo > 0.5 * width:  # (False where either is unknown, or the range is a point)
-                out.append(f"{name}'s {u.get('level', 0.9):.0%} interval {ulo:.3g} – {uhi:.3g} spans "
-                           f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more "
-                           "flights per point, less noise, or another bootstrap where the answer still moves)")
+                say("wide", f"{name}'s {u.get('level', 0.9):.0%} interval {ulo:.3g} – {uhi:.3g} spans "
+                    f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more flights per "
+                    "point, less noise, or another bootstrap where the answer still moves)")
         for name, rec in last.items():
             shift = stale(rec.held, self.gains, space)
             if math.isfinite(self.uncertainty.get(name, {}).get("lo", math.nan)) and held_elsewhere(shift, epsilon):
                 moved_others = ", ".join(f"{n} {v:.3g} → {self.gains[n]:.3g}" for n, v in rec.held.items()
                                          if n in self.gains and n in space and abs(self.gains[n] - v) > 0)
-                out.append(f"{name}'s last line search held the other gains where they no longer are ("
-                           f"{moved_others}): how far {name}'s own minimum moved with them no flight tells, so its "
-                           "interval reaches both bounds (another bootstrap would tell)")
+                say("stale", f"{name}'s last line search held the other gains where they no longer are ("
+                    f"{moved_others}): how far {name}'s own minimum moved with them no flight tells, so its "
+                    "interval reaches both bounds (another bootstrap would tell)")
             answer = self.gains.get(name, rec.result)  # another stage may have moved it off the line's result
             wall = rec.beside_failure if answer == rec.result or not rec.samples else beside_failure(rec.samples,
                                                                                                         answer)
             if wall is None and answer == self.designed.get(name):  # the design's verdict on its own answer
                 wall = rec.beside_failure  # (`Tuner._surface`: from every flight of the run)
             if wall is not None:
-                out.append(f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed (diverged): no "
-                           "gain beyond it was answered, but the margin to it is one step of the search")
+                say("beside failure", f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed "
+                    "(diverged): no gain beyond it was answered, but the margin to it is one step of the search")
         designed = bool(self.designed) and all(self.gains.get(n) == v for n, v in self.designed.items())
         if self.open_face and designed:  # (the design's verdicts are the answer's only while it is the design's)
             faces = ", ".join(f"{n} = {v:.4g}" for n, v in self.open_face.items())
-            out.append(f"the last design answered {faces} on the edge of the box it flew, inside the range: it did "
-                       "not surround its answer, so the optimum may lie beyond (a design around the answer, or a "
-                       "larger budget, would tell)")
+            say("open face", f"the last design answered {faces} on the edge of the box it flew, inside the range: "
+                "it did not surround its answer, so the optimum may lie beyond (a design around the answer, or a "
+                "larger budget, would tell)")
         risk = self.divergence or {}
         if risk and designed:
             chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
             said = f"fitted to the run's flights, some of which diverged, a flight at the answer diverges with " \
                    f"chance {chance:.2%}"
             if chance > bound and risk.get("kept"):
-                out.append(f"{said}, above the {bound:.1%} an answer keeps to: it is the design before's answer, kept "
-                           "beside the wall (that design's flights put it under the bound; the last one's, nearer the "
-                           f"wall, do not, though under the {KEEP_RISK:.0%} a kept answer may have): fly narrower "
-                           "ranges away from the failed flights before trusting it")
+                say("divergence", f"{said}, above the {bound:.1%} an answer keeps to: it is the design before's "
+                    "answer, kept beside the wall (that design's flights put it under the bound; the last one's, "
+                    f"nearer the wall, do not, though under the {KEEP_RISK:.0%} a kept answer may have): fly "
+                    "narrower ranges away from the failed flights before trusting it")
             elif chance > bound:
-                out.append(f"{said}, above the {bound:.1%} an answer keeps to, which no point flown in the design "
-                           "meets: fly the design away from the failed flights (narrower ranges) before trusting it")
+                say("divergence", f"{said}, above the {bound:.1%} an answer keeps to, which no point flown in the "
+                    "design meets: fly the design away from the failed flights (narrower ranges) before trusting it")
             elif free:
                 gains = ", ".join(f"{n} {v:.4g}" for n, v in free.items())
-                out.append(f"{said}: the bound of {bound:.1%} on that chance moved the answer off the fit's minimum "
-                           f"({gains}), where it is {risk['unbounded_chance']:.1%}")
+                say("divergence", f"{said}: the bound of {bound:.1%} on that chance moved the answer off the fit's "
+                    f"minimum ({gains}), where it is {risk['unbounded_chance']:.1%}")
         return out
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:

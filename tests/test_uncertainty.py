@@ -304,6 +304,10 @@ def test_the_cautions_fire_for_a_moving_answer_and_an_answer_next_to_a_fly_away(
     assert max(map(abs, moves.values())) > 0.125  # kp creeps up the ridge by more than the tolerance
     for g, m in moves.items():  # the caution fires exactly when the last move exceeds the tolerance
         assert (f"{g} still moved" in said) == (abs(m) > 0.125), (g, m, said)
+    for result, kind, words in ((moving, "moving", "still moved"), (diverges, "beside failure", "where a flight failed")):
+        named = result.caution_kinds()  # each line with its kind, as benchmarks/cautions.py counts them
+        assert [text for _, text in named] == result.cautions()
+        assert [text for k, text in named if k == kind] == [c for c in result.cautions() if words in c] != []
     quiet = mavtune.tune(lambda gs: [(g["kp"] - 0.3) ** 2 + (g["kd"] - 0.6) ** 2 + 0.1 for g in gs], seed=1, draws=20,
                          **PASSES)
     assert not [c for c in quiet.cautions() if "still moved" in c or "failed" in c or "no longer are" in c]
