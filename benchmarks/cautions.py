@@ -45,24 +45,27 @@ def kinds_of_run(plant_name: str, tuning: dict[str, Any], run: int, x: list[floa
     got = [result.gains[g] for g in plant.gains]
     if any(abs(a - b) > 1e-9 for a, b in zip(got, x)):
         raise SystemExit(f"{plant_name} run {run} answers {got}, the result recorded {x}: another engine flew it")
-    return sorted({kind for kind, _ in result.caution_kinds()})
+    kinds = {kind for kind, _ in result.caution_kinds()}
+    if kinds - set(KINDS):
+        raise SystemExit(f"caution kinds {sorted(kinds - set(KINDS))} are not counted here: add them to KINDS")
+    return sorted(kinds)
 
 
 def table(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per kind: the runs it fires on, their share within 2 % and median excess, and the same for the rest."""
     out = {}
     for kind in KINDS:
-        on = [r["excess_pct"] for r in rows if kind in r["kinds"]]
-        off = [r["excess_pct"] for r in rows if kind not in r["kinds"]]
-        out[kind] = {"fires": len(on), "runs": len(rows),
-                     **{f"{side}_within": (sum(e <= WITHIN_PCT for e in ex) / len(ex) if ex else None)
-                        for side, ex in (("on", on), ("off", off))},
-                     **{f"{side}_median": (statistics.median(ex) if ex else None) for side, ex in (("on", on),
-                                                                                                    ("off", off))}}
+        sides = {"on": [r["excess_pct"] for r in rows if kind in r["kinds"]],
+                 "off": [r["excess_pct"] for r in rows if kind not in r["kinds"]]}
+        out[kind] = {"fires": len(sides["on"]), "runs": len(rows)}
+        for side, excess in sides.items():
+            out[kind][f"{side}_within"] = sum(e <= WITHIN_PCT for e in excess) / len(excess) if excess else None
+            out[kind][f"{side}_median"] = statistics.median(excess) if excess else None
     return out
 
 
 def _cell(s: dict[str, Any]) -> str:
+    """A table cell: the runs the kind fires on, then within 2 % / median excess for them · for the rest."""
     if not s["fires"]:
         return "—"
     on = f"{s['on_within']:.0%} / {s['on_median']:.1f}"
