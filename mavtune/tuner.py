@@ -771,7 +771,7 @@ class Tuner:
         options = self._answer_options(half, keep) | ({"risk": None} if start else {})
         best, _ = surface_answer(flown, box, ruled, self.pool, **options)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
-        self.divergence = self._divergence(flown, box, ruled, best, half, keep)
+        self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
@@ -829,16 +829,18 @@ class Tuner:
 
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
                     ruled: Any, best: tuple[float, ...], half: float,
-                    keep: list[float] | None = None) -> dict[str, Any] | None:
+                    keep: list[float] | None = None, free: tuple[float, ...] | None = None) -> dict[str, Any] | None:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
-        (the previous design's answer `keep` included) and its chance when the bound moved it (None when not), and
-        whether the answer is `keep` ("kept"); None when no flight near the design failed."""
+        (the previous design's answer `keep` included; `free` when the caller already has it: a design answered
+        unbounded) and its chance when the bound moved it (None when not), and whether the answer is `keep`
+        ("kept"); None when no flight near the design failed."""
         options = self._answer_options(half, keep)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None
-        free, _ = surface_answer(flown, box, ruled, self.pool, risk=None, **options)
+        if free is None:
+            free, _ = surface_answer(flown, box, ruled, self.pool, risk=None, **options)
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
         names, s = list(self.settings.space), self.settings
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
