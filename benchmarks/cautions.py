@@ -28,8 +28,7 @@ from typing import Any  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model, write_results  # noqa: E402
 from quality import _git_commit, _init_worker, engine_hash  # noqa: E402
-from zoo.methods import Method, ZooFleet, tune_seed  # noqa: E402
-from zoo.plants import ALL_PLANTS  # noqa: E402
+from zoo.methods import Method, tune_run  # noqa: E402
 from zoo.truth import WITHIN_PCT  # noqa: E402
 
 KINDS = ("moving", "wide", "stale", "beside failure", "open face", "divergence")  # TuningResult.caution_kinds
@@ -37,18 +36,13 @@ KINDS = ("moving", "wide", "stale", "beside failure", "open face", "divergence")
 
 def kinds_of_run(plant_name: str, tuning: dict[str, Any], run: int, x: list[float]) -> list[str]:
     """The kinds of caution run `run` of the plant ends with (its answer checked against the recorded `x`)."""
-    from mavtune.tuner import run_tuning
-
-    plant = ALL_PLANTS[plant_name]
-    settings = Method("default", tuning).settings(plant, run)
-    result = run_tuning(settings, ZooFleet(plant, settings.vehicles, tune_seed(run)))
-    got = [result.gains[g] for g in plant.gains]
-    if any(abs(a - b) > 1e-9 for a, b in zip(got, x)):
-        raise SystemExit(f"{plant_name} run {run} answers {got}, the result recorded {x}: another engine flew it")
-    kinds = {kind for kind, _ in result.caution_kinds()}
-    if kinds - set(KINDS):
-        raise SystemExit(f"caution kinds {sorted(kinds - set(KINDS))} are not counted here: add them to KINDS")
-    return sorted(kinds)
+    row = tune_run(plant_name, Method("default", tuning), run)
+    if any(abs(a - b) > 1e-9 for a, b in zip(row["x"], x)):
+        raise SystemExit(f"{plant_name} run {run} answers {row['x']}, the result recorded {x}: another engine flew it")
+    if set(row["cautions"]) - set(KINDS):
+        raise SystemExit(f"caution kinds {sorted(set(row['cautions']) - set(KINDS))} are not counted here: add them "
+                         "to KINDS")
+    return row["cautions"]
 
 
 def table(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:

@@ -92,7 +92,7 @@ def _expected_flights(settings) -> dict[str, float]:
 
 
 def tune_run(plant_name: str, method: Method, run: int) -> dict[str, Any]:
-    """One mavtune tuning of a plant: the answer, flights, its interval per gain, the plan's expectation."""
+    """One mavtune tuning of a plant: the answer, flights, its interval per gain, the kinds of caution it ends with."""
     from mavtune.tuner import run_tuning
 
     plant = ALL_PLANTS[plant_name]
@@ -104,7 +104,8 @@ def tune_run(plant_name: str, method: Method, run: int) -> dict[str, Any]:
            for g, u in (result.uncertainty or {}).items()}
     return {"plant": plant_name, "method": method.label, "run": run, "x": [float(result.gains[g]) for g in plant.gains],
             "flights": int(result.flights), "rounds": len(result.rounds), "diverged_flights": fleet.diverged,
-            "uncertainty": unc, "stop_reason": str(result.stop_reason)[:200], "cpu_s": time.process_time() - cpu}
+            "uncertainty": unc, "cautions": sorted({kind for kind, _ in result.caution_kinds()}),
+            "stop_reason": str(result.stop_reason)[:200], "cpu_s": time.process_time() - cpu}
 
 
 def peer_run(plant_name: str, method: Method, run: int, budget: int) -> dict[str, Any]:
