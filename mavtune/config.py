@@ -123,6 +123,21 @@ def gain_set_problem(gain_set: Any, gains: Any) -> str | None:
     return None
 
 
+def defaults_in_space(initial: dict[str, float], space: dict[str, Any]) -> dict[str, float]:
+    """The default initial values (`Tuning.initial` not given) that apply to `space`: those of gains it tunes, inside
+    their ranges. The paper's kd 0.2 is a value of the simulator's normalised range: a gain named kd in a user's own
+    units starts mid-range instead of being refused for a value the user never gave."""
+    out = {}
+    for name, value in initial.items():
+        bounds = space.get(name)
+        try:
+            if bounds is not None and float(bounds[0]) <= value <= float(bounds[1]):
+                out[name] = value
+        except (TypeError, ValueError, IndexError):  # a malformed range: the space's own validation says so
+            out[name] = value
+    return out
+
+
 # what [tuning] gives the engine's Settings
 SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "strategy", "reuse", "initial",
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
@@ -175,7 +190,8 @@ class Tuning(_Section):
     """nsection: points per iteration (unset: one per vehicle slot)."""
     reuse: StrictBool = True
     initial: dict[str, float] = Field(default_factory=lambda: {"kd": 0.2})
-    """Starting values of gains not yet tuned (others start mid-range); the paper's kd 0.2 when kd is tuned."""
+    """Starting values of gains not yet tuned (others start mid-range); unset: the paper's kd 0.2 when kd is tuned
+    over a range that holds it (the simulator's normalised one)."""
     seed: StrictInt = Field(0, ge=0, le=MAX_SEED, description="simulated vehicle j has seed + j")
     adaptive: StrictBool = True
     confidence: float = Field(0.85, gt=0.5, lt=1.0, description="adaptive: p_correct a comparison needs to move on")
@@ -283,10 +299,10 @@ class Tuning(_Section):
 
     @model_validator(mode="after")
     def _default_initial_in_space(self) -> "Tuning":
-        """The default initial values apply only to the gains tuned, when no initial values were given (kept out of
-        the fields set: `settings(space=...)` filters the default again for another space)."""
+        """The default initial values apply only to the gains tuned inside their ranges, when no initial values were
+        given (kept out of the fields set: `settings(space=...)` filters the default again for another space)."""
         if "initial" not in self.model_fields_set:
-            self.__dict__["initial"] = {k: v for k, v in self.initial.items() if k in self.space}
+            self.__dict__["initial"] = defaults_in_space(self.initial, self.space)
         return self
 
     @model_validator(mode="after")
@@ -340,10 +356,11 @@ class Tuning(_Section):
     def settings(self, **given: Any) -> Settings:
         """The engine's Settings of this tuning with the fields in `given` replaced (validated there: ranges, initial
         values, groups) — the one conversion behind `mavtune tune` (the file and flags) and `mavtune.tune()` (its
-        arguments over the defaults). An initial value of the default that is not in a given space is dropped."""
+        arguments over the defaults). An initial value of the default that is not in a given space, or outside its
+        gain's range there, is dropped (that gain starts mid-range)."""
         values = {name: getattr(self, name) for name in SETTINGS_FIELDS} | given
         if "initial" not in given and "initial" not in self.model_fields_set:
-            values["initial"] = {k: v for k, v in values["initial"].items() if k in values["space"]}
+            values["initial"] = defaults_in_space(values["initial"], values["space"])
         auto = values["budget"] == "auto"
         values["budget"] = resolved_budget(values["budget"], values["space"], values["design"], values["bootstraps"],
                                            values["vehicles"])

@@ -70,3 +70,28 @@ def test_a_named_preset_is_its_settings_over_the_file_and_under_the_flags(tmp_pa
     assert run_app(["plan", "--preset", "fast"]) == 2
     err = capsys.readouterr().err
     assert "--preset must be one of paper, budget, passes, got 'fast'" in err and "Traceback" not in err
+
+
+def test_the_default_initial_kd_applies_only_inside_the_range_a_user_gives(tmp_path):
+    """The paper's kd 0.2 is a value of the simulator's normalised range: a kd in a user's own units (or a range
+    narrowed past it) starts mid-range, in the API and the CLI; an initial value the user gives is still checked."""
+    from mavtune.errors import MavtuneError
+
+    def bowl(assignments):
+        return [(g["kp"] - 3.0) ** 2 / 4 + (g["kd"] - 0.02) ** 2 / 1e-4 + 1 for g in assignments]
+
+    space = {"kp": (0.5, 8.0), "kd": (0.0, 0.05)}
+    assert default_settings(space=space).initial == {}
+    result = mavtune.tune(bowl, space=space, design_steps=1)
+    assert abs(result.gains["kd"] - 0.02) <= 0.005 and abs(result.gains["kp"] - 3.0) <= 0.75
+    try:
+        mavtune.tune(bowl, space=space, initial={"kd": 0.2})
+    except MavtuneError as exc:
+        assert "initial kd = 0.2 is outside its range [0.0, 0.05]" in str(exc)
+    else:
+        raise AssertionError("an initial value outside its range was not refused")
+    toml = tmp_path / "narrow.toml"
+    toml.write_text("[tuning]\nspace = {kp = [0.0, 1.0], kd = [0.3, 1.0]}\n")
+    assert run_app(["plan", "-c", str(toml)]) == 0
+    assert load_config(toml).settings().start_gains() == {"kp": 0.5, "kd": 0.65}
+    assert load_config(None).settings().initial == {"kd": 0.2}  # the simulator's range keeps the paper's start
