@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from mavtune.errors import MavtuneError
-from mavtune.fleet import Fleet, Flight, Gains
+from mavtune.fleet import Fleet, Flight, Gains, Status
 from mavtune.flown import by_gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
@@ -47,6 +47,8 @@ DIRECTION = "direction"  # the `gain` of a round of a line search across the gai
 SURFACE = "design"  # the `gain` of a round of the response surface's design (all gains at once)
 MAX_DESIGN_REPEATS = 100
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
+MAX_ROUNDS_WITHOUT_A_COST = 10  # rounds a run flies, none of whose flights measured a usable cost (every one failed or
+# was lost: a cost function that answers NaN, vehicles that cannot fly any gain), before it gives up: no gains to give
 # Bounds of every accepted setting, the same for the Python API and the CLI: each run plans and flies in bounded time.
 MAX_VEHICLES = 10_000  # more than any swarm flown; the plan rehearses speculation for every spare vehicle
 MAX_POINTS = 1_000  # nsection points per iteration
@@ -559,6 +561,7 @@ class Tuner:
         self.bootstrap = 0
         self.stop_reason = "not started"
         self._dry_rounds = 0
+        self._usable = False  # whether a flight of the run has measured a usable cost (ok, finite)
         self.flown = 0  # rounds flown (not replayed) by this process
         self.pool = NoisePool()  # the run's flight-to-flight noise, pooled over every line search
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
@@ -697,7 +700,18 @@ class Tuner:
         for _ in range(s.design_count() - len(self._design_answers)):
             if self._surface(half):  # inside the design's box: the next design narrows in; on its face: it moves
                 half *= self._shrink()
+        if not self._usable:
+            self._no_cost()
         return self.snapshot()
+
+    def _no_cost(self) -> None:
+        """Refuse to answer a run none of whose flights measured a usable cost: every gain it would hand out failed
+        (or was never measured); said in one line, the journal keeping every round."""
+        flights = [f for r in self.rounds for f in r.flights]
+        lost = sum(not f.measured for f in flights)
+        raise MavtuneError(f"no flight of the run's {len(flights)} measured a usable cost ({len(flights) - lost} "
+                           f"failed, {lost} lost) in {len(self.rounds)} rounds: there are no gains to hand out; check "
+                           "the cost function or the vehicles (the journal keeps every round)")
 
     def _shrink(self) -> float:
         """The next design's half-width over the last one's, once the last answered inside its box: `design_shrink`
@@ -988,11 +1002,14 @@ class Tuner:
         rnd = Round(index, bootstrap, name, bracket, assignments, flights, started, finished, replayed)
         self.rounds.append(rnd)
         self._dry_rounds = 0 if any(f.measured for f in flights) else self._dry_rounds + 1
+        self._usable = self._usable or any(f.status is Status.OK and math.isfinite(f.cost) for f in flights)
         if self.on_round is not None:
             self.on_round(rnd)
         if self._dry_rounds >= MAX_ROUNDS_WITHOUT_RESULT:
             raise MavtuneError(f"no vehicle returned a result in {MAX_ROUNDS_WITHOUT_RESULT} consecutive rounds "
                                f"(last: round {index}); the journal keeps every round so far")
+        if not self._usable and len(self.rounds) >= MAX_ROUNDS_WITHOUT_A_COST:
+            self._no_cost()
         return flights
 
     def _check_replay(self, record: RoundRecord, assignments: list[Gains]) -> None:

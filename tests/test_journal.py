@@ -188,6 +188,30 @@ def test_a_fleet_that_never_returns_stops_with_a_clear_error(tmp_path):
         assert len(j.rounds()) == 5
 
 
+SHORT = dict(space={"kp": (0.0, 1.0)}, design=False, epsilon=0.3, bootstraps=1, adaptive=False)  # 5 rounds if flown
+
+
+@pytest.mark.parametrize("options", [SETTINGS, SHORT], ids=["long", "short"])
+def test_a_run_whose_every_flight_fails_hands_out_no_gains(tmp_path, options):
+    """Every flight diverges (or a cost function answers NaN): no gain was flown safely, so none is answered. A long
+    run stops after MAX_ROUNDS_WITHOUT_A_COST rounds; one shorter than that at its end; the journal keeps them."""
+    from mavtune.tuner import MAX_ROUNDS_WITHOUT_A_COST
+
+    class Diverging(CountingFleet):
+        def fly(self, assignments, round_id):
+            return [Flight(f"v{i}", g, 1e9, Status.FAILED) for i, g in enumerate(assignments)]
+
+    path = tmp_path / "j.sqlite"
+    with pytest.raises(MavtuneError, match=r"no flight of the run's \d+ measured a usable cost \(\d+ failed, 0 lost\)"
+                       ".* there are no gains to hand out"):
+        mavtune.tune(Diverging(2), journal=path, **options)
+    with Journal(path) as j:
+        flown = len(j.rounds())
+    assert flown == MAX_ROUNDS_WITHOUT_A_COST if options is SETTINGS else 0 < flown < MAX_ROUNDS_WITHOUT_A_COST
+    with pytest.raises(MavtuneError, match="no gains to hand out"):
+        mavtune.tune(lambda assignments: [math.nan] * len(assignments), **options)
+
+
 def test_tuning_in_stages_flies_every_round_once_to_the_same_result(tmp_path):
     from mavtune.tuner import Settings, StageDone, run_tuning
 
