@@ -18,8 +18,9 @@ from typing import Any, Callable, Sequence
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Gains
 
-UNCONVERGED = ("still moved", "no longer are")  # a run's cautions that its answer had not settled (a wide interval
-# alone is not one: the entry's interval shows it)
+UNCONVERGED = ("moving", "stale")  # the kinds of caution (`TuningResult.caution_kinds`) that say a run's answer had
+# not settled (a wide interval alone is not one: the entry's interval shows it)
+UNCONVERGED_TEXT = ("still moved", "no longer are")  # the same cautions' words, in a result.json from before the kinds
 MASS_DECIMALS = 6  # masses are kept to the milligram: 2.3 + 0.9 is stored as 3.2, not 3.1999999999999997
 
 
@@ -52,7 +53,11 @@ def run_facts(summary: dict[str, Any]) -> dict[str, Any]:
     uncertainty = summary.get("uncertainty") or {}
     interval = {k: [float(u["lo"]), float(u["hi"])] for k, u in uncertainty.items()
                 if isinstance(u, dict) and _finite(u.get("lo")) and _finite(u.get("hi"))}
-    cautions = [str(c) for c in summary.get("cautions") or [] if any(m in str(c) for m in UNCONVERGED)]
+    lines, kinds = [str(c) for c in summary.get("cautions") or []], summary.get("caution_kinds")
+    if isinstance(kinds, list) and len(kinds) == len(lines):
+        cautions = [c for k, c in zip(kinds, lines) if k in UNCONVERGED]
+    else:  # a result.json written before the kinds were: its lines' words
+        cautions = [c for c in lines if any(m in c for m in UNCONVERGED_TEXT)]
     params = next(iter((summary.get("tuned_params") or {}).values()), {})
     return {"se": standard_errors(uncertainty), "interval": interval, "cautions": cautions,
             "converged": not cautions,

@@ -225,6 +225,7 @@ class TuningResult:
         return sum(len(r.flights) for r in self.rounds)
 
     def to_dict(self) -> dict[str, Any]:
+        kinds = self.caution_kinds()
         return {
             "gains": self.gains,
             "rounds": len(self.rounds),
@@ -234,7 +235,8 @@ class TuningResult:
             "settings": self.settings,
             "uncertainty": self.uncertainty,
             "uncertainty_note": INTERVAL_NOTE,
-            "cautions": self.cautions(),
+            "cautions": [text for _, text in kinds],
+            "caution_kinds": [kind for kind, _ in kinds],  # each line's kind, in order (`caution_kinds`)
             "divergence": self.divergence,
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],

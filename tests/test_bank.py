@@ -159,6 +159,9 @@ def test_entries_keep_intervals_parameters_and_whether_their_run_converged(tmp_p
     stale = {"cautions": ["kp's 90% interval 0 – 1 spans 100%", "kp's last line search held the other gains where "
                           "they no longer are (kd 0.33 → 0.541)"]}
     assert not run_facts(stale)["converged"] and run_facts(stale)["cautions"] == stale["cautions"][1:]
+    kinds = {"cautions": ["kp's 90% interval spans it", "kp's search held kd elsewhere", "kd beside a failure"],
+             "caution_kinds": ["wide", "stale", "beside failure"]}  # (today's result.json: each line's kind)
+    assert run_facts(kinds)["cautions"] == ["kp's search held kd elsewhere"]
     b = GainBank()
     b.add(2.3, {"kp": 0.35}, "a", **run_facts(settled))
     b.add(3.2, {"kp": 0.55}, "b", **run_facts(moving))

@@ -147,6 +147,7 @@ def test_an_unsettled_answer_and_a_wide_interval_are_cautioned():
     cautions = " ".join(result.cautions())
     assert "interval" in cautions and "of its range" in cautions
     assert result.to_dict()["cautions"] == result.cautions() and "held" in result.to_dict()["uncertainty_note"]
+    assert result.to_dict()["caution_kinds"] == [kind for kind, _ in result.caution_kinds()]
 
 
 def diagonal_valley(seed, cv=0.05):
