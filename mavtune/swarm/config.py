@@ -16,11 +16,11 @@ import secrets
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from mavtune.config import read_toml, validated
 from mavtune.errors import MavtuneError
-from mavtune.swarm.messages import SESSION_PATTERN, VEHICLE_PATTERN, vehicle_key
+from mavtune.swarm.messages import SESSION_PATTERN, VEHICLE_PATTERN, locator_problem, vehicle_key
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +81,13 @@ class SwarmConfig(BaseModel):
             raise ValueError("'token' is gone: messages are now authenticated with a key that never travels; "
                              f"set key_file (or key, at least {MIN_KEY_CHARS} characters, or ${KEY_ENV})")
         return data
+
+    @field_validator("listen", "connect")
+    @classmethod
+    def _locator(cls, endpoint: str | None) -> str | None:
+        if endpoint is not None and (problem := locator_problem(endpoint)):
+            raise ValueError(problem)
+        return endpoint
 
     @model_validator(mode="after")
     def _check_envelope(self) -> "SwarmConfig":

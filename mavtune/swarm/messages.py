@@ -46,6 +46,19 @@ SESSION_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
 VEHICLE_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
 """A vehicle id is a Zenoh key chunk too."""
 
+LOCATOR_PATTERN = r"^[A-Za-z0-9]+/\S+$"
+"""A Zenoh endpoint: protocol/address, e.g. tcp/127.0.0.1:7447."""
+
+
+def locator_problem(endpoint: str) -> str | None:
+    """Why `endpoint` is no Zenoh locator (None when it is one): checked in the swarm's config, before a run folder
+    or key is made, and again where a session opens."""
+    import re
+
+    if not isinstance(endpoint, str) or not re.match(LOCATOR_PATTERN, endpoint):
+        return "not a Zenoh locator like tcp/127.0.0.1:7447"
+    return None
+
 NONCE_PATTERN = r"^[0-9a-f]{32}$"
 """Run and agent nonces: 16 random bytes in hex (secrets.token_hex(16))."""
 

@@ -22,6 +22,7 @@ from typing import Any, Callable
 import zenoh
 
 from mavtune.errors import MavtuneError
+from mavtune.swarm.messages import locator_problem
 
 log = logging.getLogger(__name__)
 
@@ -91,8 +92,8 @@ def zenoh_config(mode: str, endpoint: str, *, lease_ms: int = 2000, connect_time
     """A Zenoh config: `router` listening on `endpoint` or `client` connecting to it; no multicast scouting."""
     if mode not in ("router", "client"):
         raise MavtuneError(f"zenoh mode must be 'router' or 'client', not {mode!r}")
-    if "/" not in endpoint:
-        raise MavtuneError(f"endpoint {endpoint!r} is not a Zenoh locator like tcp/127.0.0.1:7447")
+    if problem := locator_problem(endpoint):
+        raise MavtuneError(f"endpoint {endpoint!r} is {problem}")
     cfg = zenoh.Config()
     try:
         cfg.insert_json5("mode", json.dumps(mode))

@@ -24,3 +24,15 @@ def test_a_run_that_fails_still_writes_result_json(tmp_path):
     result = json.loads((tmp_path / "result.json").read_text())
     assert result["status"] == "error" and result["gains"] is None
     assert "0 of 2 vehicles" in result["error"] and result["session"] == "r1" and result["events"] == []
+
+
+def test_a_bad_endpoint_is_refused_before_a_run_folder_or_key_is_made(tmp_path, monkeypatch, capsys):
+    from mavtune.cli import run_app
+
+    monkeypatch.chdir(tmp_path)
+    assert run_app(["tune", "-q", "--fleet", "zenoh", "--listen", "127.0.0.1:7447"]) == 2
+    assert capsys.readouterr().err.strip() == ("error: config swarm.listen: not a Zenoh locator like "
+                                               "tcp/127.0.0.1:7447 (got '127.0.0.1:7447')")
+    assert not (tmp_path / "runs").exists()  # no folder, no swarm.key written for a run that cannot start
+    assert run_app(["agent", "--connect", "localhost", "--id", "v1"]) == 2
+    assert "swarm.connect: not a Zenoh locator" in capsys.readouterr().err
