@@ -163,15 +163,26 @@ def previous_default() -> dict[str, Any]:
 def candidates() -> list[Method]:
     """The configurations the default is chosen from (`--half select`): the first is today's default
     (config.Tuning()), every other one fields over the default before session 13 (`previous_default()`; the second
-    is that default, the third the default before the budget, chosen on selection_budget_default.md; the last is
-    today's default at the flight goals' budget). The paper's setting (PAPER_TUNING) flies twice the flights' goal:
+    is that default, the third the default before the budget, chosen on selection_budget_default.md; the last ones
+    are today's default at the flight goals' budget, and capped at the worst run's 112 flights: `capped`). The paper's setting (PAPER_TUNING) flies twice the flights' goal:
     it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
     return [today, Method("previous default (2 passes, then ±0.15; session 12)", base),
             *(Method(m.label, {**base, **m.tuning}, m.peer, m.per_gain) for m in older),
             Method("default at 26 flights a gain (the flight goals: 52 for 2 gains, 104 for 4)", per_gain=26),
-            Method("default without the pass over the gains at 26 flights a gain", {"bootstraps": 0}, per_gain=26)]
+            Method("default without the pass over the gains at 26 flights a gain", {"bootstraps": 0}, per_gain=26),
+            *capped()]
+
+
+def capped() -> list[Method]:
+    """Today's default capped at 112 flights (issue 20's worst run: 28 a gain on 4 gains, 37 on 3; 2 gains keep their
+    84), as is and with a map of the box without its inner corners (16 flights fewer on 4 gains), session 17."""
+    cap, light = {"budget": 112}, {"budget": 112, "design_inner": False}
+    return [Method("default, at most 112 flights (session 17)", cap),
+            Method("default, at most 112 flights, the map without its inner corners", light),
+            Method("default, at most 112 flights, the map without its inner corners, shrink 0.5",
+                   {**light, "design_shrink": 0.5})]
 
 
 def _candidates() -> list[Method]:
