@@ -31,7 +31,8 @@ from quality import _git_commit, _init_worker, engine_hash  # noqa: E402
 from zoo.methods import Method, tune_run  # noqa: E402
 from zoo.truth import WITHIN_PCT  # noqa: E402
 
-KINDS = ("moving", "wide", "stale", "beside failure", "open face", "divergence")  # TuningResult.caution_kinds
+KINDS = ("moving", "wide", "stale", "beside failure", "open face", "divergence",
+         "cost at zero")  # TuningResult.caution_kinds
 
 
 def kinds_of_run(plant_name: str, tuning: dict[str, Any], run: int, x: list[float]) -> list[str]:

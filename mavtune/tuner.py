@@ -147,11 +147,19 @@ class TuningResult:
         tolerance ("moving"), an interval spanning most of its range ("wide"), a gain whose last line search held
         the others more than half the tolerance from where they ended ("stale"), an answer next to a flight that
         failed ("beside failure"), a last design that answered on its box's face inside the range ("open face"),
-        the answer's fitted divergence chance where flights near it diverged ("divergence")."""
+        the answer's fitted divergence chance where flights near it diverged ("divergence"), flights that measured
+        a cost at or below zero ("cost at zero")."""
         out: list[tuple[str, str]] = []
 
         def say(kind: str, text: str) -> None:
             out.append((kind, text))
+
+        low = [f.cost for r in self.rounds for f in r.flights
+               if f.status is Status.OK and math.isfinite(f.cost) and f.cost <= 0.0]
+        if low:
+            say("cost at zero", f"{len(low)} flights measured a cost at or below zero (the lowest {min(low):.3g}): "
+                "the comparisons and the fits take a flight's noise to grow with its cost, which a cost near zero "
+                "breaks; add a constant above the noise to the cost so that it stays positive")
 
         space, epsilon = self.settings.get("space", {}), self.settings.get("epsilon", math.nan)
         last = {s.gain: s for s in self.searches}

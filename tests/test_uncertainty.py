@@ -142,6 +142,26 @@ def test_the_90_percent_interval_covers_the_optimum_in_90_percent_of_runs():
     assert covered >= 50, f"{covered} of {total}"
 
 
+def test_a_cost_at_or_below_zero_is_cautioned_with_what_to_do():
+    """The engine takes a flight's noise as relative to its cost: a cost that crosses zero is said, once, with the
+    lowest cost and the remedy (benchmarks/cost_offset.py measures what it costs); a positive one is not."""
+    import random
+
+    def shifted(offset):
+        def evaluate(assignments, context):
+            return [offset + (g["kp"] - 0.3) ** 2 + (g["kd"] - 0.6) ** 2 + random.Random(c.seed).gauss(0.0, 0.01)
+                    for g, c in zip(assignments, context)]
+        return evaluate
+
+    crossing = mavtune.tune(shifted(0.0), seed=1, draws=0)
+    said = [text for kind, text in crossing.caution_kinds() if kind == "cost at zero"]
+    lowest = min(f.cost for r in crossing.rounds for f in r.flights)
+    assert len(said) == 1 and f"(the lowest {lowest:.3g})" in said[0] and "add a constant" in said[0]
+    assert "cost at zero" in crossing.to_dict()["caution_kinds"]
+    positive = mavtune.tune(shifted(1.0), seed=1, draws=0)
+    assert "cost at zero" not in {kind for kind, _ in positive.caution_kinds()}
+
+
 def test_an_unsettled_answer_and_a_wide_interval_are_cautioned():
     result = mavtune.tune(coupled_bowl(3, 0.8, 0.2, cv=0.8, coupling=1.9), vehicles=2, seed=3, draws=30)
     cautions = " ".join(result.cautions())
