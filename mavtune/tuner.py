@@ -721,7 +721,8 @@ class Tuner:
         lost = sum(not f.measured for f in flights)
         raise MavtuneError(f"no flight of the run's {len(flights)} measured a usable cost ({len(flights) - lost} "
                            f"failed, {lost} lost) in {len(self.rounds)} rounds: there are no gains to hand out; check "
-                           "the cost function or the vehicles (the journal keeps every round)")
+                           "the cost function or the vehicles, or narrow the ranges to gains that fly (the journal "
+                           "keeps every round)")
 
     def _shrink(self) -> float:
         """The next design's half-width over the last one's, once the last answered inside its box: `design_shrink`
