@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Callable, Protocol, Sequence, runtime_checkable
@@ -129,6 +130,12 @@ def wants_context(evaluate: Callable[..., Any]) -> bool:
     return len(positional) >= 2
 
 
+def _short(value: Any) -> str:
+    """`value`'s repr for a one-line error, cut to 60 characters."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 class CallableFleet:
     """A fleet of `vehicles` backed by a user function `evaluate(assignments) -> costs` (or `evaluate(assignments,
     context)`: one `FlightContext` per assignment, seeded from `seed`)."""
@@ -149,10 +156,17 @@ class CallableFleet:
         gains = [dict(a) for a in assignments]
         if self._context:
             contexts = [FlightContext(round_id, i, flight_seed(self.seed, round_id, i)) for i in range(len(gains))]
-            costs = list(self._evaluate(gains, context=contexts) if _named_context(self._evaluate) else
-                         self._evaluate(gains, contexts))
+            returned = (self._evaluate(gains, context=contexts) if _named_context(self._evaluate) else
+                        self._evaluate(gains, contexts))
         else:
-            costs = list(self._evaluate(gains))
+            returned = self._evaluate(gains)
+        try:
+            if isinstance(returned, (str, bytes, Mapping)) or not isinstance(returned, Iterable):
+                raise TypeError
+            costs = list(returned)
+        except TypeError:  # (None, a number, a dict whose keys would pass for costs, a 0-d array)
+            raise MavtuneError(f"evaluate returned {type(returned).__name__} {_short(returned)} in round {round_id}; "
+                               "it must return a list of costs, one per assignment") from None
         if len(costs) != len(assignments):
             raise MavtuneError(
                 f"evaluate returned {len(costs)} costs for {len(assignments)} assignments in round {round_id}; "
@@ -161,9 +175,12 @@ class CallableFleet:
         flights = []
         for i, (gains, cost) in enumerate(zip(assignments, costs)):
             try:
+                if isinstance(cost, bool) or getattr(getattr(cost, "dtype", None), "kind", "") == "b":  # (True is
+                    # 1 to float(): a flag, Python's or numpy's, returned for a cost is a mistake)
+                    raise TypeError
                 cost = float(cost)
             except (TypeError, ValueError):
-                raise MavtuneError(f"evaluate returned a non-number cost {cost!r} in round {round_id}") from None
+                raise MavtuneError(f"evaluate returned a non-number cost {_short(cost)} in round {round_id}") from None
             status = Status.OK if math.isfinite(cost) else Status.FAILED
             flights.append(Flight(vehicle=f"v{i}", gains=dict(gains), cost=cost, status=status))
         return flights

@@ -160,6 +160,23 @@ def test_wrong_number_of_costs_is_named():
         mavtune.tune(lambda gs: [0.0], vehicles=2, strategy="split")
 
 
+@pytest.mark.parametrize("returned, said", [
+    (None, r"returned NoneType None in round 0; it must return a list of costs, one per assignment"),
+    (1.5, r"returned float 1\.5 in round 0; it must return a list"),
+    ({0: 1.0, 1: 2.0}, r"returned dict \{0: 1\.0, 1: 2\.0\} in round 0"),  # (its keys would pass for two costs)
+    ("12", r"returned str '12' in round 0"),
+    ([True, False], r"returned a non-number cost (np\.)?True_? in round 0"),  # (True is 1 to float(); numpy's too)
+])
+def test_a_cost_function_that_returns_no_list_of_numbers_is_named_in_one_line(returned, said):
+    import numpy as np
+
+    for value in (returned, np.array(returned) if isinstance(returned, list) else returned):
+        with pytest.raises(MavtuneError, match=said):
+            mavtune.tune(lambda gs: value, vehicles=2)
+    assert mavtune.tune(lambda gs: np.array([(g["kp"] - 0.3) ** 2 + 1.0 for g in gs]), vehicles=2, design_steps=1,
+                        space={"kp": (0.0, 1.0)}).gains["kp"] == pytest.approx(0.3, abs=0.02)  # an array is a list
+
+
 def noisy(seed, cv=0.1, kp0=0.4, kd0=0.6):
     import random
 
