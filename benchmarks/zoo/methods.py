@@ -172,7 +172,14 @@ def candidates() -> list[Method]:
             *(Method(m.label, {**base, **m.tuning}, m.peer, m.per_gain) for m in older),
             Method("default at 26 flights a gain (the flight goals: 52 for 2 gains, 104 for 4)", per_gain=26),
             Method("default without the pass over the gains at 26 flights a gain", {"bootstraps": 0}, per_gain=26),
-            *capped()]
+            *capped(), *split_designs()]
+
+
+def split_designs() -> list[Method]:
+    """Today's default with the designs after the pass flying each point once (its 9 points on distinct vehicles:
+    half the flights a design, the rest to the pass), two or three of them (session 17)."""
+    return [Method("default, the designs each point once", {"design_split": True}),
+            Method("default, three designs after the pass, each point once", {"design_split": True, "design_steps": 4})]
 
 
 def capped() -> list[Method]:
