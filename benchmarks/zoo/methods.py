@@ -164,8 +164,9 @@ def candidates() -> list[Method]:
     """The configurations the default is chosen from (`--half select`): the first is today's default
     (config.Tuning()), every other one fields over the default before session 13 (`previous_default()`; the second
     is that default, the third the default before the budget, chosen on selection_budget_default.md; the last ones
-    are today's default at the flight goals' budget, and capped at the worst run's 112 flights: `capped`). The paper's setting (PAPER_TUNING) flies twice the flights' goal:
-    it is no candidate."""
+    are today's default at the flight goals' budget, capped at the worst run's 112 flights (`capped`) and with its
+    designs each point once (`split_designs`)). The paper's setting (PAPER_TUNING) flies twice the flights' goal: it
+    is no candidate."""
     today, *older = _candidates()
     base = previous_default()
     return [today, Method("previous default (2 passes, then ±0.15; session 12)", base),
