@@ -188,7 +188,7 @@ def test_a_fleet_that_never_returns_stops_with_a_clear_error(tmp_path):
         assert len(j.rounds()) == 5
 
 
-SHORT = dict(space={"kp": (0.0, 1.0)}, design=False, epsilon=0.3, bootstraps=1, adaptive=False)  # 5 rounds if flown
+SHORT = dict(space={"kp": (0.0, 1.0)}, design=False, epsilon=0.3, bootstraps=1, adaptive=False)  # < 10 rounds
 
 
 @pytest.mark.parametrize("options", [SETTINGS, SHORT], ids=["long", "short"])
