@@ -192,8 +192,9 @@ class CallableFleet:
 
         again = self.fly(assignments, round_id)
         for i, (was, now) in enumerate(zip(flights, again)):
-            if was.measured and not (was.cost == now.cost or math.isclose(was.cost, now.cost, rel_tol=1e-9,
-                                                                          abs_tol=1e-12)):
+            same = (was.cost == now.cost or (math.isnan(was.cost) and math.isnan(now.cost))  # (NaN: a failed
+                    or math.isclose(was.cost, now.cost, rel_tol=1e-9, abs_tol=1e-12))  # flight's cost, both times)
+            if was.measured and not same:
                 raise MavtuneError(f"{where} was recorded with another cost function: round {round_id} vehicle {i} "
                                    f"cost {was.cost:.6g} then, {now.cost:.6g} now; use a new journal (or pass "
                                    "resume=True if the cost is noisy by design)")

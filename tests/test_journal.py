@@ -379,3 +379,21 @@ def test_a_journal_reused_with_another_cost_function_is_refused(tmp_path):
     resumed = mavtune.tune(lambda gs: [noisy_cost(g) for g in gs], **cut)  # the same function: resumed
     assert resumed.gains == mavtune.tune(lambda gs: [noisy_cost(g) for g in gs], vehicles=2, draws=0,
                                          **SETTINGS).gains
+
+
+def test_a_journal_whose_first_round_has_a_nan_cost_is_resumed_by_the_same_function(tmp_path):
+    """A cost function answers NaN where a flight diverged (as the API invites): NaN then and NaN now is the same
+    cost, so the run it journaled resumes, to the uninterrupted answer; a finite cost where NaN was is another."""
+    from mavtune.fleet import Status
+
+    def cost(assignments):
+        return [math.nan if g["kd"] < 0.1 else (g["kp"] - 0.3) ** 2 + (g["kd"] - 0.6) ** 2 + 1 for g in assignments]
+
+    path = tmp_path / "j.sqlite"
+    first = mavtune.tune(cost, journal=path)
+    assert any(f.status is Status.FAILED and math.isnan(f.cost) for f in first.rounds[0].flights)  # (the map's
+    # first round flies (0.5, 0.5) and (0.5, 0))
+    again = mavtune.tune(cost, journal=path)
+    assert again.gains == first.gains and len(again.rounds) == len(first.rounds)
+    with pytest.raises(MavtuneError, match=r"round 0 vehicle 1 cost nan then, 1\.4 now"):
+        mavtune.tune(lambda gs: [(g["kp"] - 0.3) ** 2 + (g["kd"] - 0.6) ** 2 + 1 for g in gs], journal=path)
