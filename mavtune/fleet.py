@@ -45,6 +45,12 @@ class Flight:
         """True when the flight produced a cost (ok or failed), False when it was lost."""
         return self.status is not Status.LOST
 
+    @property
+    def usable(self) -> bool:
+        """True when the flight measured a cost a search can compare and fit: flown without failing, finite (a
+        failed flight's, whatever it reports, counts as the worst)."""
+        return self.status is Status.OK and math.isfinite(self.cost)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "vehicle": self.vehicle,

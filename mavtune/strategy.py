@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 
 from mavtune.errors import MavtuneError
-from mavtune.fleet import Flight, Status
+from mavtune.fleet import Flight
 from mavtune.search import LineSearch
 
 STRATEGIES = ("avg", "split", "groups")
@@ -79,6 +79,5 @@ class Strategy:
         or aborted) whatever cost it reports (the simulator's is a finite penalty): a gain whose flights diverged
         is a wall, never an answer nor a cost to fit. Lost flights are left out: a point none of whose flights
         measured anything is asked for again."""
-        kept = [(p, f.cost if math.isfinite(f.cost) and f.status is not Status.FAILED else math.inf)
-                for p, f in zip(points, flights) if f.measured]
+        kept = [(p, f.cost if f.usable else math.inf) for p, f in zip(points, flights) if f.measured]
         return [p for p, _ in kept], [c for _, c in kept]

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from mavtune.errors import MavtuneError
-from mavtune.fleet import Fleet, Flight, Gains, Status
+from mavtune.fleet import Fleet, Flight, Gains
 from mavtune.flown import by_gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
@@ -154,8 +154,7 @@ class TuningResult:
         def say(kind: str, text: str) -> None:
             out.append((kind, text))
 
-        low = [f.cost for r in self.rounds for f in r.flights
-               if f.status is Status.OK and math.isfinite(f.cost) and f.cost <= 0.0]
+        low = [f.cost for r in self.rounds for f in r.flights if f.usable and f.cost <= 0.0]
         if low:
             say("cost at zero", f"{len(low)} flights measured a cost at or below zero (the lowest {min(low):.3g}): "
                 "the comparisons and the fits take a flight's noise to grow with its cost, which a cost near zero "
@@ -1013,7 +1012,7 @@ class Tuner:
         rnd = Round(index, bootstrap, name, bracket, assignments, flights, started, finished, replayed)
         self.rounds.append(rnd)
         self._dry_rounds = 0 if any(f.measured for f in flights) else self._dry_rounds + 1
-        self._usable = self._usable or any(f.status is Status.OK and math.isfinite(f.cost) for f in flights)
+        self._usable = self._usable or any(f.usable for f in flights)
         if self.on_round is not None:
             self.on_round(rnd)
         if self._dry_rounds >= MAX_ROUNDS_WITHOUT_RESULT:
