@@ -19,6 +19,7 @@ import hashlib
 import hmac
 import json
 import math
+import re
 from enum import Enum
 from typing import Annotated, Any, Literal, Union
 
@@ -53,8 +54,6 @@ LOCATOR_PATTERN = r"^[A-Za-z0-9]+/\S+$"
 def locator_problem(endpoint: str) -> str | None:
     """Why `endpoint` is no Zenoh locator (None when it is one): checked in the swarm's config, before a run folder
     or key is made, and again where a session opens."""
-    import re
-
     if not isinstance(endpoint, str) or not re.match(LOCATOR_PATTERN, endpoint):
         return "not a Zenoh locator like tcp/127.0.0.1:7447"
     return None
