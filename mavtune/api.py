@@ -51,6 +51,9 @@ def default_settings(vehicles: int | None = None, **given: Any) -> Settings:
     if "initial" in options and options["initial"] is None:
         options["initial"] = {}
     if "space" in options and options["space"] is not None:
+        if not isinstance(options["space"], Mapping):
+            raise MavtuneError(f"space must map each gain's name to its range, e.g. {{'kp': (0.0, 1.0)}}; "
+                               f"got {options['space']!r}")
         options["space"] = dict(options["space"])
     elif "space" in options:
         del options["space"]

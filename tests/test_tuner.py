@@ -114,6 +114,7 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
 
 @pytest.mark.parametrize("kwargs, message", [
     (dict(space={}), "space is empty"),
+    (dict(space=[("kp", 0.0, 1.0)]), "space must map each gain's name to its range"),
     (dict(space={"kp": (1.0, 0.0)}), "lo must be below hi"),
     (dict(epsilon=0.5), "epsilon 0.5 is outside"),
     (dict(vehicles=0), "vehicles must be from 1 to"),
