@@ -14,6 +14,7 @@ from mavtune.sim.gains import to_physical
 from mavtune.sim.scenario import Scenario
 
 CSV_COLUMNS = ("kp", "kd", "mean_cost", "std_cost", "n")  # one row per grid point, kp-major
+MAX_FLIGHTS = 4_000_000  # grid x grid x repeats: about 3 min and 200 MB of arrays; more is a typo, not a map
 
 
 @dataclass
@@ -44,9 +45,13 @@ class Surface:
 
 
 def check_size(grid: int, repeats: int) -> None:
-    """A one-line MavtuneError unless grid >= 2 points per axis and repeats >= 1 flights per point."""
+    """A one-line MavtuneError unless grid >= 2 points per axis, repeats >= 1 flights per point and the map's
+    flights at most MAX_FLIGHTS (before any array is allocated)."""
     if grid < 2 or repeats < 1:
         raise MavtuneError(f"a surface needs grid >= 2 and repeats >= 1, got grid {grid}, repeats {repeats}")
+    if grid * grid * repeats > MAX_FLIGHTS:
+        raise MavtuneError(f"a surface of grid {grid} x {grid} x {repeats} repeats is {grid * grid * repeats:,} "
+                           f"flights, more than the {MAX_FLIGHTS:,} one map flies; lower --grid or --repeats")
 
 
 def compute_surface(grid: int = 25, repeats: int = 20, scenario: Scenario | None = None, seed: int = 0,

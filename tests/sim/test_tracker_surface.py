@@ -93,6 +93,7 @@ def test_a_surface_csv_that_does_not_parse_is_one_line_error(tmp_path, text, pro
 @pytest.mark.parametrize("args, problem", [
     (["surface", "--grid", "1"], "grid >= 2"),
     (["surface", "--grid", "2", "--repeats", "0"], "repeats >= 1"),
+    (["surface", "--grid", "100000"], "lower --grid or --repeats"),  # 2e11 flights: refused before any array
     (["surface", "--grid", "2", "--repeats", "1", "--payload", "-0.5"], "--payload"),
     (["surface", "--grid", "2", "--repeats", "1", "--cost", "rms"], "--cost"),
     (["bench", "--sizes", "1", "--primitive-s", "-1"], "--primitive-s"),
