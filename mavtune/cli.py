@@ -309,7 +309,7 @@ def _print_bank(console, bank) -> None:
     table = Table(title="gain bank", caption="each run's gains ± its last line searches' standard error, and its "
                   "90 % interval with all gains free (see its result.json); then the same gains in the vehicle's "
                   "own units where the run had them (autopilot parameters; the simulator's k_x(z) in 1/s², k_v(z) "
-                  "in 1/s)")
+                  "in 1/s)", caption_justify="left")
     table.add_column("mass, kg", justify="right")
     names = list(bank.entries[0].gains) if bank.entries else []
     params = list(dict.fromkeys(p for e in bank.entries for p in e.params))

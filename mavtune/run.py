@@ -522,7 +522,7 @@ def _result_table(result: TuningResult) -> Table:
                 "flights cannot rule out and its last move between bootstraps, to a bound where the cost still falls "
                 "at the last point flown, and to both when the other gains moved on after it; p ≥ 0.9: comparisons "
                 "whose kept point was the best with that probability (not the answer's accuracy)")
-    table = Table(caption=caption)
+    table = Table(caption=caption, caption_justify="left")
     for column in ("gain", "value ± se (others held)", "interval (joint)", "comparisons p ≥ 0.9"):
         table.add_column(column, justify="left" if column == "gain" else "right")
     last = {s.gain: s for s in result.searches}
