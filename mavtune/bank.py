@@ -190,6 +190,7 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
     out = Path(out)
     bank = GainBank.load(out / "bank.json", missing_ok=True)
     folders = [out / f"payload-{p:g}kg" for p in payloads_kg]
+    configs = [config_for(p) for p in payloads_kg]  # every payload's config checked before any flies
 
     def keep(i: int, result: Any) -> None:
         facts = run_facts(result.to_dict())
@@ -200,7 +201,7 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
     if not scheduler:
         for i, payload in enumerate(payloads_kg):
             console.rule(f"payload {payload:g} kg")
-            keep(i, run(config_for(payload), folders[i], console=console, quiet=True))
+            keep(i, run(configs[i], folders[i], console=console, quiet=True))
         return bank
 
     def landed(i: int, done: tuple[dict[str, bytes], Any]) -> None:
@@ -209,7 +210,7 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
         keep(i, result)
         console.print(f"payload {payloads_kg[i]:g} kg tuned: {folders[i]}")
 
-    chunks = [(config_for(p), folder_files(f)) for p, f in zip(payloads_kg, folders)]
+    chunks = [(c, folder_files(f)) for c, f in zip(configs, folders)]
     run_chunks(run_in_folder, chunks, scheduler, landed, name="bank")
     return bank
 

@@ -109,6 +109,13 @@ def test_bank_build_tunes_each_payload_in_the_simulator(tmp_path):
     assert sim_params({"kp": 0.5, "ki": 0.25}) == {}  # not the simulator's gains: no units claimed
 
 
+def test_bank_build_checks_every_payload_before_any_flies(tmp_path):
+    """A payload the simulator cannot carry, last in the list, is refused before the first payload is tuned."""
+    out = CliRunner().invoke(app, ["bank", "build", "--payloads", "0,9", "--out", str(tmp_path)])
+    assert isinstance(out.exception, MavtuneError) and "payload_kg" in str(out.exception)
+    assert not (tmp_path / "payload-0kg").exists() and not (tmp_path / "bank.json").exists()
+
+
 def test_a_tuned_mass_is_looked_up_as_itself_not_as_an_end_of_a_bracket():
     b = bank()
     b.add(2.3 + 0.45, {"kp": 0.65, "kd": 0.35})  # 2.7499999999999996 in floating point
