@@ -26,7 +26,6 @@ import hmac
 import logging
 import math
 import queue
-import re
 import secrets
 import threading
 import time
@@ -37,8 +36,9 @@ from typing import Any
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Gains, Status, Trace
 from mavtune.swarm.config import SwarmConfig, agent_key
-from mavtune.swarm.messages import (VEHICLE_PATTERN, Ack, AgentState, Assignment, Codec, Finish, Hello, Knock, Probe,
-                                    Rejected, Result, Start, State, Welcome, claimed, result_from_flight)
+from mavtune.swarm.messages import (Ack, AgentState, Assignment, Codec, Finish, Hello, Knock, Probe,
+                                    Rejected, Result, Start, State, Welcome, check_vehicle_id, claimed,
+                                    result_from_flight)
 from mavtune.swarm.ratelog import RateLimitedLog
 from mavtune.swarm.transport import Keys, Link, open_client
 from mavtune.swarm.vehicles import Vehicle, finite_gains
@@ -139,8 +139,7 @@ class Agent:
     @classmethod
     def connect(cls, vehicle_id: str, vehicle: Vehicle, config: SwarmConfig, endpoint: str) -> "Agent":
         """Open a Zenoh client to the coordinator at `endpoint` and build the agent on it."""
-        if not re.match(VEHICLE_PATTERN, vehicle_id):
-            raise MavtuneError(f"vehicle id {vehicle_id!r} must be 1-64 letters, digits, '_' or '-'")
+        check_vehicle_id(vehicle_id)
         key, given_swarm_key = agent_key(config, vehicle_id)
         if given_swarm_key:
             log.warning("agent %s holds the swarm key, with which it could act as any vehicle; give it only its own "

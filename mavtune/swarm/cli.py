@@ -55,9 +55,11 @@ def agent_command(
 ) -> None:
     """Run one vehicle's agent: wait for assignments from the coordinator, fly them, report the costs."""
     from mavtune.swarm.agent import Agent
+    from mavtune.swarm.messages import check_vehicle_id
     from mavtune.swarm.vehicles import make_vehicle
 
     _logging(verbose)
+    check_vehicle_id(id)  # before its state folder is named by it
     cfg = load_swarm_config(config, session=session, key_file=key_file, connect=connect)
     if cfg.connect is None:
         raise MavtuneError("give the coordinator's endpoint: --connect tcp/HOST:PORT (or connect = ... in --config)")

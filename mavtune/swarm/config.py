@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from mavtune.config import read_toml, validated
 from mavtune.errors import MavtuneError
-from mavtune.swarm.messages import SESSION_PATTERN, VEHICLE_PATTERN, locator_problem, vehicle_key
+from mavtune.swarm.messages import SESSION_PATTERN, VEHICLE_PATTERN, check_vehicle_id, locator_problem, vehicle_key
 
 log = logging.getLogger(__name__)
 
@@ -164,9 +164,8 @@ def write_vehicle_keys(swarm_key: str, vehicles: list[str], out_dir: Path) -> li
     if is_vehicle_key(swarm_key):
         raise MavtuneError("that is a vehicle's key: vehicle keys are made from the swarm key (the coordinator's "
                            f"{KEY_FILE})")
-    bad = [v for v in vehicles if not re.match(VEHICLE_PATTERN, v)]
-    if bad:
-        raise MavtuneError(f"vehicle id {bad[0]!r} must be 1-64 letters, digits, '_' or '-'")
+    for v in vehicles:
+        check_vehicle_id(v)
     lines = {v: f"{VEHICLE_KEY_PREFIX}/{v}/{vehicle_key(swarm_key, v)}" for v in vehicles}
     paths = {v: Path(out_dir) / f"{v}.key" for v in vehicles}
     for v, path in paths.items():

@@ -25,6 +25,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
+from mavtune.errors import MavtuneError
 from mavtune.fleet import Flight, Status, Trace
 from mavtune.vehicles.parammap import ParamMap
 
@@ -46,6 +47,15 @@ SESSION_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
 
 VEHICLE_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
 """A vehicle id is a Zenoh key chunk too."""
+
+
+
+def check_vehicle_id(vehicle_id: str) -> None:
+    """A one-line MavtuneError unless `vehicle_id` is a vehicle id (`VEHICLE_PATTERN`): checked before an agent
+    makes its vehicle, its state folder (named by the id) or its link, and before a key is written for it."""
+    if not isinstance(vehicle_id, str) or not re.match(VEHICLE_PATTERN, vehicle_id):
+        raise MavtuneError(f"vehicle id {vehicle_id!r} must be 1-64 letters, digits, '_' or '-'")
+
 
 LOCATOR_PATTERN = r"^[A-Za-z0-9]+/\S+$"
 """A Zenoh endpoint: protocol/address, e.g. tcp/127.0.0.1:7447."""

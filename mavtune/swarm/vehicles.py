@@ -217,6 +217,8 @@ def make_vehicle(kind: str, *, seed: int = 0, scenario: str | None = None, mavli
                  min_flight_s: float = 0.0, state_dir: str | Path | None = None) -> Vehicle:
     """Build the backend an agent drives: 'sim' (SimFleet of one), 'toy' (stand-in), or 'mavlink' (URL; its
     originals kept in state_dir until restored)."""
+    if not (math.isfinite(min_flight_s) and min_flight_s >= 0):
+        raise MavtuneError(f"--min-flight-s must be a wall time of 0 s or more, got {min_flight_s}")
     vehicle: Vehicle
     if kind == "sim":
         vehicle = sim_vehicle(load_scenario(scenario), seed=seed)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 
 import pytest
 
@@ -36,3 +37,16 @@ def test_a_bad_endpoint_is_refused_before_a_run_folder_or_key_is_made(tmp_path, 
     assert not (tmp_path / "runs").exists()  # no folder, no swarm.key written for a run that cannot start
     assert run_app(["agent", "--connect", "localhost", "--id", "v1"]) == 2
     assert "swarm.connect: not a Zenoh locator" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["--id", "../v1"], "vehicle id '../v1' must be 1-64 letters, digits, '_' or '-'"),  # (its state folder is named by the id)
+    (["--id", "v1", "--min-flight-s", "-3"], "--min-flight-s must be a wall time of 0 s or more, got -3.0"),
+])
+def test_an_agent_given_a_bad_id_or_flight_time_says_so_before_it_connects(tmp_path, capsys, caplog, args, problem):
+    from mavtune.cli import run_app
+
+    caplog.set_level(logging.INFO)
+    assert run_app(["agent", "--connect", "tcp/127.0.0.1:9", "--key-file", str(tmp_path / "no.key"), *args]) == 2
+    assert capsys.readouterr().err.strip() == f"error: {problem}"
+    assert not [r for r in caplog.records if "connecting" in r.getMessage()]
