@@ -203,3 +203,15 @@ def test_bench_of_millions_of_vehicles_stops_on_ctrl_c(tmp_path):
         proc.kill()
     assert proc.returncode == 130 and err.strip() == "interrupted", err
     assert took < 15, took
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--sysid", "300"], "--sysid must be in 1..255, got 300"),  # was a struct.error traceback
+    (["--sysid", "0"], "--sysid must be in 1..255, got 0"),  # MAVLink's broadcast address
+    (["--altitude", "-5"], "--altitude must be a positive number of m, got -5.0"),  # was served underground
+    (["--port", "0"], "--port must be in 1..65535"),
+    (["--speed", "0"], "--speed must be a positive number"),
+])
+def test_mavsim_refuses_a_vehicle_it_cannot_serve_in_one_line(args, expected):
+    code, _, err = cli("mavsim", "--port", "14599", *args)
+    one_line(code, err, expected)

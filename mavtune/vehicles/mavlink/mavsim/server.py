@@ -143,6 +143,10 @@ class SimVehicle:
             raise MavtuneError(f"--port must be in 1..65535, got {port}")
         if not (link_delay_s >= 0 and math.isfinite(link_delay_s)):
             raise MavtuneError(f"--link-delay-ms must be a number >= 0, got {link_delay_s * 1000:g}")
+        if not 1 <= system_id <= 255:  # (0 is MAVLink's broadcast address, not a vehicle's)
+            raise MavtuneError(f"--sysid must be in 1..255, got {system_id}")
+        if not (altitude_m > 0 and math.isfinite(altitude_m)):
+            raise MavtuneError(f"--altitude must be a positive number of m, got {altitude_m}")
         self.profile, self.params = flavour_params(flavour)
         self.version = VERSIONS[flavour]
         self.param_names = sorted(self.params)
