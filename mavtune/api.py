@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from mavtune.config import Tuning, preset_fields
+from mavtune.config import MAX_SEED, Tuning, preset_fields
 from mavtune.errors import MavtuneError
 from mavtune.fleet import CallableFleet, Evaluate, Fleet, Gains
 from mavtune.search.interval import DRAWS
@@ -133,8 +133,10 @@ def tune(
     holding rounds is resumed: a cost function must give its first round the recorded costs again (another
     function is refused), unless `resume=True` (a cost noisy by design).
     """
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
-        raise MavtuneError(f"seed must be a whole number ≥ 0, got {seed!r}")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED):
+        raise MavtuneError(f"seed must be a whole number from 0 to {MAX_SEED}, got {seed!r}")
+    if on_round is not None and not callable(on_round):
+        raise MavtuneError(f"on_round must be a function of the round, got {type(on_round).__name__}")
     if evaluate is None:
         from mavtune.sim import SimFleet
 

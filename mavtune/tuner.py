@@ -12,6 +12,7 @@ gets an interval from its last line search's flights (`mavtune.search.interval`)
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -296,6 +297,7 @@ class Settings:
     adaptive_rule: Adaptive | None = field(init=False)
 
     def __post_init__(self) -> None:
+        self._check_types()
         if not self.space:
             raise MavtuneError("space is empty: give at least one gain and its range, e.g. {'kp': (0.0, 1.0)}")
         space = {}
@@ -374,6 +376,23 @@ class Settings:
         self.search(0.0, 1.0)  # validates
         if self.budget is not None:
             self._check_budget()
+
+    def _check_types(self) -> None:
+        """Every count a whole number and every share or level a finite number, initial values included (one line
+        naming the option: `tune(vehicles=2.5)` or `epsilon="0.1"` failed deep inside the run with a TypeError)."""
+        whole = ("vehicles", "max_bootstraps", "design_repeats", "design_steps")
+        optional = ("bootstraps", "replicates", "points", "cap", "seed")
+        for name in whole + optional:
+            v = getattr(self, name)
+            if not (v is None and name in optional) and (isinstance(v, bool) or not isinstance(v, numbers.Integral)):
+                raise MavtuneError(f"{name} must be a whole number, got {v!r}")
+        shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
+                  "wall_span", "composite_reach")
+        values = [(name, getattr(self, name)) for name in shares]
+        values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
+        for name, v in values:
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
+                raise MavtuneError(f"{name} must be a finite number, got {v!r}")
 
     def _check_budget(self) -> None:
         """A budget is a whole number of flights, at least the designs' (`budget_minimum`), with a design to take

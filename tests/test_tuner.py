@@ -127,6 +127,14 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
     (dict(vehicles=10_001), "vehicles must be from 1 to 10000"),
     (dict(method="nsection", points=1_001), "points must be from 2 to 1000"),
     (dict(bootstraps=1_001), "bootstraps must be from 0 to 1000"),
+    # of the wrong type: each was a TypeError or ValueError from deep inside the run
+    (dict(vehicles=2.5), "vehicles must be a whole number, got 2.5"),
+    (dict(epsilon="0.1"), "epsilon must be a finite number, got '0.1'"),
+    (dict(initial={"kp": "a"}), "initial kp must be a finite number, got 'a'"),
+    (dict(design_width=math.nan), "design_width must be a finite number, got nan"),
+    (dict(cap=True), "cap must be a whole number, got True"),
+    (dict(on_round=3), "on_round must be a function of the round, got int"),
+    (dict(seed=2**70), "seed must be a whole number from 0 to"),  # as the config's limit: vehicle seeds stay distinct
 ])
 def test_bad_input_is_one_line_naming_the_problem(kwargs, message):
     with pytest.raises(MavtuneError, match=message) as info:
