@@ -146,7 +146,8 @@ def tune(
     elif callable(evaluate):
         fleet = CallableFleet(evaluate, vehicles or Tuning().vehicles, seed=seed or 0)
     else:
-        raise MavtuneError(f"evaluate must be a function, a Fleet or None, got {type(evaluate).__name__}")
+        raise MavtuneError(f"evaluate must be a function, a Fleet (size, fly(assignments, round_id) and close()) or "
+                           f"None, got {type(evaluate).__name__}")
     settings = default_settings(
         vehicles if vehicles is not None else fleet.size, space=space, method=method, epsilon=epsilon,
         bootstraps=bootstraps, strategy=strategy, reuse=reuse, initial=initial, replicates=replicates, points=points,

@@ -8,6 +8,8 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Callable, Protocol, Sequence, runtime_checkable
 
+from mavtune.errors import MavtuneError
+
 Gains = dict[str, float]
 """A full gain vector by name; normalised gains are in [0, 1]."""
 
@@ -39,6 +41,15 @@ class Flight:
     status: Status = Status.OK
     trace: Trace | None = None
     info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """A status given as its text ("ok", as a user's fleet may write it) is the Status itself: compared by
+        identity everywhere, "ok" would count as a failed flight. Any other text is one line."""
+        try:
+            self.status = Status(self.status)
+        except ValueError:
+            raise MavtuneError(f"flight status {self.status!r} is not one of "
+                               f"{', '.join(repr(s.value) for s in Status)}") from None
 
     @property
     def measured(self) -> bool:
@@ -157,8 +168,6 @@ class CallableFleet:
         return self._vehicles
 
     def fly(self, assignments: Sequence[Gains], round_id: int) -> list[Flight]:
-        from mavtune.errors import MavtuneError
-
         gains = [dict(a) for a in assignments]
         if self._context:
             contexts = [FlightContext(round_id, i, flight_seed(self.seed, round_id, i)) for i in range(len(gains))]
@@ -194,8 +203,6 @@ class CallableFleet:
     def same_costs(self, flights: Sequence[Flight], assignments: Sequence[Gains], round_id: int, where: str) -> None:
         """Refuse a journal recorded with another cost function: its round `round_id` evaluated again must give the
         costs it recorded (a cost that is noisy by design cannot be checked: resume it explicitly)."""
-        from mavtune.errors import MavtuneError
-
         again = self.fly(assignments, round_id)
         for i, (was, now) in enumerate(zip(flights, again)):
             same = (was.cost == now.cost or (math.isnan(was.cost) and math.isnan(now.cost))  # (NaN: a failed

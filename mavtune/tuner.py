@@ -252,6 +252,20 @@ class TuningResult:
         }
 
 
+def _flights(returned: Any, index: int) -> list[Flight]:
+    """What a fleet's `fly()` returned for round `index` as a list of Flight, else one line naming what it was."""
+    try:
+        flights = list(returned)
+    except TypeError:
+        raise MavtuneError(f"the fleet's fly() returned {type(returned).__name__} for round {index}, not a list of "
+                           "mavtune.Flight") from None
+    for f in flights:
+        if not isinstance(f, Flight):
+            raise MavtuneError(f"the fleet's fly() returned a {type(f).__name__} among the flights of round {index}: "
+                               "each must be a mavtune.Flight")
+    return flights
+
+
 @dataclass
 class Settings:
     """Validated tuning settings (everything of `tune()` but the fleet, the journal and callbacks)."""
@@ -1020,7 +1034,7 @@ class Tuner:
                 raise StageDone(self.flown, index)
             self.flown += 1
             started = time.time()
-            flights = list(self.fleet.fly(assignments, index))
+            flights = _flights(self.fleet.fly(assignments, index), index)
             finished = time.time()
             if len(flights) != len(assignments):
                 raise MavtuneError(f"the fleet returned {len(flights)} flights for {len(assignments)} assignments "

@@ -186,6 +186,44 @@ def test_a_cost_function_that_returns_no_list_of_numbers_is_named_in_one_line(re
                         space={"kp": (0.0, 1.0)}).gains["kp"] == pytest.approx(0.3, abs=0.02)  # an array is a list
 
 
+class _Bench:
+    """A user's own Fleet of two vehicles whose `fly` answers with `answer(assignments)`."""
+
+    size = 2
+
+    def __init__(self, answer):
+        self.answer = answer
+
+    def fly(self, assignments, round_id):
+        return self.answer(assignments)
+
+    def close(self):
+        pass
+
+
+def _flown(assignments, status=mavtune.Status.OK):
+    return [mavtune.Flight(f"v{i}", g, (g["kp"] - 0.3) ** 2 + 1.0, status) for i, g in enumerate(assignments)]
+
+
+@pytest.mark.parametrize("answer, said", [
+    (lambda a: None, r"the fleet's fly\(\) returned NoneType for round 0, not a list of mavtune.Flight"),
+    (lambda a: [{"cost": 1.0} for _ in a], "returned a dict among the flights of round 0: each must be a mavtune.Flight"),
+    (lambda a: _flown(a, "okay"), "flight status 'okay' is not one of 'ok', 'failed', 'lost'"),
+])
+def test_a_fleet_that_returns_no_flights_is_named_in_one_line(answer, said):
+    with pytest.raises(MavtuneError, match=said) as info:
+        mavtune.tune(_Bench(answer), space={"kp": (0.0, 1.0)})
+    assert "\n" not in str(info.value)
+
+
+def test_a_flight_status_given_as_its_text_counts_as_that_status():
+    """`Flight(..., "ok")` from a user's fleet is a measured flight: compared by identity, it counted as failed,
+    and the run refused to answer after 10 rounds of 'failed' flights."""
+    assert mavtune.Flight("v0", {"kp": 0.5}, 1.0, "ok").status is mavtune.Status.OK
+    result = mavtune.tune(_Bench(lambda a: _flown(a, "ok")), space={"kp": (0.0, 1.0)})
+    assert result.gains["kp"] == pytest.approx(0.3, abs=0.02)
+
+
 def noisy(seed, cv=0.1, kp0=0.4, kd0=0.6):
     import random
 
