@@ -723,7 +723,7 @@ class Tuner:
                 self._active = None
             if s.direction_searches(self.bootstrap) > s.direction_searches(self.bootstrap - 1):
                 self._direction(start)
-            self.stop_reason = f"ran {limit} bootstraps"
+            self.stop_reason = f"ran {limit} bootstrap{'s' if limit != 1 else ''}"
             if undecided:
                 self.stop_reason = f"bootstrap {self.bootstrap}: " + "; ".join(undecided)
                 if len(undecided) == len(s.space) and not any(r.iterations for r in self.searches[-len(s.space):]):
