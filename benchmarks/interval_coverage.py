@@ -35,11 +35,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model  # noqa: E402
 from quality import CACHE, RESULTS, _git_commit, _init_worker  # noqa: E402
 from zoo.methods import Method, ZooFleet, tune_seed  # noqa: E402
-from zoo.plants import PLANTS  # noqa: E402
+from zoo.plants import ALL_PLANTS, PLANTS  # noqa: E402
 from zoo.stats import wilson  # noqa: E402
 from zoo.truth import Truth  # noqa: E402
 
-SLOW = ("mavsim PX4 cascade", "mavsim ArduPilot", "crazyflow")
+SLOW = ("mavsim PX4 cascade", "mavsim ArduPilot", "crazyflow", "unseen mavsim PX4 PID payload",
+        "unseen crazyflow payload figure-8")
 DEFAULT = Method("default (config.Tuning())")
 
 
@@ -47,7 +48,7 @@ def one_run(plant_name: str, run: int) -> dict[str, Any]:
     """The default's run `run` on a plant: its answer, each gain's interval and the cautions."""
     from mavtune.tuner import run_tuning
 
-    plant = PLANTS[plant_name]
+    plant = ALL_PLANTS[plant_name]
     settings = DEFAULT.settings(plant, run)
     result = run_tuning(settings, ZooFleet(plant, settings.vehicles, tune_seed(run)))
     return {"run": run, "x": [float(result.gains[g]) for g in plant.gains], "flights": result.flights,
@@ -59,7 +60,7 @@ def one_run(plant_name: str, run: int) -> dict[str, Any]:
 
 def score(plant_name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Coverage of the optimum by the box of intervals (with its 95 % Wilson interval) and the median width."""
-    plant = PLANTS[plant_name]
+    plant = ALL_PLANTS[plant_name]
     optimum = Truth(plant_name, CACHE).optimum
     if optimum is None:
         raise SystemExit(f"no cached truth for {plant_name!r} in {CACHE}: run benchmarks/quality.py first")
@@ -83,11 +84,12 @@ def score(plant_name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def plants_of(text: str) -> list[str]:
-    """The plants a comma-separated --plants names (the whole zoo when empty); an unknown one is a one-line error."""
+    """The plants a comma-separated --plants names (the whole zoo when empty; an unseen plant by its name); an
+    unknown one is a one-line error."""
     plants = [p.strip() for p in text.split(",") if p.strip()] or list(PLANTS)
-    unknown = [p for p in plants if p not in PLANTS]
+    unknown = [p for p in plants if p not in ALL_PLANTS]
     if unknown:
-        raise SystemExit(f"--plants: unknown plant {unknown[0]!r}; known: {', '.join(PLANTS)}")
+        raise SystemExit(f"--plants: unknown plant {unknown[0]!r}; known: {', '.join(ALL_PLANTS)}")
     return plants
 
 

@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model  # noqa: E402
 from interval_coverage import DEFAULT, plants_of, run_numbers  # noqa: E402
 from quality import CACHE, RESULTS, _git_commit, _init_worker  # noqa: E402
-from zoo.plants import PLANTS  # noqa: E402
+from zoo.plants import ALL_PLANTS  # noqa: E402
 from zoo.truth import Truth  # noqa: E402
 
 RULES = ("all rules", "no region", "no edge", "no stale", "no moves", "held only")
@@ -48,7 +48,7 @@ def one_run(plant_name: str, run: int) -> dict[str, Any]:
     from mavtune.tuner import SURFACE, Tuner
     from zoo.methods import ZooFleet, tune_seed
 
-    plant = PLANTS[plant_name]
+    plant = ALL_PLANTS[plant_name]
     s = DEFAULT.settings(plant, run)
     t = Tuner(s, ZooFleet(plant, s.vehicles, tune_seed(run)))
     t.run()
