@@ -128,8 +128,8 @@ def score(rows: list[dict[str, Any]], optimum) -> dict[str, dict[str, float]]:
                 hits.append(iv.lo - 1e-9 <= lo + o * (hi - lo) <= iv.hi + 1e-9)
                 widths.append((iv.hi - iv.lo) / (hi - lo))
             out.setdefault(variant, []).append((all(hits), float(np.mean(widths))))
-    return {v: {"coverage": float(np.mean([c for c, _ in r])), "mean_width": float(np.mean([w for _, w in r]))}
-            for v, r in out.items()}
+    return {v: {"coverage": float(np.mean([c for c, _ in r])), "mean_width": float(np.nanmean([w for _, w in r]))}
+            for v, r in out.items()}  # (width over the runs whose interval is known: one too short to resample has none)
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -164,6 +164,7 @@ def markdown(doc: dict[str, Any]) -> str:
     m = doc["machine"]
     variants = RULES + tuple(REACHES)
     lines = ["# What makes the 90 % intervals wide? Each rule left out, and the plausible region's reach capped", "",
+             *([doc["note"], ""] if doc.get("note") else []),
              f"Command: `{doc['command']}` at commit `{doc['commit']}`, {doc['started']}; machine: {m['cpu']}, "
              f"nproc {m['nproc']}, shared with other jobs; load average {m['load_start']:.2f} at the start, "
              f"{m['load_end']:.2f} at the end; wall {doc['wall_s']:.0f} s.", "",
@@ -172,7 +173,7 @@ def markdown(doc: dict[str, Any]) -> str:
     for p, t in doc["table"].items():
         lines.append(f"| {p} | {t['runs']} | " + " | ".join(f"{t[v]['coverage']:.0%} / {t[v]['mean_width']:.0%}"
                                                             for v in variants) + " |")
-    zoo = {v: np.mean([t[v]["mean_width"] for t in doc["table"].values()]) for v in variants}
+    zoo = {v: np.nanmean([t[v]["mean_width"] for t in doc["table"].values()]) for v in variants}
     lines.append("| zoo (mean of plants) | | " + " | ".join(f"{zoo[v]:.0%}" for v in variants) + " |")
     return "\n".join(lines) + "\n"
 
