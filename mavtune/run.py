@@ -518,10 +518,11 @@ def _result_table(result: TuningResult) -> Table:
     caption = (f"noise: {cv:.0%} of the cost per flight ({result.noise.get('dof', 0):g} repeats)"
                if math.isfinite(cv) else "noise unknown: no point was flown twice")
     caption += ("; ± se: the spread of the gain's last line search's result with the other gains held; each "
-                "interval is that line search's (the other gains held), widened by what its "
-                "flights cannot rule out and its last move between bootstraps, to a bound where the cost still falls "
-                "at the last point flown, and to both when the other gains moved on after it; p ≥ 0.9: comparisons "
-                "whose kept point was the best with that probability (not the answer's accuracy)")
+                "interval is that line search's (the other gains held), widened by what the run's flights cannot "
+                "rule out with every gain free and by its last move between bootstraps, to a bound where the cost "
+                "still falls at the last point flown, and to both when the other gains moved on after it and no "
+                "design followed; p ≥ 0.9: comparisons whose kept point was the best with that probability (not the "
+                "answer's accuracy)")
     table = Table(caption=caption, caption_justify="left")
     for column in ("gain", "value ± se (others held)", "interval (joint)", "comparisons p ≥ 0.9"):
         table.add_column(column, justify="left" if column == "gain" else "right")

@@ -43,7 +43,7 @@ INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, 
                  "moved it) and on, to the range's bound while the answer "
                  "still moves by more than the search's tolerance between bootstraps, where the line's cost still "
                  "falls at its outermost flown point, and on both sides when the other gains moved by more than half "
-                 "the tolerance after its last line search")
+                 "the tolerance after its last line search and no design flew after it")
 DIRECTION = "direction"  # the `gain` of a round of a line search across the gains (all gains at once)
 SURFACE = "design"  # the `gain` of a round of the response surface's design (all gains at once)
 MAX_DESIGN_REPEATS = 100
@@ -87,6 +87,24 @@ class Round:
             "started_s": self.started_s,
             "finished_s": self.finished_s,
         }
+
+
+def designed_after(rounds: list[Round]) -> set[str]:
+    """The gains whose last line search a response-surface design flew after: its flights, every gain varied around
+    the answer, measured each such gain where the other gains are now, so the line search's hold of the others
+    elsewhere (`interval.stale`) neither widens that gain's interval to its range (the run's flights, every gain free,
+    bound it: `plausible_region`) nor is cautioned."""
+    out: set[str] = set()
+    last: set[str] = set()
+    design = False
+    for r in reversed(rounds):
+        if r.gain == SURFACE:
+            design = True
+        elif r.gain not in last:  # (the gain's last line search)
+            last.add(r.gain)
+            if design:
+                out.add(r.gain)
+    return out
 
 
 @dataclass
@@ -163,6 +181,7 @@ class TuningResult:
 
         space, epsilon = self.settings.get("space", {}), self.settings.get("epsilon", math.nan)
         last = {s.gain: s for s in self.searches}
+        designed = designed_after(self.rounds)
         for name, u in self.uncertainty.items():
             lo, hi = space.get(name, (math.nan, math.nan))
             width, moved = hi - lo, u.get("moved", math.nan)
@@ -176,7 +195,7 @@ class TuningResult:
                     f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more flights per "
                     "point, less noise, or another bootstrap where the answer still moves)")
         for name, rec in last.items():
-            shift = stale(rec.held, self.gains, space)
+            shift = stale(rec.held, self.gains, space) if name not in designed else 0.0
             if math.isfinite(self.uncertainty.get(name, {}).get("lo", math.nan)) and held_elsewhere(shift, epsilon):
                 moved_others = ", ".join(f"{n} {v:.3g} → {self.gains[n]:.3g}" for n, v in rec.held.items()
                                          if n in self.gains and n in space and abs(self.gains[n] - v) > 0)
@@ -662,6 +681,7 @@ class Tuner:
         surfaced = any(r.gain == SURFACE for r in self.rounds)
         s, rule = self.settings, self.settings.strategy_rule
         last = {rec.gain: (i, rec) for i, rec in enumerate(self.searches)}
+        designed = designed_after(self.rounds)
         region = dict(zip(s.space, self._region() or [])) if self.draws and last else {}
         start = s.start_gains()
         out = {}
@@ -677,7 +697,8 @@ class Tuner:
                 answers.append(self.gains[name])
             moves = [b - a for a, b in zip(answers, answers[1:])]
             out[name] = joint(interval, region.get(name), moves, s.epsilon * (hi - lo), (lo, hi),
-                              edge_reach(rec.samples, (lo, hi)), stale(rec.held, self.gains, s.space)).to_dict()
+                              edge_reach(rec.samples, (lo, hi)),
+                              stale(rec.held, self.gains, s.space) if name not in designed else 0.0).to_dict()
         if surfaced and not last and self.draws:  # the designs only: the span no flight rules out, every gain free,
             region = dict(zip(s.space, self._region() or []))  # back to the previous design's answer and on
             for name, (lo, hi) in s.space.items():

@@ -296,7 +296,7 @@ def test_an_interval_measured_where_the_other_gains_no_longer_are_reaches_both_b
     outside = joint(Interval(0.7, 0.01, 0.45, 0.55), None, [], 0.2, (0.0, 1.0))
     assert (outside.lo, outside.hi) == (0.45, 0.7)  # an answer another rule moved off the line stays inside
     assert stale({"kd": 0.2}, {"kp": 0.5, "kd": 0.6}, {"kp": (0.0, 1.0), "kd": (0.0, 2.0)}) == pytest.approx(0.2)
-    result = mavtune.tune(ridge(0), seed=0, draws=40, **PASSES)
+    result = mavtune.tune(ridge(0), seed=0, draws=40, **{**PASSES, "design": False})  # the coordinate search alone
     rec = {s.gain: s for s in result.searches}["kp"]
     assert stale(rec.held, result.gains, result.settings["space"]) > 0.1  # kd moved on after kp's last search
     assert (result.uncertainty["kp"]["lo"], result.uncertainty["kp"]["hi"]) == (0.0, 1.0)
@@ -304,6 +304,25 @@ def test_an_interval_measured_where_the_other_gains_no_longer_are_reaches_both_b
     from mavtune.bank import run_facts
 
     assert run_facts(result.to_dict())["converged"] is False  # a bank entry of this run says it did not converge
+
+
+def test_a_design_flown_after_a_stale_line_search_bounds_its_gain_with_the_runs_flights():
+    """The same ridge with a design after the passes: its flights vary kp where kd now is, so kp's interval is
+    the run's joint one (not the whole range) and still holds the optimum (0.775, 0.75); no stale caution."""
+    from mavtune.search.interval import stale
+    from types import SimpleNamespace
+
+    from mavtune.tuner import designed_after
+
+    result = mavtune.tune(ridge(0), seed=0, draws=40, **PASSES)
+    rec = {s.gain: s for s in result.searches}["kp"]
+    assert stale(rec.held, result.gains, result.settings["space"]) > 0.1  # held elsewhere, as without the design
+    assert designed_after(result.rounds) == {"kp", "kd"}
+    order = [SimpleNamespace(gain=g) for g in ("design", "kp", "kd", "design", "kp")]  # the map, passes, design, kp
+    assert designed_after(order) == {"kd"}  # kp's last line search came after the last design
+    kp, kd = result.uncertainty["kp"], result.uncertainty["kd"]
+    assert kp["hi"] - kp["lo"] < 1.0 and kp["lo"] <= 0.775 <= kp["hi"] and kd["lo"] <= 0.75 <= kd["hi"]
+    assert "stale" not in {kind for kind, _ in result.caution_kinds()}
 
 
 def test_the_cautions_fire_for_a_moving_answer_and_an_answer_next_to_a_fly_away():
