@@ -207,7 +207,7 @@ def _flown(assignments, status=mavtune.Status.OK):
 
 @pytest.mark.parametrize("answer, said", [
     (lambda a: None, r"the fleet's fly\(\) returned NoneType for round 0, not a list of mavtune.Flight"),
-    (lambda a: [{"cost": 1.0} for _ in a], "returned a dict among the flights of round 0: each must be a mavtune.Flight"),
+    (lambda a: [{"cost": 1.0} for _ in a], "a dict among the flights of round 0: each must be a mavtune.Flight"),
     (lambda a: _flown(a, "okay"), "flight status 'okay' is not one of 'ok', 'failed', 'lost'"),
 ])
 def test_a_fleet_that_returns_no_flights_is_named_in_one_line(answer, said):

@@ -309,9 +309,9 @@ def test_an_interval_measured_where_the_other_gains_no_longer_are_reaches_both_b
 def test_a_design_flown_after_a_stale_line_search_bounds_its_gain_with_the_runs_flights():
     """The same ridge with a design after the passes: its flights vary kp where kd now is, so kp's interval is
     the run's joint one (not the whole range) and still holds the optimum (0.775, 0.75); no stale caution."""
-    from mavtune.search.interval import stale
     from types import SimpleNamespace
 
+    from mavtune.search.interval import stale
     from mavtune.tuner import designed_after
 
     result = mavtune.tune(ridge(0), seed=0, draws=40, **PASSES)

@@ -40,7 +40,7 @@ def test_a_bad_endpoint_is_refused_before_a_run_folder_or_key_is_made(tmp_path, 
 
 
 @pytest.mark.parametrize("args, problem", [
-    (["--id", "../v1"], "vehicle id '../v1' must be 1-64 letters, digits, '_' or '-'"),  # (its state folder is named by the id)
+    (["--id", "../v1"], "vehicle id '../v1' must be 1-64 letters, digits, '_' or '-'"),  # (its state folder's name)
     (["--id", "v1", "--min-flight-s", "-3"], "--min-flight-s must be a wall time of 0 s or more, got -3.0"),
 ])
 def test_an_agent_given_a_bad_id_or_flight_time_says_so_before_it_connects(tmp_path, capsys, caplog, args, problem):
