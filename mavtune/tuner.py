@@ -192,8 +192,8 @@ class TuningResult:
             ulo, uhi = u.get("lo", math.nan), u.get("hi", math.nan)
             if width > 0 and uhi - ulo > 0.5 * width:  # (False where either is unknown, or the range is a point)
                 say("wide", f"{name}'s {u.get('level', 0.9):.0%} interval {ulo:.3g} – {uhi:.3g} spans "
-                    f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (more flights per "
-                    "point, less noise, or another bootstrap where the answer still moves)")
+                    f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (a larger budget, "
+                    "more flights per point or less noise; another bootstrap where the answer still moves)")
         for name, rec in last.items():
             shift = stale(rec.held, self.gains, space) if name not in designed else 0.0
             if math.isfinite(self.uncertainty.get(name, {}).get("lo", math.nan)) and held_elsewhere(shift, epsilon):
