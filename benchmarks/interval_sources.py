@@ -4,7 +4,8 @@ region's unflown cells capped at a reach, scored on the zoo's truth (coverage an
     python benchmarks/interval_sources.py [--half select] [--runs 20] [--slow-runs 10] [--plants ...]
 
 Flies the default's runs as benchmarks/interval_coverage.py does, keeps what each gain's interval is made of (the
-resampled interval with the other gains held, the answer's moves, the edge reach, the stale shift, every flown
+resampled interval with the other gains held, the answer's moves, the edge reach, the stale shift (as the engine takes
+it: none for a gain a design flew after), every flown
 point) and recomputes the interval offline: all rules; without the plausible region; without the edge rule;
 without the stale rule; without the moves (back to the previous answer and `ahead`); the held interval only; and
 the region with each unflown gain vector kept only within a reach (shares of the ranges, Euclidean) of its nearest
@@ -45,7 +46,7 @@ REACHES = {"region within 0": 0.0, "within 0.1": 0.1, "within 0.2": 0.2, "within
 def one_run(plant_name: str, run: int) -> dict[str, Any]:
     """The default's run: per gain what its interval is made of, every flown point, the noise."""
     from mavtune.search.interval import edge_reach, resample, resolution, stale
-    from mavtune.tuner import SURFACE, Tuner
+    from mavtune.tuner import SURFACE, Tuner, designed_after
     from zoo.methods import ZooFleet, tune_seed
 
     plant = ALL_PLANTS[plant_name]
@@ -54,7 +55,7 @@ def one_run(plant_name: str, run: int) -> dict[str, Any]:
     t.run()
     final = t.uncertainty()
     surfaced = any(r.gain == SURFACE for r in t.rounds)
-    start, parts = s.start_gains(), {}
+    start, parts, designed = s.start_gains(), {}, designed_after(t.rounds)
     for name, (i, rec) in {rec.gain: (i, rec) for i, rec in enumerate(t.searches)}.items():
         lo, hi = s.space[name]
         held = resample(lambda pool: s.search(lo, hi, pool),
@@ -66,7 +67,7 @@ def one_run(plant_name: str, run: int) -> dict[str, Any]:
             answers.append(t.gains[name])
         parts[name] = {"held": held, "moves": [b - a for a, b in zip(answers, answers[1:])],
                        "tolerance": s.epsilon * (hi - lo), "bounds": (lo, hi), "edge": edge_reach(rec.samples, (lo, hi)),
-                       "shift": stale(rec.held, t.gains, s.space)}
+                       "shift": stale(rec.held, t.gains, s.space) if name not in designed else 0.0}  # as the engine
     return {"plant": plant_name, "run": run, "final": final, "parts": parts, "flown": t._flown(), "pool": t.pool,
             "names": list(s.space)}
 
