@@ -4,12 +4,12 @@ region's unflown cells capped at a reach, scored on the zoo's truth (coverage an
     python benchmarks/interval_sources.py [--half select] [--runs 20] [--slow-runs 10] [--plants ...]
 
 Flies the default's runs as benchmarks/interval_coverage.py does, keeps what each gain's interval is made of (the
-resampled interval with the other gains held, the answer's moves, the edge reach, the stale shift (as the engine takes
-it: none for a gain a design flew after), every flown
-point) and recomputes the interval offline: all rules; without the plausible region; without the edge rule;
-without the stale rule; without the moves (back to the previous answer and `ahead`); the held interval only; and
-the region with each unflown gain vector kept only within a reach (shares of the ranges, Euclidean) of its nearest
-plausible flown point: 0 (the flown points only), 0.1, 0.2, and its nearest flown neighbour's distance.
+resampled interval with the other gains held, the answer's moves, the edge reach, the stale shift as the engine takes
+it — none for a gain a design flew after —, every flown point) and recomputes the interval offline: all rules;
+without the plausible region; without the edge rule; without the stale rule; without the moves (back to the previous
+answer and `ahead`); the held interval only; and the region with each unflown gain vector kept only within a reach
+(shares of the ranges, Euclidean) of its nearest plausible flown point: 0 (the flown points only), 0.1, 0.2, and its
+nearest flown neighbour's distance.
 Writes benchmarks/results/interval_sources.md + .json.
 """
 
