@@ -45,8 +45,8 @@ REACHES = {"region within 0": 0.0, "within 0.1": 0.1, "within 0.2": 0.2, "within
 
 def one_run(plant_name: str, run: int) -> dict[str, Any]:
     """The default's run: per gain what its interval is made of, every flown point, the noise."""
-    from mavtune.search.interval import edge_reach, resample, resolution, stale
-    from mavtune.tuner import SURFACE, Tuner, designed_after
+    from mavtune.search.interval import edge_reach, resample, resolution
+    from mavtune.tuner import SURFACE, Tuner, designed_after, held_shift
     from zoo.methods import ZooFleet, tune_seed
 
     plant = ALL_PLANTS[plant_name]
@@ -67,7 +67,7 @@ def one_run(plant_name: str, run: int) -> dict[str, Any]:
             answers.append(t.gains[name])
         parts[name] = {"held": held, "moves": [b - a for a, b in zip(answers, answers[1:])],
                        "tolerance": s.epsilon * (hi - lo), "bounds": (lo, hi), "edge": edge_reach(rec.samples, (lo, hi)),
-                       "shift": stale(rec.held, t.gains, s.space) if name not in designed else 0.0}  # as the engine
+                       "shift": held_shift(rec, t.gains, s.space, designed)}  # as the engine takes it
     return {"plant": plant_name, "run": run, "final": final, "parts": parts, "flown": t._flown(), "pool": t.pool,
             "names": list(s.space)}
 

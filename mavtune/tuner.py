@@ -107,6 +107,13 @@ def designed_after(rounds: list[Round]) -> set[str]:
     return out
 
 
+def held_shift(rec: "LineSearchRecord", gains: Gains, space: dict[str, tuple[float, float]],
+               designed: set[str]) -> float:
+    """How far the other gains lie from where line search `rec` held them (`interval.stale`, shares of their
+    ranges); 0 for a gain a design flew after (`designed_after`): its hold is no longer the interval's concern."""
+    return 0.0 if rec.gain in designed else stale(rec.held, gains, space)
+
+
 @dataclass
 class LineSearchRecord:
     """One line search: which gain, in which bootstrap, its comparisons and result, every flight's cost by point,
@@ -195,7 +202,7 @@ class TuningResult:
                     f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (a larger budget, "
                     "more flights per point or less noise; another bootstrap where the answer still moves)")
         for name, rec in last.items():
-            shift = stale(rec.held, self.gains, space) if name not in designed else 0.0
+            shift = held_shift(rec, self.gains, space, designed)
             if math.isfinite(self.uncertainty.get(name, {}).get("lo", math.nan)) and held_elsewhere(shift, epsilon):
                 moved_others = ", ".join(f"{n} {v:.3g} → {self.gains[n]:.3g}" for n, v in rec.held.items()
                                          if n in self.gains and n in space and abs(self.gains[n] - v) > 0)
@@ -271,8 +278,9 @@ class TuningResult:
         }
 
 
-def _flights(returned: Any, index: int) -> list[Flight]:
-    """What a fleet's `fly()` returned for round `index` as a list of Flight, else one line naming what it was."""
+def _flights(returned: Any, index: int, assigned: int) -> list[Flight]:
+    """What a fleet's `fly()` returned for round `index` as a list of one Flight per each of its `assigned`
+    assignments, else one line naming what it was."""
     try:
         flights = list(returned)
     except TypeError:
@@ -282,6 +290,8 @@ def _flights(returned: Any, index: int) -> list[Flight]:
         if not isinstance(f, Flight):
             raise MavtuneError(f"the fleet's fly() returned a {type(f).__name__} among the flights of round {index}: "
                                "each must be a mavtune.Flight")
+    if len(flights) != assigned:
+        raise MavtuneError(f"the fleet returned {len(flights)} flights for {assigned} assignments in round {index}")
     return flights
 
 
@@ -698,7 +708,7 @@ class Tuner:
             moves = [b - a for a, b in zip(answers, answers[1:])]
             out[name] = joint(interval, region.get(name), moves, s.epsilon * (hi - lo), (lo, hi),
                               edge_reach(rec.samples, (lo, hi)),
-                              stale(rec.held, self.gains, s.space) if name not in designed else 0.0).to_dict()
+                              held_shift(rec, self.gains, s.space, designed)).to_dict()
         if surfaced and not last and self.draws:  # the designs only: the span no flight rules out, every gain free,
             region = dict(zip(s.space, self._region() or []))  # back to the previous design's answer and on
             for name, (lo, hi) in s.space.items():
@@ -1055,11 +1065,8 @@ class Tuner:
                 raise StageDone(self.flown, index)
             self.flown += 1
             started = time.time()
-            flights = _flights(self.fleet.fly(assignments, index), index)
+            flights = _flights(self.fleet.fly(assignments, index), index, len(assignments))
             finished = time.time()
-            if len(flights) != len(assignments):
-                raise MavtuneError(f"the fleet returned {len(flights)} flights for {len(assignments)} assignments "
-                                   f"in round {index}")
             replayed = False
             if self.journal is not None:
                 self.journal.append(RoundRecord(index, bootstrap, name, assignments, flights, started, finished))

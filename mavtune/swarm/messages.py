@@ -49,7 +49,6 @@ VEHICLE_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
 """A vehicle id is a Zenoh key chunk too."""
 
 
-
 def check_vehicle_id(vehicle_id: str) -> None:
     """A one-line MavtuneError unless `vehicle_id` is a vehicle id (`VEHICLE_PATTERN`): checked before an agent
     makes its vehicle, its state folder (named by the id) or its link, and before a key is written for it."""
