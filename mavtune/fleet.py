@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -111,7 +112,7 @@ class Fleet(Protocol):
 Evaluate = Callable[..., Sequence[float]]
 """The plain-function form of a fleet: one round in, one cost per vehicle out — `evaluate(assignments)`, or
 `evaluate(assignments, context)` to receive each flight's `FlightContext` (a parameter named `context`, or a
-second positional parameter)."""
+second positional parameter without a default)."""
 
 
 @dataclass(frozen=True)
@@ -134,9 +135,8 @@ def flight_seed(run_seed: int, round_id: int, vehicle: int) -> int:
 
 
 def wants_context(evaluate: Callable[..., Any]) -> bool:
-    """True when `evaluate` takes a flight's context: a parameter named `context`, or a second positional one."""
-    import inspect
-
+    """True when `evaluate` takes a flight's context: a parameter named `context`, or a second positional one with
+    no default (`lambda gains, f=f: ...`, a loop's closure, binds its own)."""
     try:
         params = list(inspect.signature(evaluate).parameters.values())
     except (TypeError, ValueError):  # a builtin without a signature: the plain form
@@ -144,7 +144,7 @@ def wants_context(evaluate: Callable[..., Any]) -> bool:
     if any(p.name == "context" for p in params):
         return True
     positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
-    return len(positional) >= 2
+    return len(positional) >= 2 and positional[1].default is inspect.Parameter.empty
 
 
 def _short(value: Any) -> str:
@@ -218,8 +218,6 @@ class CallableFleet:
 
 def _named_context(evaluate: Callable[..., Any]) -> bool:
     """True when `evaluate` names its context parameter `context` (passed by keyword)."""
-    import inspect
-
     try:
         return "context" in inspect.signature(evaluate).parameters
     except (TypeError, ValueError):

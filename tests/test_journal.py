@@ -361,6 +361,17 @@ def test_a_cost_function_receives_each_flights_context_reproducibly(tmp_path):
     assert plain.gains == keyword.gains
 
 
+def test_a_second_parameter_with_a_default_is_no_context():
+    """`lambda gs, f=f: ...`, a loop's closure over its cost, is the plain form: it was handed the contexts as `f`
+    and failed with "'list' object is not callable"."""
+    results = []
+    for scale in (1.0, 2.0):
+        cost = (lambda s: lambda g: s * noisy_cost(g))(scale)
+        results.append(mavtune.tune(lambda gs, f=cost: [f(g) for g in gs], vehicles=2, draws=0, **SETTINGS))
+    plain = mavtune.tune(lambda gs: [noisy_cost(g) for g in gs], vehicles=2, draws=0, **SETTINGS)
+    assert results[0].gains == plain.gains
+
+
 def test_a_journal_reused_with_another_cost_function_is_refused(tmp_path):
     path = tmp_path / "j.sqlite"
     cut = dict(journal=path, vehicles=2, draws=0, **SETTINGS)
