@@ -144,7 +144,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
-                   "wall_keep", "composite_reach", "budget")
+                   "wall_keep", "composite_reach", "design_widen", "budget")
 
 
 
@@ -279,6 +279,11 @@ class Tuning(_Section):
                                    "design, whose pure quadratic terms rest on its axis points alone) the surface "
                                    "fit's kernel reaches this many half-widths of the design (0: 2, as below), so "
                                    "the flights of the wider design before it count too")
+    design_widen: float = Field(0.2, ge=0.0, lt=1.0, description="design: an answer a design's fit puts on a face of "
+                                "its box inside the ranges is fitted again over the wider designs' flights around "
+                                "it too (a kernel of 6, 4 or 3 half-widths, the widest whose quadratic the flights "
+                                "do not reject at this level) and answered in the same box: a narrow design's "
+                                "noisy curvature sends the minimum to a face (0: never)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

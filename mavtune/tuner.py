@@ -335,6 +335,7 @@ class Settings:
     wall_span: float = 0.0
     wall_keep: bool = False
     composite_reach: float = 0.0
+    design_widen: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -412,6 +413,9 @@ class Settings:
         if not 0.0 <= float(self.composite_reach) <= 10.0:
             raise MavtuneError(f"composite_reach {self.composite_reach} is outside [0, 10]: half-widths of the design "
                                "the fit reaches above three gains (0: the fit's own kernel)")
+        if not 0.0 <= float(self.design_widen) < 1.0:
+            raise MavtuneError(f"design_widen {self.design_widen} is outside [0, 1): the level at which the flights "
+                               "must reject the quadratic to keep a face answer's fit local (0: never refit wider)")
         if self.wall_keep not in (True, False):
             raise MavtuneError(f"wall_keep must be true or false, got {self.wall_keep!r}")
         if self.design_split not in (True, False, "auto"):
@@ -430,7 +434,7 @@ class Settings:
             if not (v is None and name in optional) and (isinstance(v, bool) or not isinstance(v, numbers.Integral)):
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
-                  "wall_span", "composite_reach")
+                  "wall_span", "composite_reach", "design_widen")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -594,6 +598,7 @@ class Settings:
                         | ({"wall_span": float(self.wall_span)} if self.wall_span else {})
                         | ({"wall_keep": True} if self.wall_keep else {})
                         | ({"composite_reach": float(self.composite_reach)} if self.composite_reach else {})
+                        | ({"widen": float(self.design_widen)} if self.design_widen else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
@@ -884,12 +889,14 @@ class Tuner:
 
     def _answer_options(self, half: float, keep: list[float] | None = None) -> dict[str, Any]:
         """`surface.answer`'s options for a design of half-width `half`: the wall rules (`wall_span` in half-widths,
-        `wall_keep` with the previous design's answer `keep`) and a composite design's kernel (`composite_reach`);
-        none when off (the answer's defaults)."""
+        `wall_keep` with the previous design's answer `keep`) and a composite design's kernel (`composite_reach`),
+        each left out when off (the answer's defaults); and the level of the wider refit of an answer on a face of
+        the design (`design_widen`, 0: off), always given."""
         s = self.settings
         reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
         return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
-            {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {})
+            {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {}) | {
+            "widen": float(s.design_widen)}
 
     def _designs_first(self) -> float:
         """`design_first`: fly the first designs (the first with `design_inner` a map of the box) before the passes,

@@ -165,15 +165,18 @@ def candidates() -> list[Method]:
     (config.Tuning()), every other one fields over the default before session 13 (`previous_default()`; the second
     is that default, the third the default before the budget, chosen on selection_budget_default.md; the last ones
     are today's default at the flight goals' budget, capped at the worst run's 112 flights (`capped`) and with its
-    designs each point once (`split_designs`)). The paper's setting (PAPER_TUNING) flies twice the flights' goal: it
-    is no candidate."""
+    designs each point once (`split_designs`), and today's default without session 19's wider refit of an answer on
+    a design's face (`design_widen`)). The paper's setting (PAPER_TUNING) flies twice the flights' goal: it is no
+    candidate."""
     today, *older = _candidates()
     base = previous_default()
     return [today, Method("previous default (2 passes, then ±0.15; session 12)", base),
             *(Method(m.label, {**base, **m.tuning}, m.peer, m.per_gain) for m in older),
             Method("default at 26 flights a gain (the flight goals: 52 for 2 gains, 104 for 4)", per_gain=26),
             Method("default without the pass over the gains at 26 flights a gain", {"bootstraps": 0}, per_gain=26),
-            *capped(), *split_designs()]
+            *capped(), *split_designs(),
+            Method("default without the wider refit of a face answer (design_widen = 0: before session 19)",
+                   {"design_widen": 0.0})]
 
 
 def split_designs() -> list[Method]:

@@ -59,6 +59,8 @@ CUBIC_LEVEL = 0.05  # a cubic replaces the quadratic where the flights reject th
 LOCAL_REACH = 3.0  # the kernel of the fit that guides a design's move (`next_centre`): points in the box weigh ~alike
 PLANE_LEVEL = 0.2  # a plane replaces the quadratic where the flights do not reject the plane at this level
 GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the design's box (then polished)
+WIDEN_LEVEL = 0.2  # an answer on a face of the design inside the ranges: refit wider where the flights do not reject
+WIDE_REACHES = (6.0, 4.0, 3.0)  # the quadratic at this level, trying these kernel reaches (half-widths) widest first
 
 
 def design(centre: Sequence[float], half: float, inner: bool = False) -> list[tuple[float, ...]]:
@@ -97,7 +99,8 @@ def next_centre(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequen
     centre = tuple(0.5 * (lo + hi) for lo, hi in box)
     if move >= 1.0:
         inside = {k: c for k, c in points.items() if all(lo - 1e-9 <= v <= hi + 1e-9 for v, (lo, hi) in zip(k, box))}
-        guide, _ = answer(inside, box, ruled_out(inside, pool) if pool is not None else (), pool, reach=LOCAL_REACH)
+        guide, _ = answer(inside, box, ruled_out(inside, pool) if pool is not None else (), pool, reach=LOCAL_REACH,
+                       widen=0.0)
         if any(open_faces(box, guide)):
             for t in [move - 0.25 * k for k in range(int((move - 1.0) / 0.25 + 1e-9) + 1)]:
                 target = tuple(min(max(c + t * (g - c), 0.0), 1.0) for c, g in zip(centre, guide))
@@ -345,7 +348,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            log: bool = False, cubic_level: float = CUBIC_LEVEL,
            plane_level: float = PLANE_LEVEL, slope_level: float = 0.0, plane_inside: bool = False,
            risk: float | None = RISK, risk_reach: float | None = None,
-           keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK) -> tuple[tuple[float, ...], bool]:
+           keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK,
+           widen: float = WIDEN_LEVEL) -> tuple[tuple[float, ...], bool]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
@@ -370,7 +374,11 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     by the last design and lost to the answer before it): a narrow design beside a wall fits few safe flights, and
     a wall it barely sees or sees through a few unlucky failures (answer_diagnostic_guard.md: replayed on the
     designs alone's 40 cliff runs, with `risk_reach` 4, within 2 % of the optimum in 48 % of runs and 1 fly-away
-    answer, against 12 % and 5)."""
+    answer, against 12 % and 5). `widen`: a fitted answer on a face of the box inside the ranges is fitted again with
+    the widest kernel of WIDE_REACHES whose quadratic the flights do not reject at that level (`_wide_reach`; 0:
+    never), and answered inside the same box: a narrow design's flights resolve the curvature poorly (a noisy 3-gain
+    bowl's near-zero eigenvalue sends the minimum to a face though the design is centred on the optimum), which the
+    wider designs' flights around it resolve wherever the cost is that quadratic."""
     from statistics import NormalDist
 
     import numpy as np
@@ -496,4 +504,23 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         if np.all(np.abs(v) < 1.0 - 1e-6) and beside_wall(points, tuple(v * half + centre), 0.0) is None:
             u = v  # (nor next to a failed flight with nothing safe flown between: a cubic dips into the gap)
     out = np.clip(u * half + centre, lo, hi)
+    wide = _wide_reach(x, y, counts[ok], cv, reach, widen) if widen and any(open_faces(box, out)) else None
+    if wide is not None:
+        return answer(points, box, worse, pool, power=power, reach=wide, log=log, cubic_level=cubic_level,
+                      plane_level=plane_level, slope_level=slope_level, plane_inside=plane_inside, risk=risk,
+                      risk_reach=risk_reach or reach, keep=keep, keep_risk=keep_risk, widen=0.0)
     return tuple(float(v) for v in out), True
+
+
+def _wide_reach(x, y, n, cv: float, reach: float, level: float) -> float | None:
+    """The widest kernel reach of WIDE_REACHES beyond `reach` (half-widths of the design) whose quadratic the flights
+    `x`, `y` (each flown `n` times) do not reject for a cubic at `level` (`_rejects`); None where each is rejected
+    or the noise is unknown."""
+    import numpy as np
+
+    for wide in (r for r in WIDE_REACHES if r > reach):
+        weights = n * _tricube(wide)(x)
+        use = weights > 0
+        if _rejects(x[use], y[use], weights[use], cv, _terms(x.shape[1], 2), _terms(x.shape[1], 3), level) is False:
+            return wide
+    return None
