@@ -63,9 +63,9 @@ first design is flown once); `design_inner = false, design_shrink = 0.4` restore
 PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.bootstraps": 2, "tuning.design_width": 0.15, "tuning.design_steps": 1, "tuning.design_shrink": 1.0,
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
-    "tuning.design_shrink_fit": False, "tuning.wall_keep": False}
+    "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
-same budget of 42 flights a gain: the default until session 13. On the zoo's report half (quality.md) it is more
+same budget of 42 flights a gain: the default until session 13 (without the later refit of a face answer). On the zoo's report half (quality.md) it is more
 often within 2 % of the optimum on the analytic valley and the nominal simulator, less often where the optimum lies
 on an edge, in a corner or along a ridge beside fly-away gains, and significantly worse than CMA-ES on the unknown
 heavier vehicle."""
@@ -158,10 +158,12 @@ class Tuning(_Section):
     where a design has fewer than three flights per coefficient of its quadratic: `design_shrink_fit`). The answer
     is the minimum of one quadratic in every gain fitted to the flights near the last design (a plane where the
     flights do not reject a plane and its minimum lies on a bound of the ranges; a cubic where they reject the
-    quadratic), inside the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight
-    the previous design's answer stands; the map's answer, where the passes start, is not bounded by the fitted
-    divergence chance, every later design's is); all within a budget of 42 flights a gain (`budget = "auto"`: 84 for 2
-    gains, 168 for 4), flown exactly and known before take-off.
+    quadratic; fitted again over the wider designs' flights too where its minimum lies on a face of the design
+    inside the ranges and the flights do not reject that wider quadratic: `design_widen`, since session 19), inside
+    the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
+    answer stands; the map's answer, where the passes start, is not bounded by the fitted divergence chance, every
+    later design's is); all within a budget of 42 flights a gain (`budget = "auto"`: 84 for 2 gains, 168 for 4),
+    flown exactly and known before take-off.
     Chosen on the plant zoo of benchmarks/quality.py (selection half, even runs, 40 a plant:
     benchmarks/results/selection_default13.md) by `zoo.stats.choose`: of the configurations never significantly worse
     than CMA-ES or TPE on a plant and better than both over the zoo, the highest mean share of runs within 2 % of the
@@ -283,7 +285,8 @@ class Tuning(_Section):
                                 "its box inside the ranges is fitted again over the wider designs' flights around "
                                 "it too (a kernel of 6, 4 or 3 half-widths, the widest whose quadratic the flights "
                                 "do not reject at this level) and answered in the same box: a narrow design's "
-                                "noisy curvature sends the minimum to a face (0: never)")
+                                "noisy curvature sends the minimum to a face (0: never; 0.2 chosen on the zoo's "
+                                "select half, selection_widen.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "
