@@ -39,6 +39,10 @@ MIN_REPORT_S = 0.1  # with less time than this left, the report is not begun
 MANY_VEHICLES = 8  # above this the per-round line summarises the vehicles instead of listing them
 
 
+ADDED_FIELDS = {"budget": "none", "design_widen": 0.0}  # [tuning] fields added since runs were first saved, each with
+# the value a run folder without it flew (no budget; no refit of a face answer before session 19), so that it resumes
+
+
 def saved_config(out_dir: Path) -> dict[str, Any] | None:
     """The configuration a run folder was started with (its config.json), or None for a new folder."""
     path = Path(out_dir) / "config.json"
@@ -50,8 +54,9 @@ def saved_config(out_dir: Path) -> dict[str, Any] | None:
         raise MavtuneError(f"{path} is unreadable ({exc}); pass --config to say how the run was set up") from None
     if not isinstance(saved, dict):
         raise MavtuneError(f"{path} is not a mavtune configuration; pass --config to say how the run was set up")
-    if isinstance(saved.get("tuning"), dict):  # a folder from before budgets flew without one
-        saved["tuning"].setdefault("budget", "none")
+    if isinstance(saved.get("tuning"), dict):  # a folder from before a field came takes the value it flew with
+        for name, before in ADDED_FIELDS.items():
+            saved["tuning"].setdefault(name, before)
     return saved
 
 

@@ -148,6 +148,22 @@ def test_resume_with_another_config_file_is_refused_naming_the_field(staged, tmp
     assert folder_bytes(staged) == before
 
 
+def test_a_folder_flown_before_a_setting_came_resumes_with_what_it_flew(tmp_path):
+    """A run folder from before session 19 (its config.json without `design_widen`, its journal without the refit)
+    resumes and is reported: the missing field takes the value it flew with, not today's default (which refused it:
+    "design.widen was None, now 0.2")."""
+    folder, cfg = tmp_path / "run", tmp_path / "c.toml"
+    cfg.write_text("[tuning]\ndesign_widen = 0.0\n")
+    code, err = run_cli("tune", "-q", "--config", str(cfg), "--stage-rounds", "2", "--out", str(folder))
+    assert code == 0, err
+    saved = json.loads((folder / "config.json").read_text())
+    del saved["tuning"]["design_widen"]
+    (folder / "config.json").write_text(json.dumps(saved))
+    assert run_cli("report", str(folder)) == (0, "")
+    code, err = run_cli("tune", "-q", "--out", str(folder))
+    assert code == 0 and status(folder) == "finished", err
+
+
 def blank_database(path: Path) -> None:
     """An SQLite file without a single table: what a journal is when its creation is cut short."""
     path.unlink(missing_ok=True)
