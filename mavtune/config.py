@@ -65,10 +65,10 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
-same budget of 42 flights a gain: the default until session 13 (without the later refit of a face answer). On the zoo's report half (quality.md) it is more
-often within 2 % of the optimum on the analytic valley and the nominal simulator, less often where the optimum lies
-on an edge, in a corner or along a ridge beside fly-away gains, and significantly worse than CMA-ES on the unknown
-heavier vehicle."""
+same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
+zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
+simulator, less often where the optimum lies on an edge, in a corner or along a ridge beside fly-away gains, and
+significantly worse than CMA-ES on the unknown heavier vehicle."""
 
 PRESETS: dict[str, dict[str, Any]] = {"paper": PAPER_TUNING, "budget": BUDGET_TUNING, "passes": PASSES_TUNING}
 """The named settings `--preset` gives (`mavtune tune --preset budget`), each [tuning] overrides over the file's."""

@@ -691,7 +691,7 @@ def test_the_map_answers_where_it_flew_best_not_the_corner_farthest_from_its_fai
 
 def _two_designs(cost, centre, cv: float, seed: int):
     """3 gains: a ±0.22 design and a ±0.096 one around `centre`, each point flown once with relative noise `cv`;
-    the narrow design's box, the run's noise and the answers without and with the wider refit (`widen`)."""
+    the narrow design's box and its answers without and with the wider refit (`widen`)."""
     from mavtune.search.evidence import NoisePool
     from mavtune.search.surface import ruled_out
 
@@ -726,8 +726,8 @@ def test_an_answer_on_the_narrow_designs_face_is_fitted_again_over_the_wider_des
 
 
 def test_a_face_answer_stays_where_the_wider_flights_reject_the_quadratic():
-    """`widen` only where a quadratic fits the wider flights: a cost that rises five times as steeply past its
-    optimum (which lies beyond the narrow design's face), measured at 1 % a flight, rejects it, and the narrow
+    """`widen` only where a quadratic fits the wider flights: a cost curved 8.5 times as much in kp past its optimum
+    (which lies beyond the narrow design's face) as before it, measured at 1 % a flight, rejects it, and the narrow
     design's face answer stands."""
     opt = (0.65, 0.45, 0.5)
 

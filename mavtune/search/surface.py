@@ -36,9 +36,9 @@ answer is the minimiser of the cubic instead, where it lies inside the box (on a
 and not beside a failed flight (a cubic dips into the unflown gap next to one):
 an asymmetric valley — a wall of oscillating gains on one side — pulls a quadratic's minimum towards the shallow
 side (benchmarks/results/answer_diagnostic.md).
-An answer on a face of the design inside the ranges is fitted again over the wider designs' flights around it (`widen`:
-the widest kernel whose quadratic the flights do not reject), in the same box: a narrow design's few flights resolve
-the curvature poorly (benchmarks/results/selection_widen.md).
+An answer on a face of the design inside the ranges is fitted again over the wider designs' flights around it
+(`widen`: the widest kernel whose quadratic the flights do not reject), in the same box: a narrow design's few flights
+resolve the curvature poorly (benchmarks/results/selection_widen.md).
 """
 
 from __future__ import annotations
