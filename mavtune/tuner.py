@@ -214,9 +214,11 @@ class TuningResult:
                                                                                                         answer)
             if wall is None and answer == self.designed.get(name):  # the design's verdict on its own answer
                 wall = rec.beside_failure  # (`Tuner._surface`: from every flight of the run)
-            if wall is not None:
+            if wall is not None:  # (after a design the verdict is the design's: `Tuner._surface`)
+                margin = ("it lies within the last design's span" if self.designed and wall == rec.beside_failure
+                          else "the margin to it is one step of the search")
                 say("beside failure", f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed "
-                    "(diverged): no gain beyond it was answered, but the margin to it is one step of the search")
+                    f"(diverged): no gain beyond it was answered, but {margin}")
         designed = bool(self.designed) and all(self.gains.get(n) == v for n, v in self.designed.items())
         if self.open_face and designed:  # (the design's verdicts are the answer's only while it is the design's)
             faces = ", ".join(f"{n} = {v:.4g}" for n, v in self.open_face.items())

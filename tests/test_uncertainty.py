@@ -326,8 +326,10 @@ def test_a_design_flown_after_a_stale_line_search_bounds_its_gain_with_the_runs_
 
 
 def test_the_cautions_fire_for_a_moving_answer_and_an_answer_next_to_a_fly_away():
-    diverges = mavtune.tune(lambda gs: [math.inf if g["kp"] > 0.62 else (g["kp"] - 0.7) ** 2 + (g["kd"] - 0.4) ** 2 + 0.1
-                                        for g in gs], seed=1, draws=20, **PASSES)
+    def cliff(gs):
+        return [math.inf if g["kp"] > 0.62 else (g["kp"] - 0.7) ** 2 + (g["kd"] - 0.4) ** 2 + 0.1 for g in gs]
+
+    diverges = mavtune.tune(cliff, seed=1, draws=20, **PASSES)
     assert diverges.gains["kp"] <= 0.62
     assert any("where a flight failed" in c for c in diverges.cautions())
     rec = {s.gain: s for s in diverges.searches}["kp"]
@@ -338,6 +340,10 @@ def test_the_cautions_fire_for_a_moving_answer_and_an_answer_next_to_a_fly_away(
     assert not any("where a flight failed" in c for c in diverges.cautions())
     diverges.gains["kp"] = safe  # and one next to the wall: said, whatever stage chose it
     assert any(f"kp = {safe:.4g} lies next to {wall:.4g}" in c for c in diverges.cautions())
+    for options, margin in (({"design": False, "budget": None}, "one step of the search"),  # the line search's
+                            ({}, "within the last design's span")):  # the default: the designs' verdict
+        said = [c for c in mavtune.tune(cliff, seed=1, draws=20, **options).cautions() if "where a flight failed" in c]
+        assert len(said) == 1 and margin in said[0]
     moving = mavtune.tune(ridge(1, cv=0.02), seed=1, draws=20, epsilon=0.125, **PASSES)
     moves = {g: u["moved"] for g, u in moving.uncertainty.items()}
     said = " ".join(moving.cautions())
