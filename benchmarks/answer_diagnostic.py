@@ -76,6 +76,8 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "the previous design's answer beside a failed flight and divergence fit over 4 half-widths": {
         "keep": PREVIOUS, "risk_reach": 4.0},
     "kernel reach 3.6 half-widths": {"reach": 3.6},
+    "no wider refit of an answer on the design's face (before session 19)": {"widen": 0.0},
+    "wider refit at the 50 % level": {"widen": 0.5},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -99,6 +101,7 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
         if "risk" in options and options["risk"] is None:  # the divergence caution's unbounded answer: not the
             return out  # run's answer
         calls.append({"keep": list(options["keep"]) if options.get("keep") is not None else None,
+                      "options": {k: v for k, v in options.items() if k != "keep"},
                       "points": [[list(k), [c if math.isfinite(c) else "inf" for c in v]] for k, v in points.items()],
                       "box": [list(b) for b in box], "cv": pool.cv if pool is not None else math.nan,
                       "dof": pool.dof if pool is not None else 0.0, "answer": list(out[0]), "fitted": out[1]})
@@ -115,6 +118,21 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
             "x": [float(result.gains[g]) for g in plant.gains], "flights": int(result.flights),
             "flown": [[list(k), [c if math.isfinite(c) else "inf" for c in v]] for k, v in flown.items()],
             "surface_calls": calls, "noise": result.noise}
+
+
+def engine_options(row: dict[str, Any], call: dict[str, Any]) -> dict[str, Any]:
+    """The options the engine gave a recorded surface answer: as recorded (since session 19), else those of the
+    run's method's settings today (`tuner.answer_options`: the wall rules, the composite kernel, the refit), with the
+    recorded `keep` — so that a replay with no variant is the answer as flown."""
+    from mavtune.tuner import answer_options
+
+    if "options" in call:
+        base = dict(call["options"])
+    else:
+        method = next(m for m in candidates() if m.label == row["method"])
+        half = max(0.5 * (hi - lo) for lo, hi in call["box"])
+        base = answer_options(method.settings(PLANTS[row["plant"]], row["run"]), half)
+    return base | ({"keep": call["keep"]} if call["keep"] is not None else {})
 
 
 def costs_of(pairs) -> dict[tuple[float, ...], list[float]]:
@@ -184,7 +202,8 @@ def summary(scores: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) -> list[dict[str, Any]]:
-    """Each run's last surface answer again, with the fit's `options`, on the same flights, judged on the truth
+    """Each run's last surface answer again, with the fit's `options` over the engine's own (`engine_options`: with
+    none, the answer as flown), on the same flights, judged on the truth
     (exact for a configuration with one design, whose answer flies nothing after it; with more designs only
     the last is replayed, the earlier ones' answers having chosen what was flown after them)."""
     from mavtune.search import surface
@@ -197,7 +216,7 @@ def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) ->
             c = row["surface_calls"][-1]
             points = costs_of(c["points"])
             pool = NoisePool.prior(c["cv"], c["dof"]) if c["cv"] is not None and math.isfinite(c["cv"]) else None
-            given = dict(options)
+            given = engine_options(row, c) | options
             if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
                 given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
             x = list(surface.answer(points, [tuple(b) for b in c["box"]], surface.ruled_out(points, pool or

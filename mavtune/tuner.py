@@ -607,6 +607,18 @@ class Settings:
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
 
+def answer_options(s: Settings, half: float, keep: list[float] | None = None) -> dict[str, Any]:
+    """`surface.answer`'s options for a design of half-width `half` under settings `s`: the wall rules (`wall_span`
+    in half-widths, `wall_keep` with the previous design's answer `keep`) and a composite design's kernel
+    (`composite_reach`), each left out when off (the answer's defaults); and the level of the wider refit of an
+    answer on a face of the design (`design_widen`, 0: off), always given. (benchmarks/answer_diagnostic.py replays
+    recorded answers with them.)"""
+    reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
+    return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
+        {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {}) | {
+        "widen": float(s.design_widen)}
+
+
 class StageDone(Exception):
     """A stage of a run (e.g. one battery pack) has flown its rounds; the journal holds them, resume continues."""
 
@@ -863,7 +875,7 @@ class Tuner:
         start = step < s.designs_before_passes()  # where the passes start from, not the run's answer: no bound on
         # the divergence chance there (a map's coarse fit over failures at the box's edges sent its answer to the far
         # corner however badly that flew: the 60 ms latency plant, session 15); every design after the passes keeps it
-        options = self._answer_options(half, keep) | ({"risk": None} if start else {})
+        options = answer_options(self.settings, half, keep) | ({"risk": None} if start else {})
         best, _ = surface_answer(flown, box, ruled, self.pool, **options)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None)
@@ -888,17 +900,6 @@ class Tuner:
             if moved:
                 return False
         return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
-
-    def _answer_options(self, half: float, keep: list[float] | None = None) -> dict[str, Any]:
-        """`surface.answer`'s options for a design of half-width `half`: the wall rules (`wall_span` in half-widths,
-        `wall_keep` with the previous design's answer `keep`) and a composite design's kernel (`composite_reach`),
-        each left out when off (the answer's defaults); and the level of the wider refit of an answer on a face of
-        the design (`design_widen`, 0: off), always given."""
-        s = self.settings
-        reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
-        return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
-            {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {}) | {
-            "widen": float(s.design_widen)}
 
     def _designs_first(self) -> float:
         """`design_first`: fly the first designs (the first with `design_inner` a map of the box) before the passes,
@@ -932,7 +933,7 @@ class Tuner:
         (the previous design's answer `keep` included; `free` when the caller already has it: a design answered
         unbounded) and its chance when the bound moved it (None when not), and whether the answer is `keep`
         ("kept"); None when no flight near the design failed."""
-        options = self._answer_options(half, keep)
+        options = answer_options(self.settings, half, keep)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None

@@ -1,0 +1,33 @@
+"""benchmarks/answer_diagnostic.py replays a run's last surface answer on its own flights: with no variant the replay
+is the answer as flown (the engine's options, the wall rules' included), whether recorded with the answer or derived
+from the method's settings for a record from before they were kept."""
+
+from pathlib import Path
+
+from mavtune.search import surface
+from mavtune.search.evidence import NoisePool
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def test_a_replay_with_no_variant_is_the_answer_as_flown(monkeypatch):
+    """On the cliff (failed flights beside the optimum: the divergence reach and the kept answer matter), every run's
+    replay equals its answer, with the options recorded or derived; without them most runs answer elsewhere (the
+    replay before session 19)."""
+    monkeypatch.setenv("SCIPY_ARRAY_API", "1")  # (answer_diagnostic sets it for Crazyflow; not left for the session)
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import answer_diagnostic as ad
+    from zoo.methods import candidates
+
+    elsewhere = 0
+    for run in range(4):
+        row = ad.tune_flights("analytic cliff", candidates()[0], run)
+        call = row["surface_calls"][-1]
+        points, box = ad.costs_of(call["points"]), [tuple(b) for b in call["box"]]
+        pool = NoisePool.prior(call["cv"], call["dof"])
+        ruled = surface.ruled_out(points, pool)
+        older = {k: v for k, v in call.items() if k != "options"}
+        for record in (call, older):
+            assert list(surface.answer(points, box, ruled, pool, **ad.engine_options(row, record))[0]) == row["x"]
+        elsewhere += list(surface.answer(points, box, ruled, pool)[0]) != row["x"]
+    assert elsewhere >= 2
