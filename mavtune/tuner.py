@@ -215,7 +215,7 @@ class TuningResult:
             if wall is None and answer == self.designed.get(name):  # the design's verdict on its own answer
                 wall = rec.beside_failure  # (`Tuner._surface`: from every flight of the run)
             if wall is not None:  # (after a design the verdict is the design's: `Tuner._surface`)
-                margin = ("it lies within the last design's span" if self.designed and wall == rec.beside_failure
+                margin = ("the two lie within the last design's span" if self.designed and wall == rec.beside_failure
                           else "the margin to it is one step of the search")
                 say("beside failure", f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed "
                     f"(diverged): no gain beyond it was answered, but {margin}")
