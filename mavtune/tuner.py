@@ -210,12 +210,12 @@ class TuningResult:
                     f"{moved_others}): how far {name}'s own minimum moved with them no flight tells, so its "
                     "interval reaches both bounds (another bootstrap would tell)")
             answer = self.gains.get(name, rec.result)  # another stage may have moved it off the line's result
-            wall = rec.beside_failure if answer == rec.result or not rec.samples else beside_failure(rec.samples,
-                                                                                                        answer)
+            searched = answer != rec.result and bool(rec.samples)  # judged on this line search's own flights
+            wall = beside_failure(rec.samples, answer) if searched else rec.beside_failure
             if wall is None and answer == self.designed.get(name):  # the design's verdict on its own answer
-                wall = rec.beside_failure  # (`Tuner._surface`: from every flight of the run)
-            if wall is not None:  # (after a design the verdict is the design's: `Tuner._surface`)
-                margin = ("the two lie within the last design's span" if self.designed and wall == rec.beside_failure
+                wall, searched = rec.beside_failure, False  # (`Tuner._surface`: from every flight of the run)
+            if wall is not None:  # (the recorded verdict is the last design's once one flew: `Tuner._surface`)
+                margin = ("the two lie within the last design's span" if self.designed and not searched
                           else "the margin to it is one step of the search")
                 say("beside failure", f"{name} = {answer:.4g} lies next to {wall:.4g}, where a flight failed "
                     f"(diverged): no gain beyond it was answered, but {margin}")
