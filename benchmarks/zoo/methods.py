@@ -165,8 +165,9 @@ def candidates() -> list[Method]:
     (config.Tuning()), every other one fields over the default before session 13 (`previous_default()`; the second
     is that default, the third the default before the budget, chosen on selection_budget_default.md; the last ones
     are today's default at the flight goals' budget, capped at the worst run's 112 flights (`capped`) and with its
-    designs each point once (`split_designs`), and today's default without session 19's wider refit of an answer on
-    a design's face (`design_widen`)). The paper's setting (PAPER_TUNING) flies twice the flights' goal: it is no
+    designs each point once (`split_designs`), today's default without session 19's wider refit of an answer on
+    a design's face (`design_widen`), and with the vehicles of a round on distinct points (strategy split, session
+    20)). The paper's setting (PAPER_TUNING) flies twice the flights' goal: it is no
     candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -176,7 +177,8 @@ def candidates() -> list[Method]:
             Method("default without the pass over the gains at 26 flights a gain", {"bootstraps": 0}, per_gain=26),
             *capped(), *split_designs(),
             Method("default without the wider refit of a face answer (design_widen = 0: before session 19)",
-                   {"design_widen": 0.0})]
+                   {"design_widen": 0.0}),
+            Method("default, the vehicles of a round on distinct points (strategy split)", {"strategy": "split"})]
 
 
 def split_designs() -> list[Method]:
