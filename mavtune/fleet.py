@@ -109,10 +109,12 @@ class Fleet(Protocol):
         ...
 
 
-Evaluate = Callable[..., Sequence[float]]
+Evaluate = Callable[..., Sequence[float | None]]
 """The plain-function form of a fleet: one round in, one cost per vehicle out — `evaluate(assignments)`, or
 `evaluate(assignments, context)` to receive each flight's `FlightContext` (a parameter named `context`, or a
-second positional parameter without a default)."""
+second positional parameter without a default). A NaN or infinite cost is a failed flight (the gains diverged); None
+is no result (`Status.LOST`: a link lost, a flight spoiled by something other than its gains), left out as a fleet's
+lost flight: a point no flight of its round measured is flown again."""
 
 
 @dataclass(frozen=True)
@@ -189,6 +191,9 @@ class CallableFleet:
             )
         flights = []
         for i, (gains, cost) in enumerate(zip(assignments, costs)):
+            if cost is None:  # no result: flown again, as a fleet's lost flight
+                flights.append(Flight(vehicle=f"v{i}", gains=dict(gains), cost=math.nan, status=Status.LOST))
+                continue
             try:
                 if isinstance(cost, bool) or getattr(getattr(cost, "dtype", None), "kind", "") == "b":  # (True is
                     # 1 to float(): a flag, Python's or numpy's, returned for a cost is a mistake)

@@ -186,6 +186,25 @@ def test_a_cost_function_that_returns_no_list_of_numbers_is_named_in_one_line(re
                         space={"kp": (0.0, 1.0)}).gains["kp"] == pytest.approx(0.3, abs=0.02)  # an array is a list
 
 
+def test_a_cost_of_none_is_a_lost_flight_flown_again():
+    """None from a cost function is no result (a flight spoiled by something other than its gains): recorded as
+    lost, not failed, and its point flown again when no flight of its round measured it."""
+    from mavtune import Status
+
+    asked = []
+
+    def evaluate(gains, context):
+        asked.extend((c.round, g["kp"]) for g, c in zip(gains, context))
+        return [None if c.round == 3 else (g["kp"] - 0.3) ** 2 + 0.1 for g, c in zip(gains, context)]
+
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0)}, vehicles=2, seed=1)
+    statuses = [f.status for r in result.rounds for f in r.flights]
+    assert statuses.count(Status.LOST) == 2 and Status.FAILED not in statuses
+    spoiled = {kp for r, kp in asked if r == 3}
+    assert spoiled and spoiled <= {kp for r, kp in asked if r == 4}  # flown again in the next round
+    assert result.gains["kp"] == pytest.approx(0.3, abs=0.05)
+
+
 class _Bench:
     """A user's own Fleet of two vehicles whose `fly` answers with `answer(assignments)`."""
 
