@@ -362,7 +362,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                               chosen == default.label else f"The selection half (selection.json) chose {chosen}; "
                               f"reported here is {default.label}.")
     doc["paired"] = paired_tests(res["rows"], default.label, [lb for lb in labels if lb != default.label])
-    doc["goals"] = stats.goals(res["table"], default.label, doc["paired"])
+    doc["goals"] = stats.goals(res["table"], default.label, doc["paired"], res["rows"])
     doc["meta"] = {"command": "python benchmarks/quality.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                    "half": args.half, "zoo": args.zoo, "started_utc": started.isoformat(timespec="seconds"),
                    "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
