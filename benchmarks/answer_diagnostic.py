@@ -78,6 +78,7 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "kernel reach 3.6 half-widths": {"reach": 3.6},
     "no wider refit of an answer on the design's face (before session 19)": {"widen": 0.0},
     "wider refit at the 50 % level": {"widen": 0.5},
+    "no outlier flights left out (before session 20)": {"outliers": 0.0},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -94,12 +95,19 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
     settings = method.settings(plant, run)
     fleet = ZooFleet(plant, settings.vehicles, tune_seed(run))
     calls: list[dict[str, Any]] = []
-    original = tuner.surface_answer
+    original, clean = tuner.surface_answer, tuner.surface_inliers
+    raw: dict[str, Any] = {}  # the flights before the engine left out their outliers (`surface.inliers`)
+
+    def inliers(points, box, sds, *args):
+        raw.update(points=points, sds=sds)
+        return clean(points, box, sds, *args)
 
     def recorded(points, box, worse=(), pool=None, **options):
         out = original(points, box, worse, pool, **options)
         if "risk" in options and options["risk"] is None:  # the divergence caution's unbounded answer: not the
             return out  # run's answer
+        if raw:  # the flights as flown, before `inliers` left outliers out: a replay leaves them out again
+            points, options = raw.pop("points"), options | {"outliers": raw.pop("sds")}
         calls.append({"keep": list(options["keep"]) if options.get("keep") is not None else None,
                       "options": {k: v for k, v in options.items() if k != "keep"},
                       "points": [[list(k), [c if math.isfinite(c) else "inf" for c in v]] for k, v in points.items()],
@@ -107,11 +115,11 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
                       "dof": pool.dof if pool is not None else 0.0, "answer": list(out[0]), "fitted": out[1]})
         return out
 
-    tuner.surface_answer = recorded
+    tuner.surface_answer, tuner.surface_inliers = recorded, inliers
     try:
         result = tuner.run_tuning(settings, fleet)
     finally:
-        tuner.surface_answer = original
+        tuner.surface_answer, tuner.surface_inliers = original, clean
     told = (pair for r in result.rounds for pair in zip(*Strategy.measured([f.gains for f in r.flights], r.flights)))
     flown = {k: c for k, (_, c) in by_gains(told, list(plant.gains), digits=None).items()}
     return {"plant": plant_name, "method": method.label, "run": run,
@@ -206,27 +214,31 @@ def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) ->
     none, the answer as flown), on the same flights, judged on the truth
     (exact for a configuration with one design, whose answer flies nothing after it; with more designs only
     the last is replayed, the earlier ones' answers having chosen what was flown after them)."""
-    from mavtune.search import surface
-    from mavtune.search.evidence import NoisePool
-
     out = []
     for row in rows:
-        x = row["x"]
-        if row["surface_calls"]:
-            c = row["surface_calls"][-1]
-            points = costs_of(c["points"])
-            pool = NoisePool.prior(c["cv"], c["dof"]) if c["cv"] is not None and math.isfinite(c["cv"]) else None
-            given = engine_options(row, c) | options
-            if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
-                given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
-            x = list(surface.answer(points, [tuple(b) for b in c["box"]], surface.ruled_out(points, pool or
-                                                                                             NoisePool()), pool,
-                                    **given)[0])
+        x = replay_call(row, row["surface_calls"][-1], options) if row["surface_calls"] else row["x"]
         out.append({"plant": row["plant"], "run": row["run"], "x": x})
     judged(t, [tuple(r["x"]) for r in out], pm)
     for r in out:
         r["excess_pct"], r["fly_away"] = t.excess(r["x"])[0], t.fly_away(r["x"])
     return out
+
+
+def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, Any]) -> list[float]:
+    """One recorded surface answer of run `row` again, with the fit's `options` over the engine's own
+    (`engine_options`; the outlier flights left out first where the engine left them out, `surface.inliers`)."""
+    from mavtune.search import surface
+    from mavtune.search.evidence import NoisePool
+
+    points, box = costs_of(call["points"]), [tuple(b) for b in call["box"]]
+    pool = NoisePool.prior(call["cv"], call["dof"]) if call["cv"] is not None and math.isfinite(call["cv"]) else None
+    given = engine_options(row, call) | options
+    sds = given.pop("outliers", 0.0)  # (the engine's step before the answer, recorded since session 20)
+    if sds:
+        points, _ = surface.inliers(points, box, sds)
+    if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
+        given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
+    return list(surface.answer(points, box, surface.ruled_out(points, pool or NoisePool()), pool, **given)[0])
 
 
 def replay_summary(base: list[dict[str, Any]], rows: list[dict[str, Any]]) -> dict[str, Any]:

@@ -63,7 +63,8 @@ first design is flown once); `design_inner = false, design_shrink = 0.4` restore
 PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.bootstraps": 2, "tuning.design_width": 0.15, "tuning.design_steps": 1, "tuning.design_shrink": 1.0,
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
-    "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0}
+    "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
+    "tuning.design_outliers": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -144,7 +145,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
-                   "wall_keep", "composite_reach", "design_widen", "budget")
+                   "wall_keep", "composite_reach", "design_widen", "design_outliers", "budget")
 
 
 
@@ -159,7 +160,9 @@ class Tuning(_Section):
     is the minimum of one quadratic in every gain fitted to the flights near the last design (a plane where the
     flights do not reject a plane and its minimum lies on a bound of the ranges; a cubic where they reject the
     quadratic; fitted again over the wider designs' flights too where its minimum lies on a face of the design
-    inside the ranges and the flights do not reject that wider quadratic: `design_widen`, since session 19), inside
+    inside the ranges and the flights do not reject that wider quadratic: `design_widen`, since session 19; without
+    the flights that their replicates and their neighbours both put far off, spoiled by something other than the
+    gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
     answer stands; the map's answer, where the passes start, is not bounded by the fitted divergence chance, every
     later design's is); all within a budget of 42 flights a gain (`budget = "auto"`: 84 for 2 gains, 168 for 4),
@@ -287,6 +290,12 @@ class Tuning(_Section):
                                 "do not reject at this level) and answered in the same box: a narrow design's "
                                 "noisy curvature sends the minimum to a face (0: never; 0.2 chosen on the zoo's "
                                 "select half, selection_widen.md)")
+    design_outliers: float = Field(6.0, ge=0.0, le=100.0, description="design: a flight that both its own point's "
+                                   "other flights (by √2 times as much) and the quadratic through the points around "
+                                   "it put more than this many robust noise sds off is an outlier — a flight spoiled "
+                                   "by something other than its gains (a gust, a bad take-off) — and left out of the "
+                                   "design's fit (the run's noise keeps it), and said among the cautions (0: none; "
+                                   "6 chosen on the zoo's select half, selection_outliers.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

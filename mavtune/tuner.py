@@ -30,8 +30,8 @@ from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    fly_away as surface_fly_away, next_centre as surface_next_centre, open_faces as surface_open_faces,
-    ruled_out as surface_ruled_out, REACH,
+    fly_away as surface_fly_away, inliers as surface_inliers, next_centre as surface_next_centre,
+    open_faces as surface_open_faces, ruled_out as surface_ruled_out, REACH,
 )
 from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
@@ -163,6 +163,7 @@ class TuningResult:
     designed: Gains = field(default_factory=dict)  # the response surface's answer, when a design was flown
     divergence: dict[str, Any] | None = None  # the design's answer near failed flights: `Tuner.divergence`
     open_face: Gains = field(default_factory=dict)  # gains the last design answered on its box's face inside the range
+    outliers: list[dict[str, Any]] = field(default_factory=list)  # flights the last design's fit left out: gains, cost
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each (`caution_kinds` names them)."""
@@ -174,7 +175,7 @@ class TuningResult:
         the others more than half the tolerance from where they ended ("stale"), an answer next to a flight that
         failed ("beside failure"), a last design that answered on its box's face inside the range ("open face"),
         the answer's fitted divergence chance where flights near it diverged ("divergence"), flights that measured
-        a cost at or below zero ("cost at zero")."""
+        a cost at or below zero ("cost at zero"), flights the last design's fit left out as spoiled ("outliers")."""
         out: list[tuple[str, str]] = []
 
         def say(kind: str, text: str) -> None:
@@ -225,6 +226,14 @@ class TuningResult:
             say("open face", f"the last design answered {faces} on the edge of the box it flew, inside the range: "
                 "it did not surround its answer, so the optimum may lie beyond (a design around the answer, or a "
                 "larger budget, would tell)")
+        if self.outliers and designed:
+            worst = max(self.outliers, key=lambda f: f["cost"])
+            at = ", ".join(f"{n} {v:.4g}" for n, v in worst["gains"].items())
+            say("outliers", f"{len(self.outliers)} flight{'s' if len(self.outliers) > 1 else ''} left out of the last "
+                f"design's fit as outliers, each far off both the same gains' other flights and the fit through "
+                f"their neighbours (the worst cost {worst['cost']:.3g} at {at}): spoiled by something other than the "
+                "gains (a gust, a bad take-off) or a cost heavy-tailed there; the answer is the other flights' "
+                "(design_outliers = 0 keeps every flight)")
         risk = self.divergence or {}
         if risk and designed:
             chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
@@ -274,6 +283,7 @@ class TuningResult:
             "cautions": [text for _, text in kinds],
             "caution_kinds": [kind for kind, _ in kinds],  # each line's kind, in order (`caution_kinds`)
             "divergence": self.divergence,
+            "outliers": self.outliers,
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
@@ -338,6 +348,7 @@ class Settings:
     wall_keep: bool = False
     composite_reach: float = 0.0
     design_widen: float = 0.0
+    design_outliers: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -418,6 +429,9 @@ class Settings:
         if not 0.0 <= float(self.design_widen) < 1.0:
             raise MavtuneError(f"design_widen {self.design_widen} is outside [0, 1): the level at which the flights "
                                "must reject the quadratic to keep a face answer's fit local (0: never refit wider)")
+        if not 0.0 <= float(self.design_outliers) <= 100.0:
+            raise MavtuneError(f"design_outliers {self.design_outliers} is outside [0, 100]: robust noise sds off the "
+                               "local fit and off its point's other flights that make a flight an outlier (0: none)")
         if self.wall_keep not in (True, False):
             raise MavtuneError(f"wall_keep must be true or false, got {self.wall_keep!r}")
         if self.design_split not in (True, False, "auto"):
@@ -436,7 +450,7 @@ class Settings:
             if not (v is None and name in optional) and (isinstance(v, bool) or not isinstance(v, numbers.Integral)):
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
-                  "wall_span", "composite_reach", "design_widen")
+                  "wall_span", "composite_reach", "design_widen", "design_outliers")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -601,6 +615,7 @@ class Settings:
                         | ({"wall_keep": True} if self.wall_keep else {})
                         | ({"composite_reach": float(self.composite_reach)} if self.composite_reach else {})
                         | ({"widen": float(self.design_widen)} if self.design_widen else {})
+                        | ({"outliers": float(self.design_outliers)} if self.design_outliers else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
@@ -660,6 +675,7 @@ class Tuner:
         self._pass_half: float | None = None  # the half-width of the last design flown before the passes
         self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self.open_face: Gains = {}  # the gains the last design answered on its box's face inside the range (`_surface`)
+        self.outliers: list[dict[str, Any]] = []  # the flights the last design's fit left out (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self._step: tuple[list[tuple[float, float]], tuple[float, ...], bool] | None = None  # last design's box,
         # its answer, and whether a flight failed within its half-width of the answer (`_shrink`)
@@ -685,7 +701,8 @@ class Tuner:
                             bootstraps=self.bootstrap, stop_reason=stop_reason,
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
-                            designed=self.designed, divergence=self.divergence, open_face=dict(self.open_face))
+                            designed=self.designed, divergence=self.divergence, open_face=dict(self.open_face),
+                            outliers=list(self.outliers))
 
     def _record(self, bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason (and the range
@@ -835,7 +852,8 @@ class Tuner:
         """One step of the response surface (`design_count` in turn, each around the answer of the one before):
         fly the design around the gains now (`surface.design`, the same rounds whatever the
         costs: the plan knows them), then answer the minimiser of one quadratic in every gain fitted to the run's
-        flights near it (a cubic where the flights reject the quadratic), inside the design's box and never where the nearest flight failed (`surface.answer`). True
+        flights near it (a cubic where the flights reject the quadratic; without the flights `surface.inliers` finds
+        spoiled), inside the design's box and never where the nearest flight failed (`surface.answer`). True
         when that answer lies inside the box or on a range's bound, not on a face of the box inside the ranges (a
         trust region: the next design narrows in only around an answer the design surrounds). With `design_move`,
         the next design goes past a face where the fit of this design's own box has its minimum
@@ -868,6 +886,10 @@ class Tuner:
             for a, cost in zip(*Strategy.measured(batch + spare, flights)):  # repeats of a point: the run's noise
                 self.pool.add((SURFACE, tuple(a[n] for n in names)), cost)
         flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
+        flown, left = surface_inliers(flown, box, float(s.design_outliers))  # (0: as flown; the run's noise keeps
+        # them: the fits' tests allow for the outliers no replicate told)
+        self.outliers = [{"gains": {n: a + w * u for n, a, w, u in zip(names, lo, width, k)}, "cost": c}
+                         for k, costs in left.items() for c in costs]
         ruled = surface_ruled_out(flown, self.pool)
         before = [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # the previous design's answer
         keep = before if (s.wall_keep and step + 1 == s.design_count() and self._design_answers

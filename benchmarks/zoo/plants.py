@@ -8,7 +8,9 @@ vehicle, wind and noise at every gain vector (common random numbers for the trut
   ArduCopter's AC_PosControl up-axis cascade (`mavsim.cascade.ArduCopterAltitude`) driving `mavtune.sim.Plant`;
   the gain ranges are the MAVLink fleet's defaults (`vehicles.mavlink.config.DEFAULT_GAINS`);
 - Crazyflow: the Mellinger state controller's z gains of a Crazyflie on the climbing circle, gusts as a force;
-- analytic costs: asymmetric valleys, heteroscedastic noise, an edge optimum and 4 gains.
+- analytic costs: asymmetric valleys, heteroscedastic noise, an edge optimum and 4 gains;
+- the nominal simulator with one flight in twenty spoiled by something other than its gains (`spoiled`, since
+  2026-11-28).
 
 PLANTS is the zoo the defaults are chosen on; UNSEEN are plants of other kinds that nothing is chosen on (other
 airframes and primitives, PX4's cascade with 3 gains and a payload picked up in flight, a Crazyflie with a payload, a
@@ -331,6 +333,23 @@ def _normals(seeds, rounds, k: int) -> np.ndarray:
     return out
 
 
+SPOILED_SHARE = 0.05  # the share of flights a gust front or a bad take-off spoils, whatever their gains
+SPOILED_FACTOR = 3.0  # a spoiled flight's cost over what its gains would have flown
+
+
+def spoiled(fly: Callable) -> Callable:
+    """`fly` with one flight in twenty spoiled by something other than its gains (a gust front, a bad take-off): its
+    cost three times what the gains would have flown. Which flights, by (seed, round) alone: the same flights at
+    every gain vector, so the optimum is `fly`'s and the truth's excess of any answer too."""
+
+    def out(x, seeds, rounds):
+        cost, failed = fly(x, seeds, rounds)
+        draws = np.array([np.random.default_rng([int(s), int(r), 23]).random() for s, r in zip(seeds, rounds)])
+        return np.where(draws < SPOILED_SHARE, SPOILED_FACTOR * cost, cost), failed
+
+    return out
+
+
 def valley_fly(x, seeds, rounds):
     """A curved, asymmetric valley (steep on one side of the optimum, shallow on the other) with noise whose
     spread grows with the cost (5 % at the optimum)."""
@@ -442,6 +461,9 @@ def _plants() -> dict[str, Plant]:
         Plant("crazyflow", "Crazyflow Crazyflie, Mellinger z gains, climbing circle, OU gust forces", ("kp", "kd"),
               crazyflow_fly, {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()},
               judge_cap=128, chunk=1024),
+        Plant("sim spoiled flights", "nominal, one flight in twenty spoiled by something other than its gains (a gust "
+              "front, a bad take-off): three times the cost its gains would have flown (added 2026-11-28)",
+              ("kp", "kd"), spoiled(sim_fly({}, FULL)), _sim_units(FULL)),
         Plant("analytic cliff", "bowl whose minimum lies beyond a divergence cliff that moves with each flight: the "
               "optimum is inside, next to the cliff (unseen until 2026-11-25, when it showed every method answering "
               "gains beside the cliff)", ("kp", "kd"), cliff_fly),

@@ -10,9 +10,10 @@ one flight takes the pooled value alone, and where nothing has been flown twice 
 from __future__ import annotations
 
 import math
+import statistics
 from dataclasses import dataclass
 from functools import cache
-from typing import Hashable, Sequence
+from typing import Hashable, Iterable, Sequence
 
 PRIOR_DOF = 4.0  # how many degrees of freedom the run's pooled noise counts for in a point's own variance
 
@@ -91,6 +92,21 @@ def _spread(costs: Sequence[float]) -> tuple[float, int]:
     if len(costs) < 2 or mean == 0.0:
         return 0.0, 0
     return math.fsum((c / mean - 1.0) ** 2 for c in costs), len(costs) - 1
+
+
+def robust_cv(groups: Iterable[Sequence[float]]) -> float:
+    """The relative noise of one flight as the median absolute deviation sees it: each finite cost of a group of
+    two or more over its group's mean, scaled to one flight's deviation (√(n/(n−1))), 1.4826 times their median —
+    the pooled `NoisePool.cv` of a normal noise, unmoved by the odd outlier flight (a gust, a bad take-off) that
+    inflates a sum of squares; NaN below four deviations."""
+    deviations = []
+    for costs in groups:
+        finite = [c for c in costs if math.isfinite(c)]
+        mean = math.fsum(finite) / len(finite) if finite else 0.0
+        if len(finite) >= 2 and mean != 0.0:
+            scale = math.sqrt(len(finite) / (len(finite) - 1))
+            deviations += [abs(scale * (c / mean - 1.0)) for c in finite]
+    return 1.4826 * statistics.median(deviations) if len(deviations) >= 4 else math.nan
 
 
 def sample_variance(values: Sequence[float], mean: float) -> float:

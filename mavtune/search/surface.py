@@ -39,11 +39,15 @@ side (benchmarks/results/answer_diagnostic.md).
 An answer on a face of the design inside the ranges is fitted again over the wider designs' flights around it
 (`widen`: the widest kernel whose quadratic the flights do not reject), in the same box: a narrow design's few flights
 resolve the curvature poorly (benchmarks/results/selection_widen.md).
+Before the fit, a flight spoiled by something other than its gains (a gust front, a bad take-off) is left out where
+both its own point's other flights and the quadratic through its neighbours disown it (`inliers`;
+benchmarks/results/selection_outliers.md).
 """
 
 from __future__ import annotations
 
 import math
+import statistics
 from itertools import product
 from typing import TYPE_CHECKING, Callable, Collection, Mapping, Sequence
 
@@ -64,6 +68,8 @@ PLANE_LEVEL = 0.2  # a plane replaces the quadratic where the flights do not rej
 GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the design's box (then polished)
 WIDEN_LEVEL = 0.2  # an answer on a face of the design inside the ranges: refit wider where the flights do not reject
 WIDE_REACHES = (6.0, 4.0, 3.0)  # the quadratic at this level, trying these kernel reaches (half-widths) widest first
+OUTLIER_SDS = 6.0  # an outlier flight lies this many robust noise sds off the local fit and (times √2) its replicates
+OUTLIER_REACH = 4.0  # the fit that tells an outlier spans this many half-widths of the design from its centre
 
 
 def design(centre: Sequence[float], half: float, inner: bool = False) -> list[tuple[float, ...]]:
@@ -152,6 +158,72 @@ def _clear(base, x, walls, safe):
         t = np.clip((step @ (f - base)) / length, 0.0, 1.0)
         out &= np.linalg.norm(base + t[:, None] * step - f, axis=1) >= r
     return out
+
+
+def inliers(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+            sds: float = OUTLIER_SDS, reach: float = OUTLIER_REACH) -> tuple[dict[tuple[float, ...], list[float]],
+                                                                             dict[tuple[float, ...], list[float]]]:
+    """`points` without their outlier flights, and the flights left out (by point).
+
+    A gust or a bad take-off spoils a flight now and then, whatever its gains: such flights, kept in the means and
+    the pooled noise, move the answer off the optimum. An outlier is a flight that both its replicates and its
+    neighbours disown: more than `sds` times √2 robust sds (`robust_cv`, relative) from the median of its point's
+    other flights, and more than `sds` robust sds from the weighted quadratic through the points the kernel of
+    `reach` half-widths of the design of `box` reaches (fitted twice: the second time without the first's
+    outliers). Not by the fit alone: a lone flight off a quadratic is as likely the quadratic's fault (a steep wall of
+    oscillating gains); nor by the replicates alone: where the gains themselves make the cost heavy-tailed (near the
+    edge of stability) the fit lies among a point's spread flights, and their mean is the cost to tune. A point keeps
+    at least its flight nearest the fit; a failed flight is a wall, not a cost, and stays. With none left out, `sds`
+    0, or too few replicates or points to tell, `points` are returned as they are. The run's noise keeps them: the
+    fits' tests must allow for the outliers no replicate told (a lone flight's)."""
+    from mavtune.search.evidence import robust_cv
+
+    given = {k: list(v) for k, v in points.items()}
+    cv = robust_cv(given.values())
+    if not (sds > 0 and math.isfinite(cv) and cv > 0):
+        return given, {}
+    bound = sds * cv
+    kept = given
+    for _ in range(2):
+        fitted = _local_fit(kept, box, reach)
+        if fitted is None:
+            return given, {}
+        kept = dict(given)
+        for k, costs in given.items():
+            f = fitted.get(k, math.nan)
+            if len(costs) < 2 or not f > 0 or not all(c > 0 and math.isfinite(c) for c in costs):
+                continue
+            off = [abs(c / f - 1.0) > bound and abs(c / statistics.median(costs[:i] + costs[i + 1:]) - 1.0)
+                   > math.sqrt(2.0) * bound for i, c in enumerate(costs)]
+            if any(off):
+                kept[k] = [c for c, o in zip(costs, off) if not o] or [min(costs, key=lambda c: abs(c / f - 1.0))]
+    left = {k: [c for c in costs if c not in kept[k]] for k, costs in given.items() if len(kept[k]) < len(costs)}
+    return (kept, left) if left else (given, {})
+
+
+def _local_fit(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+               reach: float) -> dict[tuple[float, ...], float] | None:
+    """The weighted quadratic (as `answer`'s: each point by its flights over its cost²) through the points flown
+    without failure that the kernel of `reach` half-widths of the design of `box` reaches, at each of them; None with
+    too few points or a failed solve."""
+    import numpy as np
+
+    _, _, centre, half = _frame(box)
+    square = _terms(len(centre), 2)
+    keys = [k for k, v in points.items() if v and all(map(math.isfinite, v))]
+    x = (np.array(keys, float).reshape(len(keys), len(centre)) - centre) / half
+    kernel = _tricube(reach)(x)
+    keys, x, kernel = [k for k, w in zip(keys, kernel) if w > 0], x[kernel > 0], kernel[kernel > 0]
+    if len(keys) < len(square) + 2:
+        return None
+    means = np.array([math.fsum(points[k]) / len(points[k]) for k in keys])
+    scale = float(np.max(np.abs(means))) or 1.0
+    n = np.array([len(points[k]) for k in keys], float)
+    try:
+        beta, _ = _fit(x, means / scale, n / np.maximum(np.abs(means / scale), 1e-6) ** POWER * kernel, square)
+    except np.linalg.LinAlgError:
+        return None
+    return dict(zip(keys, (_columns(x, square) @ beta * scale).tolist()))
 
 
 def coefficients(d: int) -> int:
