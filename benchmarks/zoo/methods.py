@@ -177,7 +177,7 @@ def candidates() -> list[Method]:
             Method("default without the pass over the gains at 26 flights a gain", {"bootstraps": 0}, per_gain=26),
             *capped(), *split_designs(),
             Method("default without the wider refit of a face answer (design_widen = 0: before session 19)",
-                   {"design_widen": 0.0}),
+                   {"design_widen": 0.0, "design_outliers": 0.0}),  # (nor session 20's outlier rule)
             Method("default, the vehicles of a round on distinct points (strategy split)", {"strategy": "split"}),
             Method("default without the outlier rule (design_outliers = 0: before session 20)",
                    {"design_outliers": 0.0})]
