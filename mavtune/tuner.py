@@ -229,11 +229,12 @@ class TuningResult:
         if self.outliers and designed:
             worst = max(self.outliers, key=lambda f: f["cost"])
             at = ", ".join(f"{n} {v:.4g}" for n, v in worst["gains"].items())
-            say("outliers", f"{len(self.outliers)} flight{'s' if len(self.outliers) > 1 else ''} left out of the last "
-                f"design's fit as outliers, each far off both the same gains' other flights and the fit through "
-                f"their neighbours (the worst cost {worst['cost']:.3g} at {at}): spoiled by something other than the "
-                "gains (a gust, a bad take-off) or a cost heavy-tailed there; the answer is the other flights' "
-                "(design_outliers = 0 keeps every flight)")
+            many = len(self.outliers) > 1
+            say("outliers", f"{len(self.outliers)} flight{'s' if many else ''} left out of the last design's fit as "
+                f"{'outliers, each' if many else 'an outlier,'} far off both the same gains' other flights and the "
+                f"fit through their neighbours ({'the worst' if many else 'its'} cost {worst['cost']:.3g} at {at}): "
+                "spoiled by something other than the gains (a gust, a bad take-off) or a cost heavy-tailed there; "
+                "the answer is the other flights' (design_outliers = 0 keeps every flight)")
         risk = self.divergence or {}
         if risk and designed:
             chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
