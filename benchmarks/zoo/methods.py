@@ -167,8 +167,8 @@ def candidates() -> list[Method]:
     are today's default at the flight goals' budget, capped at the worst run's 112 flights (`capped`) and with its
     designs each point once (`split_designs`), today's default without session 19's wider refit of an answer on
     a design's face (`design_widen`), with the vehicles of a round on distinct points (strategy split, session 20)
-    and without session 20's outlier flights left out of the designs' fits (`design_outliers`)). The paper's setting (PAPER_TUNING) flies twice the flights' goal: it is no
-    candidate."""
+    and without session 20's outlier flights left out of the designs' fits (`design_outliers`)). The paper's setting
+    (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
     return [today, Method("previous default (2 passes, then ±0.15; session 12)", base),
