@@ -203,9 +203,9 @@ def inliers(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[t
 
 def _local_fit(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
                reach: float) -> dict[tuple[float, ...], float] | None:
-    """The weighted quadratic (as `answer`'s: each point by its flights over its cost²) through the points flown
-    without failure that the kernel of `reach` half-widths of the design of `box` reaches, at each of them; None with
-    too few points or a failed solve."""
+    """The weighted quadratic (`_polynomial`, as `answer`'s: each point by its flights over its cost²) through the
+    points flown without failure that the kernel of `reach` half-widths of the design of `box` reaches, at each of
+    them; None with too few points or a failed solve."""
     import numpy as np
 
     _, _, centre, half = _frame(box)
@@ -218,12 +218,8 @@ def _local_fit(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequenc
         return None
     means = np.array([math.fsum(points[k]) / len(points[k]) for k in keys])
     scale = float(np.max(np.abs(means))) or 1.0
-    n = np.array([len(points[k]) for k in keys], float)
-    try:
-        beta, _ = _fit(x, means / scale, n / np.maximum(np.abs(means / scale), 1e-6) ** POWER * kernel, square)
-    except np.linalg.LinAlgError:
-        return None
-    return dict(zip(keys, (_columns(x, square) @ beta * scale).tolist()))
+    value = _polynomial(x, means / scale, np.array([len(points[k]) for k in keys], float) * kernel, square)
+    return None if value is None else dict(zip(keys, (value(x) * scale).tolist()))
 
 
 def coefficients(d: int) -> int:
