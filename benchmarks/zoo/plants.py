@@ -413,9 +413,29 @@ def damping_wall_fly(x, seeds, rounds):
     return np.where(diverged, 0.8 * CLIFF_COST, c * np.exp(0.06 * z[:, 0]) + 0.1 * (c - 1.0) * z[:, 1]), diverged
 
 
+DECADES_BEST = (0.04, 0.15)  # the decades plant's optimum (its minimum cost 1)
+DECADES_FLOOR = 1e-3  # gains below it cost as it does
+
+
+def decades_cost(x: np.ndarray) -> np.ndarray:
+    """The decades plant's noise-free cost: 1 + a quadratic in the logarithm of each gain's ratio to its best."""
+    a, b = (np.log(np.maximum(x[:, i], DECADES_FLOOR) / DECADES_BEST[i]) for i in (0, 1))
+    return 1.0 + 0.3 * a * a + 0.2 * b * b + 0.1 * a * b
+
+
+def decades_fly(x, seeds, rounds):
+    """Gains whose good values span decades (a rate loop's D, an integrator): the cost grows with the logarithm of
+    each gain's ratio to its best (kp 0.04, kd 0.15 of ranges from 0), so it is steep below the optimum and shallow
+    above it; lognormal noise of 8 % (mean-one)."""
+    c = decades_cost(x)
+    z = _normals(seeds, rounds, 1)
+    return c * np.exp(0.08 * z[:, 0] - 0.0032), np.zeros(len(c), dtype=bool)
+
+
 # ----- the zoo ------------------------------------------------------------------------------------------------
 
 FULL = ((0.0, 1.0), (0.0, 1.0))
+WIDE = ((0.0, 3.0), (0.0, 3.0))
 SIM_UNITS = {"kp": ("k_x(z), 1/s²", 0.0, 250.0), "kd": ("k_v(z), 1/s", 0.0, 40.0)}
 
 
@@ -467,6 +487,12 @@ def _plants() -> dict[str, Plant]:
         Plant("analytic cliff", "bowl whose minimum lies beyond a divergence cliff that moves with each flight: the "
               "optimum is inside, next to the cliff (unseen until 2026-11-25, when it showed every method answering "
               "gains beside the cliff)", ("kp", "kd"), cliff_fly),
+        Plant("sim wide box", "nominal, ranges three times too wide (normalised kp, kd [0, 3]): the optimum near a "
+              "seventh of each between two walls of near-unstable flights, as a user who does not know the scale "
+              "sets them (added 2026-11-28)", ("kp", "kd"), sim_fly({}, WIDE), _sim_units(WIDE)),
+        Plant("analytic decades", "gains whose good values span decades, tuned on a linear scale: the cost grows "
+              "with the log of each gain's ratio to its best (0.04, 0.15 of ranges from 0), steep below and "
+              "shallow above, lognormal noise 8 % (added 2026-11-28)", ("kp", "kd"), decades_fly),
     ]
     return {p.name: p for p in out}
 
