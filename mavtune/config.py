@@ -278,8 +278,9 @@ class Tuning(_Section):
                                   "(which that design's own divergence fit bounded) where a flight within the "
                                   "surface fit's kernel (two half-widths of the design) failed, unless a failed "
                                   "flight lies nearest it or on the way to it, or the last design's own divergence "
-                                  "fit puts it above 1 % (risk.KEEP_RISK): a narrow design beside a wall fits few "
-                                  "safe flights and a wall it barely sees")
+                                  "fit puts it above 1 % (risk.KEEP_RISK), or it lay on a face of its own design "
+                                  "inside the ranges (no minimum its flights surround): a narrow design beside a "
+                                  "wall fits few safe flights and a wall it barely sees")
     composite_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: above three gains (a composite "
                                    "design, whose pure quadratic terms rest on its axis points alone) the surface "
                                    "fit's kernel reaches this many half-widths of the design (0: 2, as below), so "

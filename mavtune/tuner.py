@@ -894,7 +894,10 @@ class Tuner:
         ruled = surface_ruled_out(flown, self.pool)
         before = [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # the previous design's answer
         keep = before if (s.wall_keep and step + 1 == s.design_count() and self._design_answers
-                          and self._design_answers[-1] == self.gains) else None  # (not the passes' answer)
+                          and self._design_answers[-1] == self.gains  # (not the passes' answer)
+                          and not self.open_face) else None  # (nor one on its design's face: the cost still fell
+        # beyond it, no minimum its flights surround; on ranges three times too wide such kept answers lay 45-150 %
+        # above the optimum beside a wall of near-unstable gains, session 21)
         start = step < s.designs_before_passes()  # where the passes start from, not the run's answer: no bound on
         # the divergence chance there (a map's coarse fit over failures at the box's edges sent its answer to the far
         # corner however badly that flew: the 60 ms latency plant, session 15); every design after the passes keeps it
