@@ -195,8 +195,9 @@ class CallableFleet:
                 flights.append(Flight(vehicle=f"v{i}", gains=dict(gains), cost=math.nan, status=Status.LOST))
                 continue
             try:
-                if isinstance(cost, bool) or getattr(getattr(cost, "dtype", None), "kind", "") == "b":  # (True is
-                    # 1 to float(): a flag, Python's or numpy's, returned for a cost is a mistake)
+                if (isinstance(cost, (bool, str, bytes))
+                        or getattr(getattr(cost, "dtype", None), "kind", "") in ("b", "U", "S")):  # (True is 1 and
+                    # "1.0" is 1.0 to float(): a flag or a text returned for a cost is a mistake)
                     raise TypeError
                 cost = float(cost)
             except (TypeError, ValueError):

@@ -364,7 +364,9 @@ class Settings:
                 lo, hi = (float(b) for b in bounds)
             except (TypeError, ValueError):
                 raise MavtuneError(f"range of gain {name!r} must be two numbers (lo, hi), got {bounds!r}") from None
-            if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
+            if not (math.isfinite(lo) and math.isfinite(hi)):
+                raise MavtuneError(f"range of gain {name!r} is [{lo}, {hi}]: both ends must be finite numbers")
+            if lo >= hi:
                 raise MavtuneError(f"range of gain {name!r} is [{lo}, {hi}]: lo must be below hi")
             space[name] = (lo, hi)
         self.space = space

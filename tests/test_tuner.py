@@ -116,6 +116,7 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
     (dict(space={}), "space is empty"),
     (dict(space=[("kp", 0.0, 1.0)]), "space must map each gain's name to its range"),
     (dict(space={"kp": (1.0, 0.0)}), "lo must be below hi"),
+    (dict(space={"kp": (0.0, math.inf)}), r"\[0\.0, inf\]: both ends must be finite"),
     (dict(epsilon=0.5), "epsilon 0.5 is outside"),
     (dict(vehicles=0), "vehicles must be from 1 to"),
     (dict(vehicles=3, strategy="groups", replicates=2), "do not divide"),
@@ -175,6 +176,7 @@ def test_wrong_number_of_costs_is_named():
     ({0: 1.0, 1: 2.0}, r"returned dict \{0: 1\.0, 1: 2\.0\} in round 0"),  # (its keys would pass for two costs)
     ("12", r"returned str '12' in round 0"),
     ([True, False], r"returned a non-number cost (np\.)?True_? in round 0"),  # (True is 1 to float(); numpy's too)
+    (["1.5", "2"], r"returned a non-number cost (np\.)?(str_\()?'1\.5'\)? in round 0"),  # ("1.5" is 1.5 to float())
 ])
 def test_a_cost_function_that_returns_no_list_of_numbers_is_named_in_one_line(returned, said):
     import numpy as np
