@@ -1,12 +1,16 @@
-"""What every benchmark here shares: CPU time of this process, the CPU model, and writing a result as markdown and
-JSON."""
+"""What every benchmark here shares: CPU time of this process, the CPU model, runs over worker processes with the
+facts of the machine they ran on, and writing a result as markdown and JSON."""
 
 from __future__ import annotations
 
 import json
+import os
 import platform
 import resource
+import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any, Callable
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -26,6 +30,23 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine()
+
+
+def pooled(fn: Callable, tasks: list, workers: int) -> tuple[list, dict[str, Any]]:
+    """`fn` over `tasks` in `workers` processes, in order, and the facts of the run: its date, the CPU, nproc, the
+    workers, the load average before and after and the wall seconds (what `facts_line` says)."""
+    facts = {"cpu": cpu_model(), "nproc": os.cpu_count(), "load_before": os.getloadavg()[0], "workers": workers,
+             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    started = time.time()
+    with ProcessPoolExecutor(workers) as pool:
+        rows = list(pool.map(fn, tasks))
+    return rows, facts | {"wall_s": time.time() - started, "load_after": os.getloadavg()[0]}
+
+
+def facts_line(data: dict[str, Any]) -> str:
+    """When and on what a `pooled` run ran, for a result's first line."""
+    return (f"{data['date']}, {data['cpu']}, nproc {data['nproc']}, {data['workers']} worker processes, load "
+            f"{data['load_before']:.1f} before, {data['load_after']:.1f} after, {data['wall_s']:.0f} s.")
 
 
 def write_results(name: str, lines: list[str], data: dict) -> None:

@@ -13,17 +13,14 @@ benchmarks/results/cost_offset.md and .json.
 from __future__ import annotations
 
 import argparse
-import os
 import random
 import statistics
 import sys
-import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import cpu_model, cpu_s, write_results  # noqa: E402
+from common import cpu_s, facts_line, pooled, write_results  # noqa: E402
 
 OPTIMUM = {"kp": 0.3, "kd": 0.6}
 NOISE_SD = 0.01
@@ -56,13 +53,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     offsets = [float(v) for v in args.offsets.split(",")]
-    data = {"runs": args.runs, "offsets": offsets, "noise_sd": NOISE_SD, "optimum": OPTIMUM, "cpu": cpu_model(),
-            "nproc": os.cpu_count(), "load_before": os.getloadavg()[0], "workers": args.workers,
-            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
-    started = time.time()
-    with ProcessPoolExecutor(args.workers) as pool:
-        data["rows"] = list(pool.map(tune_once, [(o, k) for o in offsets for k in range(args.runs)]))
-    data["wall_s"], data["load_after"] = time.time() - started, os.getloadavg()[0]
+    rows, facts = pooled(tune_once, [(o, k) for o in offsets for k in range(args.runs)], args.workers)
+    data = {"runs": args.runs, "offsets": offsets, "noise_sd": NOISE_SD, "optimum": OPTIMUM, **facts, "rows": rows}
     write_results("cost_offset", render(data), data)
 
 
@@ -70,9 +62,7 @@ def render(data: dict) -> list[str]:
     """The markdown: per offset, the answers' distance to the optimum and the runs that said so."""
     lines = ["# A cost that reaches zero", "",
              f"`python benchmarks/cost_offset.py --runs {data['runs']} --offsets "
-             f"{','.join(f'{o:g}' for o in data['offsets'])}`: {data['date']}, {data['cpu']}, nproc {data['nproc']}, "
-             f"{data['workers']} worker processes, load {data['load_before']:.1f} before, {data['load_after']:.1f} "
-             f"after, {data['wall_s']:.0f} s.", "",
+             f"{','.join(f'{o:g}' for o in data['offsets'])}`: {facts_line(data)}", "",
              f"The cost: offset + (kp − {OPTIMUM['kp']})² + (kd − {OPTIMUM['kd']})² + a normal noise of sd "
              f"{data['noise_sd']:g} (each flight's own seed), tuned with the default settings (`mavtune.tune()`, 84 "
              "flights); distance: from the answer to the optimum in the normalised ranges; *said*: runs whose cautions "

@@ -15,16 +15,13 @@ Writes benchmarks/results/log_scale.md and .json.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
-import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import cpu_model, write_results  # noqa: E402
+from common import facts_line, pooled, write_results  # noqa: E402
 from zoo.stats import sign_test  # noqa: E402
 
 WITHIN = 0.02  # an answer within 2 % of the optimum's cost
@@ -90,21 +87,15 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=40)
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    data = {"runs": args.runs, "cpu": cpu_model(), "nproc": os.cpu_count(), "load_before": os.getloadavg()[0],
-            "workers": args.workers, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
-    started = time.time()
-    with ProcessPoolExecutor(args.workers) as pool:
-        data["rows"] = list(pool.map(tune_once, [(*c, 2 * k + 1) for c in CASES for k in range(args.runs)]))
-    data["wall_s"], data["load_after"] = time.time() - started, os.getloadavg()[0]
+    rows, facts = pooled(tune_once, [(*c, 2 * k + 1) for c in CASES for k in range(args.runs)], args.workers)
+    data = {"runs": args.runs, **facts, "rows": rows}
     write_results("log_scale", render(data), data)
 
 
 def render(data: dict) -> list[str]:
     """The markdown: per case, runs within 2 %, the excess, and the paired test against mavtune's linear scale."""
     lines = ["# Gains whose good values span decades: a linear scale or their logarithm", "",
-             f"`python benchmarks/log_scale.py --runs {data['runs']}`: {data['date']}, {data['cpu']}, nproc "
-             f"{data['nproc']}, {data['workers']} worker processes, load {data['load_before']:.1f} before, "
-             f"{data['load_after']:.1f} after, {data['wall_s']:.0f} s.", "",
+             f"`python benchmarks/log_scale.py --runs {data['runs']}`: {facts_line(data)}", "",
              "The zoo's *analytic decades* plant (optimum kp 0.04, kd 0.15; the cost grows with the log of each "
              "gain's ratio to its best; 8 % lognormal noise), runs 1, 3, 5 … tuned on the gains over [0, 1] "
              "(*linear*) or on their base-10 logarithm over [-3, 0] (*log*: the cost function takes 10 ** u). "

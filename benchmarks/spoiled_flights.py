@@ -14,17 +14,14 @@ the true excess, and how many flights the last design left out. Writes benchmark
 from __future__ import annotations
 
 import argparse
-import os
 import random
 import statistics
 import sys
-import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import cpu_model, cpu_s, write_results  # noqa: E402
+from common import cpu_s, facts_line, pooled, write_results  # noqa: E402
 
 NOISE = 0.08  # relative noise of one flight
 FACTOR = 3.0  # a spoiled flight's cost over its gains' own
@@ -83,14 +80,9 @@ def main() -> None:
     gains = [int(v) for v in args.gains.split(",")]
     default = Tuning().design_outliers
     cases = [(g, s, o) for g in gains for s in (args.share, 0.0) for o in (default, 0.0)]
+    rows, facts = pooled(tune_once, [(*c, k) for c in cases for k in range(args.runs)], args.workers)
     data = {"runs": args.runs, "gains": gains, "share": args.share, "factor": FACTOR, "noise": NOISE,
-            "default_outliers": default, "cpu": cpu_model(), "nproc": os.cpu_count(),
-            "load_before": os.getloadavg()[0], "workers": args.workers,
-            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
-    started = time.time()
-    with ProcessPoolExecutor(args.workers) as pool:
-        data["rows"] = list(pool.map(tune_once, [(*c, k) for c in cases for k in range(args.runs)]))
-    data["wall_s"], data["load_after"] = time.time() - started, os.getloadavg()[0]
+            "default_outliers": default, **facts, "rows": rows}
     write_results("spoiled_flights", render(data, cases), data)
 
 
@@ -98,9 +90,7 @@ def render(data: dict, cases: list[tuple[int, float, float]]) -> list[str]:
     """The markdown: per case, runs within 2 %, the excess and the flights left out."""
     lines = ["# Flights spoiled by something other than their gains", "",
              f"`python benchmarks/spoiled_flights.py --runs {data['runs']} --gains "
-             f"{','.join(map(str, data['gains']))}`: {data['date']}, {data['cpu']}, nproc {data['nproc']}, "
-             f"{data['workers']} worker processes, load {data['load_before']:.1f} before, {data['load_after']:.1f} "
-             f"after, {data['wall_s']:.0f} s.", "",
+             f"{','.join(map(str, data['gains']))}`: {facts_line(data)}", "",
              f"Noisy bowls ({data['noise']:.0%} relative noise a flight; a coupled quadratic, its minimum drawn from "
              f"the run's seed), {data['share']:.0%} of flights spoiled at {data['factor']:g} times their cost or "
              f"none, tuned with the default settings (`mavtune.tune()`, design_outliers = "
