@@ -608,7 +608,8 @@ def test_the_previous_answer_beside_a_wall_yields_to_a_point_the_flights_tell_fa
     assert (got == (0.5, 0.4)) is kept
 
 
-@pytest.mark.parametrize("bootstraps, steps, first", [(0, 2, False), (0, 3, False), (1, 1, False), (1, 2, True)])
+@pytest.mark.parametrize("bootstraps, steps, first", [(0, 3, False), (1, 1, False), (1, 2, True)])  # ((0, 2):
+# the first design answers on its face here, which no design keeps: the test below)
 def test_only_the_last_design_keeps_the_previous_designs_answer_beside_a_wall(bootstraps, steps, first):
     """`wall_keep`: beside a failed flight (kp + kd above 1.3: each design's far corner) the last design answers the
     previous design's answer (its own centre); the designs before it answer their own fits, and a design after the
