@@ -10,7 +10,9 @@ vehicle, wind and noise at every gain vector (common random numbers for the trut
 - Crazyflow: the Mellinger state controller's z gains of a Crazyflie on the climbing circle, gusts as a force;
 - analytic costs: asymmetric valleys, heteroscedastic noise, an edge optimum and 4 gains;
 - the nominal simulator with one flight in twenty spoiled by something other than its gains (`spoiled`, since
-  2026-11-28).
+  2026-11-28);
+- what a user who does not know the scale sets (since 2026-11-28): the simulator with ranges three times too wide,
+  and gains whose good values span decades tuned on a linear scale (`decades_fly`).
 
 PLANTS is the zoo the defaults are chosen on; UNSEEN are plants of other kinds that nothing is chosen on (other
 airframes and primitives, PX4's cascade with 3 gains and a payload picked up in flight, a Crazyflie with a payload, a
