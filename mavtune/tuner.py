@@ -148,6 +148,35 @@ class LineSearchRecord:
 
 
 @dataclass
+class DesignRecord:
+    """One response-surface design as flown: its box (per gain, in the gain's units), its half-width (a share of
+    each range), its rounds and flights, and its answer with how it was reached: "fit" (the minimum of the fit
+    through the run's flights near it, inside the box), "best flown" (no usable fit: the best point flown in the
+    box) or "kept" (beside a failed flight, the design before's answer, `wall_keep`); whether the box surrounded that
+    answer (inside it or on a range's bound) or answered on its face inside the range (`open_face`, the gains
+    there), and whether the next design moved past that face (`design_move`)."""
+
+    step: int  # 0-based, in the order flown
+    before_passes: bool  # flown before the passes over the gains (`design_first`: the first a map of the box)
+    half: float
+    box: dict[str, tuple[float, float]]
+    points: int
+    flights: int
+    rounds: tuple[int, int]  # first and last round (inclusive; (n, n - 1) when it flew none)
+    answer: Gains
+    how: str
+    surrounded: bool
+    open_face: list[str] = field(default_factory=list)
+    moves: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"step": self.step, "before_passes": self.before_passes, "half": self.half,
+                "box": {n: list(b) for n, b in self.box.items()}, "points": self.points, "flights": self.flights,
+                "rounds": list(self.rounds), "answer": self.answer, "how": self.how, "surrounded": self.surrounded,
+                "open_face": self.open_face, "moves": self.moves}
+
+
+@dataclass
 class TuningResult:
     """The outcome of a tuning run."""
 
@@ -164,6 +193,7 @@ class TuningResult:
     divergence: dict[str, Any] | None = None  # the design's answer near failed flights: `Tuner.divergence`
     open_face: Gains = field(default_factory=dict)  # gains the last design answered on its box's face inside the range
     outliers: list[dict[str, Any]] = field(default_factory=list)  # flights the last design's fit left out: gains, cost
+    designs: list[DesignRecord] = field(default_factory=list)  # the response surface's designs in the order flown
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each (`caution_kinds` names them)."""
@@ -287,6 +317,7 @@ class TuningResult:
             "outliers": self.outliers,
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],
+            "designs": [d.to_dict() for d in self.designs],
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
         }
 
@@ -675,6 +706,7 @@ class Tuner:
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
+        self.designs: list[DesignRecord] = []  # each design as flown and what it answered (`_surface`)
         self._pass_half: float | None = None  # the half-width of the last design flown before the passes
         self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self.open_face: Gains = {}  # the gains the last design answered on its box's face inside the range (`_surface`)
@@ -705,7 +737,7 @@ class Tuner:
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
                             designed=self.designed, divergence=self.divergence, open_face=dict(self.open_face),
-                            outliers=list(self.outliers))
+                            outliers=list(self.outliers), designs=list(self.designs))
 
     def _record(self, bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason (and the range
@@ -875,6 +907,7 @@ class Tuner:
         box = [(min(p[i] for p in points), max(p[i] for p in points)) for i in range(len(names))]
         reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
         todo, limit = self._design_budget(queue, points, names, lo, width, step)
+        first_round = len(self.rounds)
         while todo and (limit is None or limit > 0):
             record = self.recorded.get(len(self.rounds))
             vehicles = len(record.flights) if record is not None else self.fleet.size
@@ -904,7 +937,7 @@ class Tuner:
         # the divergence chance there (a map's coarse fit over failures at the box's edges sent its answer to the far
         # corner however badly that flew: the 60 ms latency plant, session 15); every design after the passes keeps it
         options = answer_options(self.settings, half, keep) | ({"risk": None} if start else {})
-        best, _ = surface_answer(flown, box, ruled, self.pool, **options)
+        best, fitted = surface_answer(flown, box, ruled, self.pool, **options)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
@@ -921,13 +954,19 @@ class Tuner:
         failed_near = any(not all(map(math.isfinite, c)) for k, c in flown.items()  # within the design's
                           if c and max(abs(v - b) for v, b in zip(k, best)) <= half + 1e-9)  # half-width of its answer
         self._step = (box, tuple(best), failed_near)
-        self._centre = None
+        self._centre, moved = None, False
         if s.design_move and step + 1 < s.design_count():  # the design's own fit says the minimum lies beyond a face
             self._centre, moved = surface_next_centre(flown, box, half, self.pool, s.design_move, best,
                                                       s.design_inner_at(step + 1))
-            if moved:
-                return False
-        return all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
+        surrounded = all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
+        kept = not fitted and keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))
+        self.designs.append(DesignRecord(
+            step, start, half, {n: (a + w * min(max(b0, 0.0), 1.0), a + w * min(max(b1, 0.0), 1.0))
+                                for n, a, w, (b0, b1) in zip(names, lo, width, box)},
+            len(points), sum(len(r.flights) for r in self.rounds[first_round:]), (first_round, len(self.rounds) - 1),
+            dict(self.gains), "fit" if fitted else "kept" if kept else "best flown", surrounded,
+            list(self.open_face), moved))
+        return surrounded and not moved
 
     def _designs_first(self) -> float:
         """`design_first`: fly the first designs (the first with `design_inner` a map of the box) before the passes,

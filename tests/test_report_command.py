@@ -15,7 +15,7 @@ import pytest
 
 from test_cli_resume import LONG, MAVTUNE, folder_bytes, rounds_in, run_cli
 
-FIGURES = ("tuning.png", "timeline.png")
+FIGURES = ("tuning.png", "designs.png", "timeline.png")
 SHORT = ["-q", "--bootstraps", "1", "--epsilon", "0.25", "--no-adaptive", "--seed", "3"]
 MAP = 7  # rounds of the default's map of the box (13 points on 2 vehicles), flown before the first line search
 STAGE = MAP + 2  # a stage that stops inside the first line search: its figure is drawn, its bracket in progress

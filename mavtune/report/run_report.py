@@ -2,9 +2,11 @@
 
 Contents, one section each (`SECTIONS`, in order): the settings; the final gains with their uncertainty; plan vs
 actual (rounds, flights, flight time); the tuning (cost against gain in every line search, the comparisons, the
-final gains' interval); the timeline (altitude and tracking error of every vehicle, gain profiles, cost per flight —
-the paper's Figs. 6–7); the final gains on the cost surface when one exists (`surface.csv` in the run folder, or one
-passed in); the table of rounds; fleet events (drop-outs, rejoins, aborts) when `result.json` records them.
+final gains' interval); the designs (each response-surface design's box and answer, and one figure of every point
+flown: where the answer came from); the timeline (altitude and tracking error of every vehicle, gain profiles, cost
+per flight — the paper's Figs. 6–7); the final gains on the cost surface when one exists (`surface.csv` in the run
+folder, or one passed in); the table of rounds; fleet events (drop-outs, rejoins, aborts) when `result.json` records
+them.
 
 A section is a function of the `Report` returning Markdown lines; add one by adding it to `SECTIONS`. Whatever the
 data (odd results from a network, a run stopped after one round), the report is written: a section that cannot be
@@ -32,6 +34,7 @@ from mavtune.plan import clock
 from mavtune.report import markdown as md
 from mavtune.report.searches import SearchView, as_float, flown_point, noise, search_views, uncertainty
 from mavtune.report import units as U
+from mavtune.report.designs import DESIGNS_PNG
 from mavtune.report.figure_rules import many
 from mavtune.report.points import flown_points, points_section
 from mavtune.report.traces import has_traces, vehicle_order
@@ -42,7 +45,7 @@ TIMELINE_PNG = "timeline.png"
 TUNING_PNG = "tuning.png"
 SURFACE_PNG = "gains_on_surface.png"
 SURFACE_CSV = "surface.csv"
-FIGURES = (TUNING_PNG, TIMELINE_PNG, SURFACE_PNG)
+FIGURES = (TUNING_PNG, DESIGNS_PNG, TIMELINE_PNG, SURFACE_PNG)
 ENDINGS = {"finished": "", "stage": "in progress", "interrupted": "interrupted", "error": "stopped"}
 
 
@@ -275,6 +278,14 @@ def _tuning(rep: Report) -> list[str]:
     return tuning_section(rep.searches, TUNING_PNG, note, rep.units)
 
 
+def _designs(rep: Report) -> list[str]:
+    from mavtune.report.designs import designs_section
+
+    space = (getattr(rep.result, "settings", None) or {}).get("space") or {}
+    return designs_section(getattr(rep.result, "designs", None) or [], rep.rounds, rep.gains, rep.uncertainty, space,
+                           rep.out if rep.figures else None, rep.units)
+
+
 def _timeline(rep: Report) -> list[str]:
     parts = ["## Timeline", ""]
     if not rep.rounds:
@@ -330,7 +341,7 @@ def _tuned_params(rep: Report) -> list[str]:
 
 
 SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _line_searches, _tuned_params,
-                                                  _plan_vs_actual, _tuning, _timeline, _cost_surface, _rounds,
+                                                  _plan_vs_actual, _tuning, _designs, _timeline, _cost_surface, _rounds,
                                                   _points, _fleet_events]
 
 
