@@ -230,8 +230,9 @@ class TuningResult:
             ulo, uhi = u.get("lo", math.nan), u.get("hi", math.nan)
             if width > 0 and uhi - ulo > 0.5 * width:  # (False where either is unknown, or the range is a point)
                 say("wide", f"{name}'s {u.get('level', 0.9):.0%} interval {ulo:.3g} – {uhi:.3g} spans "
-                    f"{(uhi - ulo) / width:.0%} of its range: the flights do not pin it down (a larger budget, "
-                    "more flights per point or less noise; another bootstrap where the answer still moves)")
+                    f"{(uhi - ulo) / width:.0%} of its range: the flights do not tell the gains across it from "
+                    "the best (a cost flat there, or flights too noisy to see it rise); a larger budget, more flights "
+                    "per point or less noise would narrow it (another bootstrap where the answer still moves)")
         for name, rec in last.items():
             shift = held_shift(rec, self.gains, space, designed)
             if math.isfinite(self.uncertainty.get(name, {}).get("lo", math.nan)) and held_elsewhere(shift, epsilon):

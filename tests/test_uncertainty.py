@@ -165,7 +165,8 @@ def test_a_cost_at_or_below_zero_is_cautioned_with_what_to_do():
 def test_an_unsettled_answer_and_a_wide_interval_are_cautioned():
     result = mavtune.tune(coupled_bowl(3, 0.8, 0.2, cv=0.8, coupling=1.9), vehicles=2, seed=3, draws=30)
     cautions = " ".join(result.cautions())
-    assert "interval" in cautions and "of its range" in cautions and "(a larger budget," in cautions  # what to do
+    assert "interval" in cautions and "of its range" in cautions and "a cost flat there" in cautions  # what it means
+    assert "a larger budget, more flights per point or less noise would narrow it" in cautions  # and what to do
     assert result.to_dict()["cautions"] == result.cautions() and "held" in result.to_dict()["uncertainty_note"]
     assert result.to_dict()["caution_kinds"] == [kind for kind, _ in result.caution_kinds()]
 
