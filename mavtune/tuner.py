@@ -150,11 +150,12 @@ class LineSearchRecord:
 @dataclass
 class DesignRecord:
     """One response-surface design as flown: its box (per gain, in the gain's units), its half-width (a share of
-    each range), its rounds and flights, and its answer with how it was reached: "fit" (the minimum of the fit
-    through the run's flights near it, inside the box), "best flown" (no usable fit: the best point flown in the
-    box) or "kept" (beside a failed flight, the design before's answer, `wall_keep`); whether the box surrounded that
-    answer (inside it or on a range's bound) or answered on its face inside the range (`open_face`, the gains
-    there), and whether the next design moved past that face (`design_move`)."""
+    each range), its rounds and flights, and its answer with how it was reached: the fit whose minimum inside the box
+    it is ("quadratic", "cubic" or "plane", ", refitted wider" over the wider designs' flights too: `surface.answer`),
+    "best flown" (no usable fit: the best point flown in the box) or "kept" (beside a failed flight, the design
+    before's answer, `wall_keep`); whether the box surrounded that answer (inside it or on a range's bound) or
+    answered on its face inside the range (`open_face`, the gains there), and whether the next design moved past
+    that face (`design_move`)."""
 
     step: int  # 0-based, in the order flown
     before_passes: bool  # flown before the passes over the gains (`design_first`: the first a map of the box)
@@ -965,7 +966,7 @@ class Tuner:
             step, start, half, {n: (a + w * min(max(b0, 0.0), 1.0), a + w * min(max(b1, 0.0), 1.0))
                                 for n, a, w, (b0, b1) in zip(names, lo, width, box)},
             len(points), sum(len(r.flights) for r in self.rounds[first_round:]), (first_round, len(self.rounds) - 1),
-            dict(self.gains), "fit" if fitted else "kept" if kept else "best flown", surrounded,
+            dict(self.gains), fitted or ("kept" if kept else "best flown"), surrounded,
             list(self.open_face), moved))
         return surrounded and not moved
 

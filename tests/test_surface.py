@@ -561,7 +561,7 @@ def test_beside_a_wall_the_previous_designs_answer_stands_where_it_was_flown_saf
         ruled = ruled_out(points, pool)
         fit = answer(points, box, ruled, pool, risk_reach=4.0)
         kept = answer(points, box, ruled, pool, risk_reach=4.0, keep=(0.5, 0.4))
-        assert fit[0] != (0.5, 0.4) and kept == (((0.5, 0.4), False) if points is near else fit)
+        assert fit[0] != (0.5, 0.4) and kept == (((0.5, 0.4), "") if points is near else fit)
     walled = {**near, (0.54, 0.36): [math.inf]}  # a failed flight nearest the previous answer: not answered
     got, _ = answer(walled, box, ruled_out(walled, pool), pool, risk_reach=4.0, keep=(0.535, 0.365))
     assert got != (0.535, 0.365)

@@ -26,8 +26,20 @@ from mavtune.report.units import GainUnit
 DESIGNS_PNG = "designs.png"
 MAX_PANEL_GAINS = 4  # the figure's panels are the pairs of the first this many gains (6 panels at most)
 ANSWER_COLOUR = "#d62728"
-HOW = {"fit": "the fit's minimum in its box", "best flown": "the best point flown in its box (no usable fit)",
+HOW = {"quadratic": "the minimum in its box of the quadratic fitted to the flights near it",
+       "cubic": "the minimum in its box of a cubic fitted to the flights near it (they reject the quadratic)",
+       "plane": "the minimum of a plane fitted to the flights near it (they need no curvature), on a range's bound",
+       "best flown": "the best point flown in its box (no usable fit)",
        "kept": "the design before's answer, kept beside a failed flight"}
+WIDER = ", refitted wider"  # (`surface.answer`: refitted over the wider designs' flights too)
+
+
+def how_text(how: str) -> str:
+    """A design's `how` in words."""
+    base = how.removesuffix(WIDER)
+    text = HOW.get(base, base)
+    return text + (" (refitted over the wider designs' flights too: the first fit's minimum lay on the box's face)"
+                   if how.endswith(WIDER) else "")
 
 
 def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mapping[str, float],
@@ -44,7 +56,7 @@ def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mappin
         box = ", ".join(f"{U.label(n, units)} {U.num(n, lo, units)}–{U.num(n, hi, units)}"
                         for n, (lo, hi) in d.box.items())
         answer = ", ".join(f"{U.label(n, units)} {U.num(n, v, units)}" for n, v in d.answer.items())
-        how = HOW.get(d.how, d.how)
+        how = how_text(d.how)
         if d.open_face:
             how += f"; on its box's face inside the range ({', '.join(d.open_face)})"
         if d.moves:
@@ -55,12 +67,13 @@ def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mappin
                      f"{d.points} ({d.flights})", answer, how])
     last = designs[-1]
     same = all(abs(as_float(final.get(n, math.nan)) - v) <= 1e-12 * max(1.0, abs(v)) for n, v in last.answer.items())
-    lead = (f"The run's answer is design {last.step + 1}'s, {HOW.get(last.how, last.how)}"
+    lead = (f"The run's answer is design {last.step + 1}'s, {how_text(last.how)}"
             + ("." if last.surrounded else ", on its box's face inside the range: the optimum may lie beyond it.")
             if same else f"The run's answer is not design {last.step + 1}'s answer: it was chosen after the designs "
             "(see Answer).")
     parts = ["## Designs", "", lead + " Each design flew a box of gains (its half-width a share of each range) and "
-             "fitted one quadratic to the run's flights near it; the next design narrowed around an answer its box "
+             "fitted the cost to the run's flights near it (a quadratic in every gain; a cubic where the flights "
+             "reject it, a plane where they need no curvature); the next design narrowed around an answer its box "
              "surrounded.", "",
              md.table(["design", "rounds", "box", "half-width (share of the range)", "points (flights)", "answer",
                        "how"], rows,

@@ -420,7 +420,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            plane_level: float = PLANE_LEVEL, slope_level: float = 0.0, plane_inside: bool = False,
            risk: float | None = RISK, risk_reach: float | None = None,
            keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK,
-           widen: float = WIDEN_LEVEL) -> tuple[tuple[float, ...], bool]:
+           widen: float = WIDEN_LEVEL) -> tuple[tuple[float, ...], str]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
@@ -428,9 +428,9 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     while a point in the box flown off the walls is not told apart from the box's best (`pool`: the run's noise;
     never with a noise-free cost), the first safe point off a wall (`at_wall`), nor, where a flight the kernel
     reaches failed, where the run's flights put the divergence chance above `risk` (`risk.divergence`; None: no
-    such bound); and whether the fit gave it.
-    Without a usable fit: the flown point in the box with the lowest mean cost among those (never an unflown
-    gain); the box's centre if none. `power`, `reach`, `log` (a quadratic in the log of the cost, each point
+    such bound); and which fit gave it: "quadratic", "cubic" or "plane" (", refitted wider" after `widen`), or ""
+    where none did. Without a usable fit: the flown point in the box with the lowest mean cost among those (never an
+    unflown gain); the box's centre if none. `power`, `reach`, `log` (a quadratic in the log of the cost, each point
     weighted by its flights), `cubic_level` (0: no cubic), `plane_level` (0: no plane), `slope_level` (0: the
     plane wherever the flights do not reject it; else only where they also reject a constant) and `plane_inside`
     (the plane's minimum answered on a face of the design inside the ranges too) are the fit's variants
@@ -469,7 +469,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     counts = np.array([len(points[k]) for k in keys], float)
     inside = ok & np.all((every >= lo - 1e-12) & (every <= hi + 1e-12), axis=1) if len(keys) else ok
     if not np.any(inside):
-        return tuple(float(v) for v in centre), False
+        return tuple(float(v) for v in centre), ""
     pick = inside
     if not np.all(ok) and not (pool is not None and pool.cv == 0.0):  # (noise-free: a flight tells it all)
         wall = at_wall(points)
@@ -497,7 +497,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         try:
             hull = Delaunay(every[inside])
         except (QhullError, ValueError):  # too few or flat (all on a line): the best point flown is the answer
-            return fallback, False
+            return fallback, ""
 
     walls = every[~ok]
     base = np.asarray(fallback)  # the best point flown in the box: an answer is reached from it
@@ -519,11 +519,11 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         if (np.all((k >= lo - 1e-9) & (k <= hi + 1e-9)) and allowed(k[None], ok, False)[0]
                 and (fitted is None or keep_risk is None or fitted.chance(k[None])[0] <= keep_risk)
                 and not _outdone(points, keys[int(tree.query(k)[1])], [q for q, o in zip(keys, pick) if o], pool)):
-            return tuple(float(v) for v in k), False
+            return tuple(float(v) for v in k), ""
     x = (every[ok] - centre) / half
     y = means[ok]
     if not np.max(np.abs(y)) > 0:
-        return fallback, False
+        return fallback, ""
     y = y / np.max(np.abs(y))
     kernel = tricube(x)
     if log and np.all(y > 0):  # relative noise is even on the log scale: each point by its flights
@@ -531,10 +531,10 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     else:
         w = counts[ok] / np.maximum(np.abs(y), 1e-6) ** power * kernel
     if np.count_nonzero(w > 0) < coefficients(d) + 1:
-        return fallback, False
+        return fallback, ""
     fit = quadratic(x, y, w / np.max(w))
     if fit is None:
-        return fallback, False
+        return fallback, ""
     c0, gradient, hessian = fit
 
     def value(u: np.ndarray) -> np.ndarray:
@@ -550,7 +550,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     grid = np.concatenate([grid, x[np.all(np.abs(x) <= 1.0 + 1e-12, axis=1)]])
     grid = grid[allowed(grid * half + centre)]
     if not len(grid):
-        return fallback, False
+        return fallback, ""
 
     def lowest(value, slope) -> np.ndarray:
         """The fit's minimum among the allowed candidates, polished (kept only where allowed and lower)."""
@@ -567,20 +567,22 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         v = np.clip(lowest(flat, None) * half + centre, lo, hi)  # where that lies on a range's bound (or off the
         face = (np.abs(v - lo) < 1e-9) & (lo > 1e-9) | (np.abs(v - hi) < 1e-9) & (hi < 1.0 - 1e-9)  # design's faces)
         if plane_inside or not np.any(face):  # (a face inside the ranges: a plane not rejected by too few flights
-            return tuple(float(t) for t in v), True  # says the optimum lies beyond the design, not on its corner)
-    u = lowest(value, slope)
+            return tuple(float(t) for t in v), "plane"  # says the optimum lies beyond the design, not on its corner)
+    u, kind = lowest(value, slope), "quadratic"
     skewed = None if log else cubic(x, y, counts[ok] * kernel, cv, cubic_level)
     if skewed is not None:  # the flights reject the quadratic: the cubic's minimum, where it lies inside the box
         v = lowest(skewed, None)  # (on a face the cubic terms extrapolate: a cubic falls away towards one side)
         if np.all(np.abs(v) < 1.0 - 1e-6) and beside_wall(points, tuple(v * half + centre), 0.0) is None:
-            u = v  # (nor next to a failed flight with nothing safe flown between: a cubic dips into the gap)
+            u, kind = v, "cubic"  # (nor next to a failed flight with nothing safe flown between: a cubic dips into
+            # the gap)
     out = np.clip(u * half + centre, lo, hi)
     wide = _wide_reach(x, y, counts[ok], cv, reach, widen) if widen and any(open_faces(box, out)) else None
     if wide is not None:
-        return answer(points, box, worse, pool, power=power, reach=wide, log=log, cubic_level=cubic_level,
-                      plane_level=plane_level, slope_level=slope_level, plane_inside=plane_inside, risk=risk,
-                      risk_reach=risk_reach or reach, keep=keep, keep_risk=keep_risk, widen=0.0)
-    return tuple(float(v) for v in out), True
+        again, how = answer(points, box, worse, pool, power=power, reach=wide, log=log, cubic_level=cubic_level,
+                            plane_level=plane_level, slope_level=slope_level, plane_inside=plane_inside, risk=risk,
+                            risk_reach=risk_reach or reach, keep=keep, keep_risk=keep_risk, widen=0.0)
+        return again, f"{how}, refitted wider" if how else how
+    return tuple(float(v) for v in out), kind
 
 
 def _wide_reach(x, y, n, cv: float, reach: float, level: float) -> float | None:
