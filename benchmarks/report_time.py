@@ -1,7 +1,7 @@
-"""Time to write a run report (report.md, tuning.png, timeline.png), per section, for three run sizes.
+"""Time to write a run report (report.md, tuning.png, designs.png, timeline.png), per section, for three run sizes.
 
-Runs: the default (2 vehicles, 36 rounds), split over 8 vehicles (8 rounds), and 2 vehicles without reuse over
-4 bootstraps (112 rounds). Each run is flown once with the built-in simulator (not timed); then every report
+Runs: the default (2 vehicles), split over 8 vehicles, and 2 vehicles without reuse over 4 passes and no budget
+(the longest run: as many rounds as its line searches ask). Each run is flown once with the built-in simulator (not timed); then every report
 section is timed `--repeats` times, wall (perf_counter) and CPU (process_time) seconds, the median kept. The
 machine may be shared: the load average is printed beside the numbers; compare sections within one run.
 
@@ -20,13 +20,15 @@ import platform
 import statistics
 import tempfile
 import time
+from datetime import datetime, timezone
 from pathlib import Path
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = {
-    "2 vehicles, 36 rounds (default)": {},
-    "8 vehicles split, 8 rounds": {"tuning.vehicles": 8, "tuning.strategy": "split"},
-    "2 vehicles, no reuse, 4 bootstraps (112 rounds)": {"tuning.reuse": False, "tuning.bootstraps": 4},
+    "2 vehicles (the default)": {},
+    "8 vehicles, split": {"tuning.vehicles": 8, "tuning.strategy": "split"},
+    "2 vehicles, no reuse, 4 passes, no budget": {"tuning.reuse": False, "tuning.bootstraps": 4,
+                                                   "tuning.budget": "none"},
 }
 
 
@@ -56,20 +58,24 @@ def time_sections(overrides: dict, repeats: int) -> dict:
 
 
 def main() -> None:
+    from common import cpu_model
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     load_before = os.getloadavg()
     runs = {name: time_sections(overrides, args.repeats) for name, overrides in RUNS.items()}
     load_after = os.getloadavg()
-    data = {"repeats": args.repeats, "load_avg_before": load_before, "load_avg_after": load_after,
+    data = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "cpu": cpu_model(),
+            "repeats": args.repeats, "load_avg_before": load_before, "load_avg_after": load_after,
             "cpus": os.cpu_count(), "python": platform.python_version(), "runs": runs}
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "report_time.json").write_text(json.dumps(data, indent=2))
     lines = ["# Time to write a run report", "",
-             f"Median of {args.repeats} writes per section; load average (1, 5, 15 min) "
-             f"{', '.join(f'{x:.1f}' for x in load_before)} before and {', '.join(f'{x:.1f}' for x in load_after)} "
-             f"after, on {os.cpu_count()} CPUs. Wall and CPU seconds.", ""]
+             f"{data['date']}, {data['cpu']}. Median of {args.repeats} writes per section; load average (1, 5, "
+             f"15 min) {', '.join(f'{x:.1f}' for x in load_before)} before and "
+             f"{', '.join(f'{x:.1f}' for x in load_after)} after, on {os.cpu_count()} CPUs. Wall and CPU seconds.",
+             ""]
     names = list(next(iter(runs.values()))["sections"])
     lines += ["| run | rounds | " + " | ".join(names) + " | total |",
               "| --- | ---: | " + " | ".join("---:" for _ in names) + " | ---: |"]
