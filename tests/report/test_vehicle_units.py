@@ -70,6 +70,11 @@ def test_the_report_of_a_vehicle_run_names_the_parameters_in_their_units(tmp_pat
     assert search[2] == "PSC_POSZ_P (kp)" and search[3] == "[1, 3]"  # the bracket in PSC_POSZ_P
     assert rows[0][2] == "design" and rows[0][4] == "2, 4.5"  # a design's point: every gain in its units
     assert "kp ∈ [0, 1] (PSC_POSZ_P 1 to 3)" in text
+    header, rows = _table(text, "## Designs")  # each design's box and answer in the parameters' units
+    assert rows[0][2] == "PSC_POSZ_P (kp) 1–3, PSC_VELZ_P (kd) 1–8"
+    answer = result.designs[-1].answer
+    assert rows[-1][5] == (f"PSC_POSZ_P (kp) {1.0 + 2.0 * answer['kp']:.4g}, "
+                           f"PSC_VELZ_P (kd) {1.0 + 7.0 * answer['kd']:.4g}")
     assert re.search(r"\| # \| bracket \(PSC_POSZ_P\) \| points \(PSC_POSZ_P\) \|", text)
 
 
