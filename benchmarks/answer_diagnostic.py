@@ -79,6 +79,12 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "no wider refit of an answer on the design's face (before session 19)": {"widen": 0.0},
     "wider refit at the 50 % level": {"widen": 0.5},
     "no outlier flights left out (before session 20)": {"outliers": 0.0},
+    "the last design's refit inside its box (before session 22)": {"widen_bound": 0.0},
+    "wider refit answering up to a range's bound within 1 half-width of its face": {"widen_bound": 1.0},
+    "wider refit answering up to a range's bound within 1.5 half-widths of its face": {"widen_bound": 1.5},
+    "wider refit answering up to a range's bound within 2 half-widths of its face": {"widen_bound": 2.0},
+    "wider refit answering up to a range's bound within 3 half-widths of its face": {"widen_bound": 3.0},
+    "wider refit answering up to a range's bound within 4 half-widths of its face": {"widen_bound": 4.0},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]

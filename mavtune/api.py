@@ -104,6 +104,7 @@ def tune(
     wall_keep: bool = DEFAULT,
     composite_reach: float = DEFAULT,
     design_widen: float = DEFAULT,
+    design_widen_bound: float = DEFAULT,
     design_outliers: float = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
@@ -161,7 +162,8 @@ def tune(
         design_move=design_move, design_first=design_first, design_trust=design_trust,
         design_shrink_wall=design_shrink_wall, design_shrink_fit=design_shrink_fit,
         design_pass_box=design_pass_box, wall_span=wall_span, wall_keep=wall_keep,
-        composite_reach=composite_reach, design_widen=design_widen, design_outliers=design_outliers,
+        composite_reach=composite_reach, design_widen=design_widen, design_widen_bound=design_widen_bound,
+        design_outliers=design_outliers,
         budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "

@@ -64,7 +64,7 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.bootstraps": 2, "tuning.design_width": 0.15, "tuning.design_steps": 1, "tuning.design_shrink": 1.0,
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
-    "tuning.design_outliers": 0.0}
+    "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -145,7 +145,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
-                   "wall_keep", "composite_reach", "design_widen", "design_outliers", "budget")
+                   "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "budget")
 
 
 
@@ -160,7 +160,9 @@ class Tuning(_Section):
     is the minimum of one quadratic in every gain fitted to the flights near the last design (a plane where the
     flights do not reject a plane and its minimum lies on a bound of the ranges; a cubic where they reject the
     quadratic; fitted again over the wider designs' flights too where its minimum lies on a face of the design
-    inside the ranges and the flights do not reject that wider quadratic: `design_widen`, since session 19; without
+    inside the ranges and the flights do not reject that wider quadratic: `design_widen`, since session 19, and in
+    the last design answered up to a range's bound within two half-widths of that face: `design_widen_bound`, since
+    session 22; without
     the flights that their replicates and their neighbours both put far off, spoiled by something other than the
     gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
@@ -291,6 +293,12 @@ class Tuning(_Section):
                                 "do not reject at this level) and answered in the same box: a narrow design's "
                                 "noisy curvature sends the minimum to a face (0: never; 0.2 chosen on the zoo's "
                                 "select half, selection_widen.md)")
+    design_widen_bound: float = Field(2.0, ge=0.0, le=10.0, description="design: where the last design's refit "
+                                      "(design_widen) starts from an answer on a face of its box that lies within "
+                                      "this many of its half-widths of a range's bound, it answers up to that bound: "
+                                      "an optimum on an edge or in a corner, which the narrow last design stopped "
+                                      "short of (0: inside the box; 2 chosen on the zoo's select half, "
+                                      "answer_diagnostic_widen_bound.md)")
     design_outliers: float = Field(6.0, ge=0.0, le=100.0, description="design: a flight that both its own point's "
                                    "other flights (by √2 times as much) and the quadratic through the points around "
                                    "it put more than this many robust noise sds off is an outlier — a flight spoiled "

@@ -382,6 +382,7 @@ class Settings:
     wall_keep: bool = False
     composite_reach: float = 0.0
     design_widen: float = 0.0
+    design_widen_bound: float = 0.0
     design_outliers: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
@@ -465,6 +466,10 @@ class Settings:
         if not 0.0 <= float(self.design_widen) < 1.0:
             raise MavtuneError(f"design_widen {self.design_widen} is outside [0, 1): the level at which the flights "
                                "must reject the quadratic to keep a face answer's fit local (0: never refit wider)")
+        if not 0.0 <= float(self.design_widen_bound) <= 10.0:
+            raise MavtuneError(f"design_widen_bound {self.design_widen_bound} is outside [0, 10]: half-widths of the "
+                               "last design between its face and a range's bound within which the wider refit "
+                               "answers up to that bound (0: inside the design's box)")
         if not 0.0 <= float(self.design_outliers) <= 100.0:
             raise MavtuneError(f"design_outliers {self.design_outliers} is outside [0, 100]: robust noise sds off the "
                                "local fit and off its point's other flights that make a flight an outlier (0: none)")
@@ -486,7 +491,7 @@ class Settings:
             if not (v is None and name in optional) and (isinstance(v, bool) or not isinstance(v, numbers.Integral)):
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
-                  "wall_span", "composite_reach", "design_widen", "design_outliers")
+                  "wall_span", "composite_reach", "design_widen", "design_widen_bound", "design_outliers")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -651,6 +656,7 @@ class Settings:
                         | ({"wall_keep": True} if self.wall_keep else {})
                         | ({"composite_reach": float(self.composite_reach)} if self.composite_reach else {})
                         | ({"widen": float(self.design_widen)} if self.design_widen else {})
+                        | ({"widen_bound": float(self.design_widen_bound)} if self.design_widen_bound else {})
                         | ({"outliers": float(self.design_outliers)} if self.design_outliers else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
@@ -658,16 +664,19 @@ class Settings:
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
 
-def answer_options(s: Settings, half: float, keep: list[float] | None = None) -> dict[str, Any]:
+def answer_options(s: Settings, half: float, keep: list[float] | None = None,
+                   last: bool = False) -> dict[str, Any]:
     """`surface.answer`'s options for a design of half-width `half` under settings `s`: the wall rules (`wall_span`
     in half-widths, `wall_keep` with the previous design's answer `keep`) and a composite design's kernel
-    (`composite_reach`), each left out when off (the answer's defaults); and the level of the wider refit of an
-    answer on a face of the design (`design_widen`, 0: off), always given. (benchmarks/answer_diagnostic.py replays
-    recorded answers with them.)"""
+    (`composite_reach`), each left out when off (the answer's defaults); the level of the wider refit of an
+    answer on a face of the design (`design_widen`, 0: off), always given; and for the `last` design how near a
+    range's bound that refit answers up to it (`design_widen_bound`: the run's answer, after which nothing flies).
+    (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
     reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
     return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
         {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {}) | {
-        "widen": float(s.design_widen)}
+        "widen": float(s.design_widen)} | (
+        {"widen_bound": float(s.design_widen_bound)} if last and s.design_widen_bound else {})
 
 
 class StageDone(Exception):
@@ -938,10 +947,11 @@ class Tuner:
         start = step < s.designs_before_passes()  # where the passes start from, not the run's answer: no bound on
         # the divergence chance there (a map's coarse fit over failures at the box's edges sent its answer to the far
         # corner however badly that flew: the 60 ms latency plant, session 15); every design after the passes keeps it
-        options = answer_options(self.settings, half, keep) | ({"risk": None} if start else {})
+        final = step + 1 == s.design_count()  # (the run's answer: `design_widen_bound`)
+        options = answer_options(self.settings, half, keep, final) | ({"risk": None} if start else {})
         best, fitted = surface_answer(flown, box, ruled, self.pool, **options)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
-        self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None)
+        self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None, final)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
@@ -996,13 +1006,14 @@ class Tuner:
 
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
                     ruled: Any, best: tuple[float, ...], half: float,
-                    keep: list[float] | None = None, free: tuple[float, ...] | None = None) -> dict[str, Any] | None:
+                    keep: list[float] | None = None, free: tuple[float, ...] | None = None,
+                    last: bool = False) -> dict[str, Any] | None:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
         (the previous design's answer `keep` included; `free` when the caller already has it: a design answered
         unbounded) and its chance when the bound moved it (None when not), and whether the answer is `keep`
-        ("kept"); None when no flight near the design failed."""
-        options = answer_options(self.settings, half, keep)
+        ("kept"); None when no flight near the design failed (`last`: the run's last design)."""
+        options = answer_options(self.settings, half, keep, last)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None

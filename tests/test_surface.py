@@ -765,6 +765,48 @@ def test_a_face_answer_stays_where_the_wider_flights_reject_the_quadratic():
         assert open_faces(box, narrow)[0] and wide == narrow
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_a_face_answer_near_a_bound_is_answered_up_to_the_bound(seed):
+    """`widen_bound`: a cost still falling at the top of kp's range (its minimum beyond it, 2 % a flight), flown by
+    a wide design and a narrow last one whose face kp 0.9 lies one half-width below the bound: the refit over the
+    wider flights answers the bound kp 1, which the narrow box stopped short of; within 0.5 half-widths it stays on
+    the face, and a face farther from the bound than the given half-widths stays too."""
+    rng = random.Random(seed)
+
+    def flown(centre, half_last):
+        points = {}
+        for half in (0.25, half_last):
+            for p in design(centre, half):
+                c = 1.0 + 2.0 * (p[0] - 1.15) ** 2 + 2.0 * (p[1] - 0.45) ** 2
+                points.setdefault(tuple(p), []).extend(c * (1.0 + 0.02 * rng.gauss(0, 1)) for _ in range(2))
+        return points
+
+    pool = _pool(0.02)
+    near = flown((0.8, 0.45), 0.1)  # the last box kp 0.7-0.9: its face one half-width below the bound
+    box = [(0.7, 0.9), (0.35, 0.55)]
+    inside = answer(near, box, (), pool)
+    assert inside[0][0] == pytest.approx(0.9) and inside[1].endswith("refitted wider")  # the face, refitted in the box
+    up, how = answer(near, box, (), pool, widen_bound=2.0)
+    assert up[0] == pytest.approx(1.0) and how.endswith("refitted wider") and abs(up[1] - 0.45) < 0.1
+    assert answer(near, box, (), pool, widen_bound=0.5) == inside
+    far = flown((0.5, 0.45), 0.1)  # the last box kp 0.4-0.6: its face four half-widths below the bound
+    box = [(0.4, 0.6), (0.35, 0.55)]
+    stays = answer(far, box, (), pool)
+    assert stays[0][0] == pytest.approx(0.6) and stays[1].endswith("refitted wider")
+    assert answer(far, box, (), pool, widen_bound=2.0) == stays
+
+
+def test_only_the_last_design_answers_up_to_a_bound():
+    """`design_widen_bound` moves the run's answer, after which nothing flies: an earlier design's face answer
+    already moves the next design (centred on it, as wide), which a jump to the bound would send elsewhere."""
+    from mavtune.config import Tuning
+    from mavtune.tuner import answer_options
+
+    s = Tuning().settings(space=SPACE)
+    assert answer_options(s, 0.2, last=True)["widen_bound"] == 2.0 and "widen_bound" not in answer_options(s, 0.2)
+    assert "widen_bound" not in answer_options(Tuning(design_widen_bound=0).settings(space=SPACE), 0.2, last=True)
+
+
 def _spoiled_bowl(seed: int, outliers: float, spoiled: float = 0.05):
     """A noisy 2-gain bowl (8 % a flight, coupled, its minimum drawn from the seed) whose flights are spoiled one in
     twenty (`spoiled`) by something other than the gains (three times the cost), tuned with the defaults and

@@ -57,6 +57,8 @@ def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mappin
                         for n, (lo, hi) in d.box.items())
         answer = ", ".join(f"{U.label(n, units)} {U.num(n, v, units)}" for n, v in d.answer.items())
         how = how_text(d.how)
+        if any(not lo - 1e-12 <= d.answer[n] <= hi + 1e-12 for n, (lo, hi) in d.box.items()):
+            how += "; beyond its box, on the range's bound the face lay near (design_widen_bound)"
         if d.open_face:
             how += f"; on its box's face inside the range ({', '.join(d.open_face)})"
         if d.moves:

@@ -420,7 +420,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            plane_level: float = PLANE_LEVEL, slope_level: float = 0.0, plane_inside: bool = False,
            risk: float | None = RISK, risk_reach: float | None = None,
            keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK,
-           widen: float = WIDEN_LEVEL) -> tuple[tuple[float, ...], str]:
+           widen: float = WIDEN_LEVEL, widen_bound: float = 0.0) -> tuple[tuple[float, ...], str]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
@@ -449,7 +449,9 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     the widest kernel of WIDE_REACHES whose quadratic the flights do not reject at that level (`_wide_reach`; 0:
     never), and answered inside the same box: a narrow design's flights resolve the curvature poorly (a noisy 3-gain
     bowl's near-zero eigenvalue sends the minimum to a face though the design is centred on the optimum), which the
-    wider designs' flights around it resolve wherever the cost is that quadratic."""
+    wider designs' flights around it resolve wherever the cost is that quadratic. `widen_bound`: where that face lies
+    within this many half-widths of a range's bound, the refit answers up to the bound (0: inside the box): an
+    optimum on an edge or in a corner of the ranges, which the narrow last design stopped short of."""
     from statistics import NormalDist
 
     import numpy as np
@@ -578,7 +580,10 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     out = np.clip(u * half + centre, lo, hi)
     wide = _wide_reach(x, y, counts[ok], cv, reach, widen) if widen and any(open_faces(box, out)) else None
     if wide is not None:
-        again, how = answer(points, box, worse, pool, power=power, reach=wide, log=log, cubic_level=cubic_level,
+        grown = [(0.0 if abs(v - a) < 1e-9 and a <= widen_bound * h else a,  # (a face within `widen_bound`
+                  1.0 if abs(v - b) < 1e-9 and 1.0 - b <= widen_bound * h else b)  # half-widths of a range's bound:
+                 for (a, b), v, h in zip(box, out, half)]  # the refit may answer up to that bound)
+        again, how = answer(points, grown, worse, pool, power=power, reach=wide, log=log, cubic_level=cubic_level,
                             plane_level=plane_level, slope_level=slope_level, plane_inside=plane_inside, risk=risk,
                             risk_reach=risk_reach or reach, keep=keep, keep_risk=keep_risk, widen=0.0)
         return again, f"{how}, refitted wider" if how else how
