@@ -42,6 +42,18 @@ def how_text(how: str) -> str:
                    if how.endswith(WIDER) else "")
 
 
+def how_line(d: Any) -> str:
+    """How design `d` reached its answer, and where that lies against its box, in words."""
+    how = how_text(d.how)
+    if any(not lo - 1e-12 <= d.answer[n] <= hi + 1e-12 for n, (lo, hi) in d.box.items()):
+        how += "; beyond its box, on the range's bound the face lay near (design_widen_bound)"
+    if d.open_face:
+        how += f"; on its box's face inside the range ({', '.join(d.open_face)})"
+    if d.moves:
+        how += "; the next design moved past that face"
+    return how
+
+
 def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mapping[str, float],
                     uncertainty: Mapping[str, Mapping[str, float]], space: Mapping[str, Sequence[float]],
                     out: Path | None, units: Mapping[str, GainUnit] | None = None) -> list[str]:
@@ -56,21 +68,14 @@ def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mappin
         box = ", ".join(f"{U.label(n, units)} {U.num(n, lo, units)}–{U.num(n, hi, units)}"
                         for n, (lo, hi) in d.box.items())
         answer = ", ".join(f"{U.label(n, units)} {U.num(n, v, units)}" for n, v in d.answer.items())
-        how = how_text(d.how)
-        if any(not lo - 1e-12 <= d.answer[n] <= hi + 1e-12 for n, (lo, hi) in d.box.items()):
-            how += "; beyond its box, on the range's bound the face lay near (design_widen_bound)"
-        if d.open_face:
-            how += f"; on its box's face inside the range ({', '.join(d.open_face)})"
-        if d.moves:
-            how += "; the next design moved past that face"
         name = f"{d.step + 1}" + (" (map, before the passes)" if d.before_passes and d.step == 0 else
                                   " (before the passes)" if d.before_passes else "")
         rows.append([name, f"{first}–{last}" if last > first else str(first), box, f"{d.half:.3g}",
-                     f"{d.points} ({d.flights})", answer, how])
+                     f"{d.points} ({d.flights})", answer, how_line(d)])
     last = designs[-1]
     same = all(abs(as_float(final.get(n, math.nan)) - v) <= 1e-12 * max(1.0, abs(v)) for n, v in last.answer.items())
-    lead = (f"The run's answer is design {last.step + 1}'s, {how_text(last.how)}"
-            + ("." if last.surrounded else ", on its box's face inside the range: the optimum may lie beyond it.")
+    lead = (f"The run's answer is design {last.step + 1}'s: {how_line(last)}"
+            + ("." if last.surrounded else ": the optimum may lie beyond it.")
             if same else f"The run's answer is not design {last.step + 1}'s answer: it was chosen after the designs "
             "(see Answer).")
     parts = ["## Designs", "", lead + " Each design flew a box of gains (its half-width a share of each range) and "
@@ -103,7 +108,7 @@ def flown(rounds: Sequence[Any], names: Sequence[str]) -> list[tuple[tuple[float
     points = by_gains(({n: as_float((f.gains or {}).get(n)) for n in names}, f) for r in rounds for f in r.flights
                       if f.status is not Status.LOST)
     out = []
-    for key, (gains, flights) in points.items():
+    for gains, flights in points.values():
         costs = [as_float(f.cost) for f in flights]
         finite = [c for c in costs if math.isfinite(c)]
         failed = any(f.status is Status.FAILED or not math.isfinite(as_float(f.cost)) for f in flights)

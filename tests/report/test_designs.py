@@ -66,7 +66,7 @@ def test_the_report_tabulates_and_draws_the_designs(noisy, tmp_path):
     assert len(rows) == len(noisy.designs)
     assert rows[0].startswith("| 1 (map, before the passes) |")
     last = noisy.designs[-1]
-    assert f"The run's answer is design {last.step + 1}'s" in section
+    assert f"The run's answer is design {last.step + 1}'s: " in section
     assert f"kp {last.answer['kp']:.4g}" in rows[-1] and f"kd {last.answer['kd']:.4g}" in rows[-1]
     assert f"![the designs]({DESIGNS_PNG})" in section and (tmp_path / DESIGNS_PNG).stat().st_size > 0
 
