@@ -46,7 +46,8 @@ def how_line(d: Any) -> str:
     """How design `d` reached its answer, and where that lies against its box, in words."""
     how = how_text(d.how)
     if any(not lo - 1e-12 <= d.answer[n] <= hi + 1e-12 for n, (lo, hi) in d.box.items()):
-        how += "; beyond its box, on the range's bound the face lay near (design_widen_bound)"
+        how = how.replace(" in its box", "", 1) + ("; answered beyond its box, on the range's bound that face lay "
+                                                   "near (design_widen_bound)")
     if d.open_face:
         how += f"; on its box's face inside the range ({', '.join(d.open_face)})"
     if d.moves:
