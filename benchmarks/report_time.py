@@ -1,9 +1,10 @@
 """Time to write a run report (report.md, tuning.png, designs.png, timeline.png), per section, for three run sizes.
 
 Runs: the default (2 vehicles), split over 8 vehicles, and 2 vehicles without reuse over 4 passes and no budget
-(the longest run: as many rounds as its line searches ask). Each run is flown once with the built-in simulator (not timed); then every report
-section is timed `--repeats` times, wall (perf_counter) and CPU (process_time) seconds, the median kept. The
-machine may be shared: the load average is printed beside the numbers; compare sections within one run.
+(the longest run: as many rounds as its line searches ask). Each run is flown once with the built-in simulator (not
+timed); then every report section is timed `--repeats` times, wall (perf_counter) and CPU (process_time) seconds,
+the median kept. The machine may be shared: the load average is printed beside the numbers; compare sections within
+one run.
 
     python benchmarks/report_time.py [--repeats 3]
 
@@ -14,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import io
-import json
 import os
 import platform
 import statistics
@@ -23,7 +23,6 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results"
 RUNS = {
     "2 vehicles (the default)": {},
     "8 vehicles, split": {"tuning.vehicles": 8, "tuning.strategy": "split"},
@@ -58,7 +57,7 @@ def time_sections(overrides: dict, repeats: int) -> dict:
 
 
 def main() -> None:
-    from common import cpu_model
+    from common import cpu_model, write_results
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
@@ -69,8 +68,6 @@ def main() -> None:
     data = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "cpu": cpu_model(),
             "repeats": args.repeats, "load_avg_before": load_before, "load_avg_after": load_after,
             "cpus": os.cpu_count(), "python": platform.python_version(), "runs": runs}
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "report_time.json").write_text(json.dumps(data, indent=2))
     lines = ["# Time to write a run report", "",
              f"{data['date']}, {data['cpu']}. Median of {args.repeats} writes per section; load average (1, 5, "
              f"15 min) {', '.join(f'{x:.1f}' for x in load_before)} before and "
@@ -83,8 +80,7 @@ def main() -> None:
         cells = [f"{r['sections'][n]['wall_s']:.2f} / {r['sections'][n]['cpu_s']:.2f}" for n in names]
         lines.append(f"| {run_name} | {r['rounds']} | " + " | ".join(cells) +
                      f" | {r['total']['wall_s']:.2f} / {r['total']['cpu_s']:.2f} |")
-    (RESULTS / "report_time.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_results("report_time", lines + [""], data)
 
 
 if __name__ == "__main__":

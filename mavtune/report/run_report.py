@@ -89,6 +89,11 @@ class Report:
         return search_views(self.result)
 
     @cached_property
+    def space(self) -> dict[str, Any]:
+        """Each tuned gain's range as the run's settings give it ({} without them)."""
+        return (getattr(self.result, "settings", None) or {}).get("space") or {}
+
+    @cached_property
     def uncertainty(self) -> dict[str, dict[str, float]]:
         return uncertainty(self.result)
 
@@ -268,8 +273,7 @@ def _tuning(rep: Report) -> list[str]:
         return tuning_section(rep.searches, None, units=rep.units)
     from mavtune.report.tuning_figure import MAX_ROWS, drawn_bootstraps, plot_tuning
 
-    space = (getattr(rep.result, "settings", None) or {}).get("space") or {}
-    plot_tuning(rep.searches, rep.gains, rep.uncertainty, space, vehicle_order(rep.rounds), rep.out / TUNING_PNG,
+    plot_tuning(rep.searches, rep.gains, rep.uncertainty, rep.space, vehicle_order(rep.rounds), rep.out / TUNING_PNG,
                 rep.units)
     shown = drawn_bootstraps(rep.searches)
     bootstraps = sorted({v.bootstrap for v in rep.searches})
@@ -281,9 +285,8 @@ def _tuning(rep: Report) -> list[str]:
 def _designs(rep: Report) -> list[str]:
     from mavtune.report.designs import designs_section
 
-    space = (getattr(rep.result, "settings", None) or {}).get("space") or {}
-    return designs_section(getattr(rep.result, "designs", None) or [], rep.rounds, rep.gains, rep.uncertainty, space,
-                           rep.out if rep.figures else None, rep.units)
+    return designs_section(getattr(rep.result, "designs", None) or [], rep.rounds, rep.gains, rep.uncertainty,
+                           rep.space, rep.out if rep.figures else None, rep.units)
 
 
 def _timeline(rep: Report) -> list[str]:
