@@ -36,7 +36,7 @@ class _Section(BaseModel):
 PAPER_TUNING: dict[str, Any] = {  # the paper's setting as [tuning] overrides (`mavtune reproduce` flies it)
     "tuning.method": "eql", "tuning.epsilon": 0.125, "tuning.bootstraps": 2, "tuning.reuse": False,
     "tuning.adaptive": False, "tuning.answer": "search", "tuning.initial": {"kd": 0.2}, "tuning.edges": False,
-    "tuning.design": False, "tuning.confirm": 0, "tuning.budget": "none"}
+    "tuning.design": False, "tuning.budget": "none"}
 
 
 BUDGET_TUNING: dict[str, Any] = {  # a fixed budget of flights, exact before take-off (issue 20; not the default)
@@ -64,7 +64,7 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.bootstraps": 2, "tuning.design_width": 0.15, "tuning.design_steps": 1, "tuning.design_shrink": 1.0,
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
-    "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.confirm": 0}
+    "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -145,8 +145,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
-                   "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "confirm",
-                   "budget")
+                   "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "budget")
 
 
 
@@ -306,11 +305,6 @@ class Tuning(_Section):
                                    "by something other than its gains (a gust, a bad take-off) — and left out of the "
                                    "design's fit (the run's noise keeps it), and said among the cautions (0: none; "
                                    "6 chosen on the zoo's select half, selection_outliers.md)")
-    confirm: StrictInt = Field(0, ge=0, le=100, description="flights of the run's answer after its last stage, "
-                                "and as many of its rival (the lowest-mean point flown twice without a failure), "
-                                "in the same rounds: the rival is handed out when one of the answer's flights "
-                                "failed and none of its own, or when its fresh mean lies a standard error below "
-                                "the answer's (0: the answer unflown; under a budget its flights are the budget's)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

@@ -39,8 +39,7 @@ MIN_REPORT_S = 0.1  # with less time than this left, the report is not begun
 MANY_VEHICLES = 8  # above this the per-round line summarises the vehicles instead of listing them
 
 
-ADDED_FIELDS = {"budget": "none", "design_widen": 0.0, "design_outliers": 0.0, "design_widen_bound": 0.0,
-                "confirm": 0}  # [tuning]
+ADDED_FIELDS = {"budget": "none", "design_widen": 0.0, "design_outliers": 0.0, "design_widen_bound": 0.0}  # [tuning]
 # fields added since runs were first saved, each with the value a run folder without it flew (no budget; no refit of
 # a face answer before session 19; no outlier flights left out before session 20; the refit inside the box before
 # session 22), so that it resumes
@@ -200,8 +199,8 @@ def round_line(rnd: Round) -> str:
                 f"{counted(len(rnd.flights), 'vehicle')}" + (f", [yellow]{lost} lost[/]" if lost else "")
                 + (f", [red]{failed} failed[/]" if failed else ""))
     tag = " (journal)" if rnd.replayed else ""
-    where = f" in [{lo:.4g}, {hi:.4g}]" if hi > lo else ""  # (none for the answer's confirmation)
-    return f"[dim]round {rnd.index:>3}[/] bootstrap {rnd.bootstrap} {rnd.gain}{where}  {each}  {mean}{tag}"
+    return (f"[dim]round {rnd.index:>3}[/] bootstrap {rnd.bootstrap} {rnd.gain} in [{lo:.4g}, {hi:.4g}]  "
+            f"{each}  {mean}{tag}")
 
 
 def _cost_text(cost: float, status: Status) -> str:
@@ -305,8 +304,6 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console.print(f"tuned after {counted(len(result.rounds), 'round')}, {counted(result.flights, 'flight')} "
                   f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
     console.print(_result_table(result))
-    if result.confirmation is not None:
-        console.print(f"confirmation: {escape(result.confirmation.reason)}", highlight=False)
     for line in result.cautions():
         console.print(f"[yellow]caution:[/] {escape(line)}", highlight=False)
     print_outcome(console, outcome)

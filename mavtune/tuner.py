@@ -46,10 +46,7 @@ INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, 
                  "the tolerance after its last line search and no design flew after it")
 DIRECTION = "direction"  # the `gain` of a round of a line search across the gains (all gains at once)
 SURFACE = "design"  # the `gain` of a round of the response surface's design (all gains at once)
-CONFIRM = "confirm"  # the `gain` of a round that flies the run's answer and its rival (`Tuner._confirm`)
-CONFIRM_Z = 1.0  # standard errors by which the rival's confirmation flights must beat the answer's to replace it
 MAX_DESIGN_REPEATS = 100
-MAX_CONFIRM = 100  # flights of the answer (and as many of its rival) after the run's last stage
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 MAX_ROUNDS_WITHOUT_A_COST = 10  # rounds a run flies, none of whose flights measured a usable cost (every one failed or
 # was lost: a cost function that answers NaN, vehicles that cannot fly any gain), before it gives up: no gains to give
@@ -181,31 +178,6 @@ class DesignRecord:
 
 
 @dataclass
-class Confirmation:
-    """The answer's confirmation (`Tuner._confirm`): the answer and its rival (the run's lowest-mean flown point,
-    flown twice without a failure) flown again in the same rounds, their fresh flights' costs (a failed flight's
-    infinite), which was handed out and why, and the rounds (first and last, inclusive)."""
-
-    answer: Gains
-    rival: Gains | None
-    answer_costs: list[float]
-    rival_costs: list[float]
-    chosen: str  # "answer" or "rival"
-    reason: str
-    rounds: tuple[int, int]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"answer": self.answer, "rival": self.rival, "answer_costs": [_json_cost(c) for c in self.answer_costs],
-                "rival_costs": [_json_cost(c) for c in self.rival_costs], "chosen": self.chosen,
-                "reason": self.reason, "rounds": list(self.rounds)}
-
-
-def _json_cost(cost: float) -> float | None:
-    """A cost for JSON: a failed flight's infinite cost as null."""
-    return cost if math.isfinite(cost) else None
-
-
-@dataclass
 class TuningResult:
     """The outcome of a tuning run."""
 
@@ -223,7 +195,6 @@ class TuningResult:
     open_face: Gains = field(default_factory=dict)  # gains the last design answered on its box's face inside the range
     outliers: list[dict[str, Any]] = field(default_factory=list)  # flights the last design's fit left out: gains, cost
     designs: list[DesignRecord] = field(default_factory=list)  # the response surface's designs in the order flown
-    confirmation: Confirmation | None = None  # the answer flown again against its rival (`confirm`)
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each (`caution_kinds` names them)."""
@@ -349,7 +320,6 @@ class TuningResult:
             "noise": self.noise,
             "searches": [s.to_dict() for s in self.searches],
             "designs": [d.to_dict() for d in self.designs],
-            "confirmation": self.confirmation.to_dict() if self.confirmation is not None else None,
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
         }
 
@@ -414,7 +384,6 @@ class Settings:
     design_widen: float = 0.0
     design_widen_bound: float = 0.0
     design_outliers: float = 0.0
-    confirm: int = 0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -504,9 +473,6 @@ class Settings:
         if not 0.0 <= float(self.design_outliers) <= 100.0:
             raise MavtuneError(f"design_outliers {self.design_outliers} is outside [0, 100]: robust noise sds off the "
                                "local fit and off its point's other flights that make a flight an outlier (0: none)")
-        if not 0 <= int(self.confirm) <= MAX_CONFIRM:
-            raise MavtuneError(f"confirm must be from 0 to {MAX_CONFIRM} flights of the answer (and as many of its "
-                               f"rival), got {self.confirm}")
         if self.wall_keep not in (True, False):
             raise MavtuneError(f"wall_keep must be true or false, got {self.wall_keep!r}")
         if self.design_split not in (True, False, "auto"):
@@ -518,7 +484,7 @@ class Settings:
     def _check_types(self) -> None:
         """Every count a whole number and every share or level a finite number, initial values included (one line
         naming the option: `tune(vehicles=2.5)` or `epsilon="0.1"` failed deep inside the run with a TypeError)."""
-        whole = ("vehicles", "max_bootstraps", "design_repeats", "design_steps", "confirm")
+        whole = ("vehicles", "max_bootstraps", "design_repeats", "design_steps")
         optional = ("bootstraps", "replicates", "points", "cap", "seed")
         for name in whole + optional:
             v = getattr(self, name)
@@ -561,9 +527,9 @@ class Settings:
         fly (with `design_first` the first is flown before the passes)."""
         v, count = int(self.vehicles), self.design_count()
         if start >= count:
-            return self.confirm_flights()
+            return 0
         return (sum(math.ceil(self.design_flights(k) / v) * v for k in range(start, count - 1))
-                + self.design_flights(count - 1) + self.confirm_flights())
+                + self.design_flights(count - 1))
 
     def designs_before_passes(self) -> int:
         """Designs flown before the passes over the gains (`design_first`: true is the first one, a number that
@@ -590,12 +556,12 @@ class Settings:
     def design_share(self, step: int, left: int) -> int:
         """budget: the flights of design `step` when `left` flights of the budget remain as it starts: its own
         flights in whole rounds and an even share of the rest over the designs still to come, in whole rounds;
-        the last design flies all that remains but the answer's confirmation (the budget exactly)."""
+        the last design flies all that remains (the budget exactly)."""
         count, v = self.design_count(), int(self.vehicles)
         if step >= count - 1:
-            return left - self.confirm_flights()
+            return left
         own = [math.ceil(self.design_flights(k) / v) * v for k in range(step, count)]
-        extra = max(0, left - sum(own[:-1]) - self.design_flights(count - 1) - self.confirm_flights())
+        extra = max(0, left - sum(own[:-1]) - self.design_flights(count - 1))
         return own[0] + extra // (count - step) // v * v
 
     def search(self, lo: float, hi: float, pool: NoisePool | None = None, edges: bool | None = None) -> LineSearch:
@@ -609,19 +575,10 @@ class Settings:
         """The rounds a run of these settings takes at the least: every line search's budget of evaluations,
         as many a round as the strategy has slots, per gain and bootstrap (one, for the paper's stop rule)."""
         if self.budget is not None:
-            return math.ceil((int(self.budget) - self.confirm_flights()) / int(self.vehicles)) + self.confirm_rounds()
+            return math.ceil(int(self.budget) / int(self.vehicles))
         rounds = math.ceil(self.search(0.0, 1.0, edges=False).budget() / self.strategy_rule.slots(int(self.vehicles)))
         passes = self.bootstraps if self.bootstraps is not None else 1
-        return (rounds * len(self.space) * passes + self.design_rounds()  # (a line search across the gains may be
-                + self.confirm_rounds())  # skipped)
-
-    def confirm_flights(self) -> int:
-        """Flights of the answer's confirmation (`confirm` of the answer, as many of its rival: `Tuner._confirm`)."""
-        return 2 * int(self.confirm)
-
-    def confirm_rounds(self, vehicles: int | None = None) -> int:
-        """Rounds of `vehicles` (the settings' by default) the answer's confirmation takes (0 without)."""
-        return math.ceil(self.confirm_flights() / int(vehicles or self.vehicles))
+        return rounds * len(self.space) * passes + self.design_rounds()  # (a line search across the gains may be skipped)
 
     def design_flights(self, step: int = 0) -> int:
         """Flights of design `step` (0: the first): its points, each flown `design_repeats` times by as many vehicles
@@ -704,8 +661,7 @@ class Settings:
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
-            if self.design else {}) | ({"confirm": int(self.confirm)} if self.confirm else {}) | (
-            {"budget": int(self.budget)} if self.budget is not None else {})
+            if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
 
 def answer_options(s: Settings, half: float, keep: list[float] | None = None,
@@ -771,7 +727,6 @@ class Tuner:
         # its answer, and whether a flight failed within its half-width of the answer (`_shrink`)
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
         self._shares: list[tuple[LineSearch, int, int]] = []  # budget: each line search, flights before it, its share
-        self.confirmation: Confirmation | None = None  # the answer flown again against its rival (`_confirm`)
 
     @property
     def designed(self) -> Gains:
@@ -793,7 +748,7 @@ class Tuner:
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
                             designed=self.designed, divergence=self.divergence, open_face=dict(self.open_face),
-                            outliers=list(self.outliers), designs=list(self.designs), confirmation=self.confirmation)
+                            outliers=list(self.outliers), designs=list(self.designs))
 
     def _record(self, bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason (and the range
@@ -902,79 +857,7 @@ class Tuner:
                 half *= self._shrink()
         if not self._usable:
             self._no_cost()
-        if s.confirm:
-            self._confirm()
         return self.snapshot()
-
-    def _confirm(self) -> None:
-        """Fly the run's answer again, `confirm` times, and as many times its rival: the lowest-mean point flown at
-        least twice without a failure (`_rival`), in the same rounds, each vehicle on each in turn (a fit's minimum
-        nobody flew is handed out only once flown; a fit misled by a steep side or a wall is caught by flights).
-        The rival replaces the answer when an answer's flight failed and none of the rival's did, or when the
-        rival's fresh mean lies `CONFIRM_Z` standard errors (the run's pooled noise) below the answer's; its
-        earlier flights, chosen for their low mean, are not counted. Under a budget the confirmation's flights are
-        its own (`Settings.confirm_flights`)."""
-        s, names = self.settings, list(self.settings.space)
-        answer, rival = dict(self.gains), self._rival()
-        pair = [answer, rival] if rival is not None else [answer]
-        costs: list[list[float]] = [[] for _ in pair]
-        first, left = len(self.rounds), s.confirm_flights()
-        while left > 0:
-            vehicles = min(self._next_vehicles(), left)
-            if vehicles < 1:
-                raise MavtuneError(f"no vehicle is available to fly round {len(self.rounds)}")
-            turn = len(self.rounds) - first
-            which = [(j + turn) % len(pair) for j in range(vehicles)]
-            flights = self._fly([dict(pair[k]) for k in which], self.bootstrap, CONFIRM, (0.0, 0.0))
-            left -= vehicles
-            for k, f in zip(which, flights):
-                if f.measured:
-                    cost = f.cost if f.usable else math.inf
-                    costs[k].append(cost)
-                    if math.isfinite(cost):
-                        self.pool.add((CONFIRM, tuple(pair[k][n] for n in names)), cost)
-        chosen, reason = self._duel(costs[0], costs[1] if rival is not None else [])
-        if chosen == "rival":
-            self.gains, self.divergence = dict(rival), None
-        self.confirmation = Confirmation(answer, rival, costs[0], costs[1] if rival is not None else [], chosen,
-                                         reason, (first, len(self.rounds) - 1))
-
-    def _rival(self) -> Gains | None:
-        """The answer's rival: the run's lowest-mean point flown at least twice, none of its flights failed, other
-        than the answer (None when there is none)."""
-        names = list(self.settings.space)
-        here = tuple(self.gains[n] for n in names)
-        twice = {k: c for k, c in self._flown().items() if len(c) >= 2 and all(map(math.isfinite, c))
-                 and any(abs(a - b) > 1e-12 for a, b in zip(k, here))}
-        if not twice:
-            return None
-        best = min(twice, key=lambda k: math.fsum(twice[k]) / len(twice[k]))
-        return dict(zip(names, best))
-
-    def _duel(self, answer: list[float], rival: list[float]) -> tuple[str, str]:
-        """Which of the answer and its rival the confirmation hands out (`_confirm`), and why, in one sentence."""
-        def mean(c: list[float]) -> float:
-            return math.fsum(c) / len(c)
-
-        a_failed, r_failed = (sum(not math.isfinite(c) for c in x) for x in (answer, rival))
-        if not answer:
-            return "answer", "no confirmation flight of the answer measured a cost: the answer stands unconfirmed"
-        if a_failed:
-            if rival and not r_failed:
-                return "rival", (f"{a_failed} of the answer's {len(answer)} confirmation flights failed and none of "
-                                 f"the rival's {len(rival)}: the rival is handed out")
-            return "answer", f"{a_failed} of the answer's {len(answer)} confirmation flights failed"
-        if not rival or r_failed:
-            return "answer", f"the answer flew {len(answer)} times, mean cost {mean(answer):.4g}" + (
-                f"; {r_failed} of the rival's flights failed" if r_failed else "")
-        cv = self.pool.cv
-        m_a, m_r = mean(answer), mean(rival)
-        se = cv * math.sqrt(m_a * m_a / len(answer) + m_r * m_r / len(rival)) if math.isfinite(cv) else math.nan
-        said = (f"the answer's {len(answer)} flights mean {m_a:.4g}, the rival's {len(rival)} mean {m_r:.4g}"
-                + (f" (difference's standard error {se:.2g})" if math.isfinite(se) else ""))
-        if math.isfinite(se) and m_r < m_a - CONFIRM_Z * se:
-            return "rival", f"{said}: the rival is lower by more than {CONFIRM_Z:g} standard error and is handed out"
-        return "answer", f"{said}: the answer stands"
 
     def _no_cost(self) -> None:
         """Refuse to answer a run none of whose flights measured a usable cost: every gain it would hand out failed

@@ -182,18 +182,10 @@ def candidates() -> list[Method]:
             Method("default, the vehicles of a round on distinct points (strategy split)", {"strategy": "split"}),
             Method("default without the outlier rule (design_outliers = 0: before session 20)",
                    {"design_outliers": 0.0}),
-            Method(BEFORE_BOUND, {"design_widen_bound": 0.0}),
-            *confirmed()]
+            Method(BEFORE_BOUND, {"design_widen_bound": 0.0})]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
-
-
-def confirmed() -> list[Method]:
-    """Today's default with the answer flown again against its rival at the end, from the same budget (`confirm`,
-    session 23)."""
-    return [Method(f"default, the answer confirmed ({c} flights of it, {c} of its rival)", {"confirm": c})
-            for c in (2, 4)]
 
 
 def split_designs() -> list[Method]:

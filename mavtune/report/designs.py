@@ -78,7 +78,7 @@ def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mappin
     lead = (f"The run's answer is design {last.step + 1}'s: {how_line(last)}"
             + ("." if last.surrounded else ": the optimum may lie beyond it.")
             if same else f"The run's answer is not design {last.step + 1}'s answer: it was chosen after the designs "
-            "(see Confirmation and Answer).")
+            "(see Answer).")
     parts = ["## Designs", "", lead + " Each design flew a box of gains (its half-width a share of each range) and "
              "fitted the cost to the run's flights near it (a quadratic in every gain; a cubic where the flights "
              "reject it, a plane where they need no curvature); the next design narrowed around an answer its box "

@@ -289,12 +289,6 @@ def _designs(rep: Report) -> list[str]:
                            rep.space, rep.out if rep.figures else None, rep.units)
 
 
-def _confirmation(rep: Report) -> list[str]:
-    from mavtune.report.confirmation import confirmation_section
-
-    return confirmation_section(getattr(rep.result, "confirmation", None), rep.units)
-
-
 def _timeline(rep: Report) -> list[str]:
     parts = ["## Timeline", ""]
     if not rep.rounds:
@@ -350,8 +344,7 @@ def _tuned_params(rep: Report) -> list[str]:
 
 
 SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _line_searches, _tuned_params,
-                                                  _plan_vs_actual, _tuning, _designs, _confirmation,
-                                                  _timeline, _cost_surface, _rounds,
+                                                  _plan_vs_actual, _tuning, _designs, _timeline, _cost_surface, _rounds,
                                                   _points, _fleet_events]
 
 
