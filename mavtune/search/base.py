@@ -226,7 +226,7 @@ class LineSearch(ABC):
 
     def vertex(self) -> Vertex:
         """The answer with its standard error from the fit (NaN for the method's own answer), always inside the
-        span flown without failure on this side of any failed point (`flown_span`): never a gain nobody flew."""
+        span flown without failure on this side of any failed point (`flown_span`): never a gain outside those flown."""
         if not self.done:
             raise MavtuneError(f"{self.name} search is not finished yet")
         state = self._state
