@@ -85,6 +85,8 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "wider refit answering up to a range's bound within 2 half-widths of its face": {"widen_bound": 2.0},
     "wider refit answering up to a range's bound within 3 half-widths of its face": {"widen_bound": 3.0},
     "wider refit answering up to a range's bound within 4 half-widths of its face": {"widen_bound": 4.0},
+    "bagged: the median answer of 15 bootstrap resamples of the flights": {"widen_bound": 2.0, "bag": 15},
+    "bagged: the median answer of 40 bootstrap resamples of the flights": {"widen_bound": 2.0, "bag": 40},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -244,7 +246,33 @@ def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, An
         points, _ = surface.inliers(points, box, sds)
     if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
         given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
-    return list(surface.answer(points, box, surface.ruled_out(points, pool or NoisePool()), pool, **given)[0])
+    bag = given.pop("bag", 0)
+    worse = surface.ruled_out(points, pool or NoisePool())
+    if bag:
+        return list(bagged(points, box, worse, pool, bag, given))
+    return list(surface.answer(points, box, worse, pool, **given)[0])
+
+
+def bagged(points, box, worse, pool, draws: int, options: dict[str, Any]) -> tuple[float, ...]:
+    """The coordinate-wise median of the answers to `draws` bootstrap resamples of the finite flights (the failed
+    ones kept: walls), the answer itself where the median's nearest flown point failed."""
+    from mavtune.search import surface
+
+    rng = np.random.default_rng(draws)
+    flights = [(k, c) for k, cs in points.items() for c in cs if math.isfinite(c)]
+    walls = {k: [c for c in cs if not math.isfinite(c)] for k, cs in points.items()}
+    answers = []
+    for _ in range(draws):
+        pts = {k: list(v) for k, v in walls.items() if v}
+        for i in rng.integers(0, len(flights), len(flights)):
+            pts.setdefault(flights[i][0], []).append(flights[i][1])
+        answers.append(surface.answer(pts, box, worse, pool, **options)[0])
+    x = tuple(float(v) for v in np.median(np.array(answers), axis=0))
+    keys = list(points)
+    nearest = keys[int(np.argmin([sum((a - b) ** 2 for a, b in zip(k, x)) for k in keys]))]
+    if not all(map(math.isfinite, points[nearest])):
+        return surface.answer(points, box, worse, pool, **options)[0]
+    return x
 
 
 def replay_summary(base: list[dict[str, Any]], rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -289,7 +317,9 @@ def markdown(doc: dict[str, Any]) -> str:
                   "Each run's last response-surface answer recomputed with `surface.answer`'s options on the run's "
                   "own flights (exact for the default, whose one design's answer flies nothing after it; for "
                   "BUDGET_TUNING only the last of its three designs is replayed). Per cell: within 2 % (median "
-                  "excess %), and the paired sign test against the answer as flown: runs better–worse (p).", "",
+                  "excess %), and the paired sign test against "
+                  + (f"the variant \"{doc['meta']['against']}\"" if doc["meta"].get("against") else
+                     "the answer as flown") + ": runs better–worse (p).", "",
                   "| plant | configuration | as flown | " + " | ".join(names) + " |",
                   "| --- | --- | --- | " + " | ".join("---" for _ in names) + " |"]
         for p, per in doc["replay"].items():
@@ -322,8 +352,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                     "source hash (benchmarks/.cache/answer), flown by the code before a change of the answer; "
                     "nothing is flown")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated names of the variants replayed")
+    ap.add_argument("--against", default=None, metavar="VARIANT", help="the variant each replay is paired with "
+                    "(default: the answer as flown): today's answer replayed on flights of the engine before it")
     args = ap.parse_args(argv)
     variants = {n.strip(): VARIANTS.get(n.strip()) for n in args.variants.split(",") if n.strip()}
+    if args.against is not None and args.against not in VARIANTS:
+        ap.error(f"--against: unknown variant {args.against!r}; known: {', '.join(VARIANTS)}")
     if None in variants.values():
         ap.error(f"--variants: unknown {[n for n, v in variants.items() if v is None]}; known: {', '.join(VARIANTS)}")
     plants = [p.strip() for p in args.plants.split(",") if p.strip()]
@@ -368,6 +402,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             if args.replay:
                 flown = {lb: [{"plant": p, "run": sc["run"], "excess_pct": sc["answer_excess_pct"]} for sc in scs]
                          for lb, scs in runs[p].items()}
+                if args.against is not None:  # each replay paired with this variant's instead of the flown answer
+                    flown = {lb: replay(t, rs, VARIANTS[args.against], pm) for lb, rs in rows.items()}
                 replays[p] = {lb: {n: replay_summary(flown[lb], replay(t, rs, o, pm)) for n, o in variants.items()}
                               for lb, rs in rows.items()}
             for lb, s in table[p].items():
@@ -380,7 +416,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         argv if argv is not None else sys.argv[1:]), "half": args.half, "seeds": seeds, "commit": commit,
         "engine": engine, "answered_by": engine_hash(), "started_utc": started.isoformat(timespec="seconds"),
         "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "cpu_model": cpu_model(),
-        "cpus": os.cpu_count(), "workers": args.workers, "load_start": load0, "load_end": os.getloadavg()},
+        "cpus": os.cpu_count(), "workers": args.workers, "load_start": load0, "load_end": os.getloadavg(),
+        "against": args.against},
         "table": table, "runs": runs, "replay": replays}
     args.out.mkdir(parents=True, exist_ok=True)
     text = json.dumps(_clean(doc), indent=1)
