@@ -87,13 +87,12 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "wider refit answering up to a range's bound within 4 half-widths of its face": {"widen_bound": 4.0},
     "bagged: the median answer of 15 bootstrap resamples of the flights": {"widen_bound": 2.0, "bag": 15},
     "bagged: the median answer of 40 bootstrap resamples of the flights": {"widen_bound": 2.0, "bag": 40},
-    "fitted in the logarithm of each gain": {"widen_bound": 2.0, "log_gains": True},
-    "fitted in the logarithm of each gain where that quadratic fits the flights better": {
-        "widen_bound": 2.0, "log_gains": "select"},
-    "fitted in the logarithm of each gain where that quadratic fits the flights better by 4 noise variances": {
-        "widen_bound": 2.0, "log_gains": "select", "log_margin": 4.0},
-    "fitted in the logarithm of each gain where that quadratic fits the flights better by 16 noise variances": {
-        "widen_bound": 2.0, "log_gains": "select", "log_margin": 16.0},
+    "the last answer fitted in the logarithm of the gains where that fits better by 4 noise variances": {
+        "widen_bound": 2.0, "log_gains": 4.0},
+    "the last answer fitted in the logarithm of the gains where that fits better by 16 noise variances": {
+        "widen_bound": 2.0, "log_gains": 16.0},
+    "the last answer fitted in the logarithm of the gains where that fits better by 64 noise variances": {
+        "widen_bound": 2.0, "log_gains": 64.0},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
@@ -254,70 +253,12 @@ def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, An
     if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
         given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
     bag = given.pop("bag", 0)
-    scale, margin = given.pop("log_gains", False), given.pop("log_margin", 0.0)
-    if scale == "select":
-        scale = log_fits_better(row, points, box, margin * (call["cv"] or 0.0) ** 2)
-    if scale:
-        return list(log_answer(row, points, box, pool, given))
+    if given.get("log_gains"):  # (the engine's offsets: `tuner.answer_options`)
+        given["offsets"] = surface.log_offsets(list(PLANTS[row["plant"]].space.values()))
     worse = surface.ruled_out(points, pool or NoisePool())
     if bag:
         return list(bagged(points, box, worse, pool, bag, given))
     return list(surface.answer(points, box, worse, pool, **given)[0])
-
-
-LOG_FLOOR = 0.01  # a range from zero: the logarithm of the gain plus this share of the range
-
-
-def _log_map(row: dict[str, Any]):
-    """The maps from shares of each range to shares of its logarithm's range and back (`log_answer`)."""
-    plant = PLANTS[row["plant"]]
-    offsets = []
-    for g in plant.gains:
-        _, lo, hi = plant.units.get(g, ("", 0.0, 1.0))
-        offsets.append(lo / (hi - lo) if lo > 0 else LOG_FLOOR)
-    ends = [(math.log(o), math.log(1.0 + o)) for o in offsets]
-
-    def to_v(u):
-        return tuple((math.log(max(x, 0.0) + o) - a) / (b - a) for x, o, (a, b) in zip(u, offsets, ends))
-
-    def to_u(v):
-        return tuple(min(max(math.exp(a + y * (b - a)) - o, 0.0), 1.0) for y, o, (a, b) in zip(v, offsets, ends))
-    return to_v, to_u
-
-
-def log_fits_better(row: dict[str, Any], points, box, margin: float = 0.0) -> bool:
-    """Whether one quadratic in the logarithm of the gains fits the flights within a half-width of the last
-    design's box better than one in the gains, by more than `margin` (weighted residual sum of squares, each point
-    by its flights over its mean cost squared: the same number of coefficients, so the likelier model)."""
-    from mavtune.search.surface import _fit, _terms
-
-    to_v, _ = _log_map(row)
-    lo, hi = np.array([b[0] for b in box]), np.array([b[1] for b in box])
-    half = 0.5 * (hi - lo)
-    near = [(k, c) for k, c in points.items() if c and all(map(math.isfinite, c))
-            and np.all((np.array(k) >= lo - half - 1e-12) & (np.array(k) <= hi + half + 1e-12))]
-    d = len(box)
-    if len(near) < len(_terms(d, 2)) + 2:
-        return False
-    y = np.array([math.fsum(c) / len(c) for _, c in near])
-    w = np.array([len(c) for _, c in near], float) / np.maximum(y, 1e-9) ** 2
-    u = np.array([k for k, _ in near], float)
-    v = np.array([to_v(k) for k, _ in near], float)
-    return _fit(v, y, w, _terms(d, 2))[1] + margin < _fit(u, y, w, _terms(d, 2))[1]
-
-
-def log_answer(row: dict[str, Any], points, box, pool, options: dict[str, Any]) -> tuple[float, ...]:
-    """The answer fitted in the logarithm of each physical gain (its range from `Plant.units`, else [0, 1]; a range
-    from zero offset by LOG_FLOOR of it), each coordinate rescaled to [0, 1] over the range, mapped back."""
-    from mavtune.search import surface
-    from mavtune.search.evidence import NoisePool
-
-    to_v, to_u = _log_map(row)
-    vpoints = {to_v(k): c for k, c in points.items()}
-    vbox = [tuple(to_v([lo if j == i else 0.5 for j in range(len(box))])[i] for lo in pair)
-            for i, pair in enumerate(box)]
-    worse = surface.ruled_out(vpoints, pool or NoisePool())
-    return to_u(surface.answer(vpoints, vbox, worse, pool, **options)[0])
 
 
 def bagged(points, box, worse, pool, draws: int, options: dict[str, Any]) -> tuple[float, ...]:

@@ -64,7 +64,7 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.bootstraps": 2, "tuning.design_width": 0.15, "tuning.design_steps": 1, "tuning.design_shrink": 1.0,
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
-    "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0}
+    "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -145,7 +145,8 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
-                   "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "budget")
+                   "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "design_log",
+                   "budget")
 
 
 
@@ -305,6 +306,12 @@ class Tuning(_Section):
                                    "by something other than its gains (a gust, a bad take-off) — and left out of the "
                                    "design's fit (the run's noise keeps it), and said among the cautions (0: none; "
                                    "6 chosen on the zoo's select half, selection_outliers.md)")
+    design_log: float = Field(16.0, ge=0.0, le=1000.0, description="design: the last design's answer is fitted in "
+                              "the logarithm of the gains (each range's lower end over its width added, 1 % of "
+                              "the range for a range from zero) where one quadratic there fits the flights near "
+                              "its box better than one in the gains by more than this many noise variances: gains "
+                              "whose good values span decades, steep below the optimum and shallow above (0: "
+                              "never; 16 chosen on the zoo's select half, answer_diagnostic_log.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

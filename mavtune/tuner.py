@@ -30,8 +30,8 @@ from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    fly_away as surface_fly_away, inliers as surface_inliers, next_centre as surface_next_centre,
-    open_faces as surface_open_faces, ruled_out as surface_ruled_out, REACH,
+    fly_away as surface_fly_away, inliers as surface_inliers, log_offsets as surface_log_offsets,
+    next_centre as surface_next_centre, open_faces as surface_open_faces, ruled_out as surface_ruled_out, REACH,
 )
 from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
@@ -384,6 +384,7 @@ class Settings:
     design_widen: float = 0.0
     design_widen_bound: float = 0.0
     design_outliers: float = 0.0
+    design_log: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -470,6 +471,10 @@ class Settings:
             raise MavtuneError(f"design_widen_bound {self.design_widen_bound} is outside [0, 10]: half-widths of the "
                                "last design between its face and a range's bound within which the wider refit "
                                "answers up to that bound (0: inside the design's box)")
+        if not 0.0 <= float(self.design_log) <= 1000.0:
+            raise MavtuneError(f"design_log {self.design_log} is outside [0, 1000]: noise variances by which a "
+                               "quadratic in the logarithm of the gains must fit the last design's flights better "
+                               "for its answer to be taken (0: never)")
         if not 0.0 <= float(self.design_outliers) <= 100.0:
             raise MavtuneError(f"design_outliers {self.design_outliers} is outside [0, 100]: robust noise sds off the "
                                "local fit and off its point's other flights that make a flight an outlier (0: none)")
@@ -491,7 +496,8 @@ class Settings:
             if not (v is None and name in optional) and (isinstance(v, bool) or not isinstance(v, numbers.Integral)):
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
-                  "wall_span", "composite_reach", "design_widen", "design_widen_bound", "design_outliers")
+                  "wall_span", "composite_reach", "design_widen", "design_widen_bound", "design_outliers",
+                  "design_log")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -658,6 +664,7 @@ class Settings:
                         | ({"widen": float(self.design_widen)} if self.design_widen else {})
                         | ({"widen_bound": float(self.design_widen_bound)} if self.design_widen_bound else {})
                         | ({"outliers": float(self.design_outliers)} if self.design_outliers else {})
+                        | ({"log": float(self.design_log)} if self.design_log else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
@@ -670,13 +677,16 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
     in half-widths, `wall_keep` with the previous design's answer `keep`) and a composite design's kernel
     (`composite_reach`), each left out when off (the answer's defaults); the level of the wider refit of an
     answer on a face of the design (`design_widen`, 0: off), always given; and for the `last` design how near a
-    range's bound that refit answers up to it (`design_widen_bound`: the run's answer, after which nothing flies).
+    range's bound that refit answers up to it (`design_widen_bound`: the run's answer, after which nothing flies)
+    and by how much a quadratic in the logarithm of the gains must fit better to answer (`design_log`).
     (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
     reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
     return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
         {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {}) | {
         "widen": float(s.design_widen)} | (
-        {"widen_bound": float(s.design_widen_bound)} if last and s.design_widen_bound else {})
+        {"widen_bound": float(s.design_widen_bound)} if last and s.design_widen_bound else {}) | (
+        {"log_gains": float(s.design_log), "offsets": surface_log_offsets(list(s.space.values()))}
+        if last and s.design_log else {})
 
 
 class StageDone(Exception):

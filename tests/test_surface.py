@@ -876,3 +876,56 @@ def test_the_caution_names_the_flights_left_out():
     said = dict(result.caution_kinds())["outliers"]
     assert f"{len(result.outliers)} flight" in said and f"{max(f['cost'] for f in result.outliers):.3g}" in said
     assert result.to_dict()["outliers"] == result.outliers and set(result.outliers[0]["gains"]) == set(SPACE)
+
+
+def _decades(p) -> float:
+    """A cost quadratic in the logarithm of each gain's ratio to its best (kp 0.04, kd 0.15): steep below, shallow
+    above (the zoo's decades plant without its noise)."""
+    a, b = (math.log(max(v, 1e-3) / best) for v, best in zip(p, (0.04, 0.15)))
+    return 1.0 + 0.3 * a * a + 0.2 * b * b + 0.1 * a * b
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_gains_spanning_decades_are_answered_in_their_logarithm(seed):
+    """`log_gains`: a last design around kp 0.1, kd 0.2 on a cost quadratic in the logarithm of the gains (2 % a
+    flight): a quadratic in the gains answers on the shallow side, above kp 0.055; the one in their logarithm fits
+    the flights better by far more than 16 noise variances and answers within 0.012 of kp 0.04, kd 0.15 (the 2 %
+    region of the cost is kp 0.031-0.052). A cost quadratic in the gains keeps its answer."""
+    from mavtune.search.surface import LOGGED, log_offsets
+
+    rng = random.Random(seed)
+    offsets = log_offsets([(0.0, 1.0)] * 2)
+
+    def flown(cost):
+        points = {}
+        for half in (0.2, 0.08):
+            for p in design((0.1, 0.2), half):
+                q = tuple(min(max(v, 0.0), 1.0) for v in p)
+                points.setdefault(q, []).extend(cost(q) * (1.0 + 0.02 * rng.gauss(0, 1)) for _ in range(2))
+        return points
+
+    pool, box = _pool(0.02), [(0.02, 0.18), (0.12, 0.28)]
+    points = flown(_decades)
+    linear, how = answer(points, box, (), pool)
+    assert linear[0] > 0.055 and LOGGED not in how
+    logged, how = answer(points, box, (), pool, log_gains=16.0, offsets=offsets)
+    assert how.endswith(LOGGED) and abs(logged[0] - 0.04) < 0.012 and abs(logged[1] - 0.15) < 0.03
+    assert _decades(logged) < 1.02 < _decades(linear)
+    bowl = flown(lambda p: 1.0 + 3.0 * (p[0] - 0.09) ** 2 + 2.0 * (p[1] - 0.21) ** 2)
+    assert answer(bowl, box, (), pool, log_gains=16.0, offsets=offsets) == answer(bowl, box, (), pool)
+
+
+def test_only_the_last_design_is_answered_in_the_logarithm_of_the_gains():
+    """`design_log` gives the last design's answer the offsets of the settings' ranges (a range from above zero: its
+    own logarithm); off, or for an earlier design, nothing."""
+    from mavtune.config import Tuning
+    from mavtune.search.surface import LOG_FLOOR
+    from mavtune.tuner import answer_options
+
+    s = Tuning().settings(space={"kp": (0.0, 1.0), "kd": (2.0, 10.0)})
+    options = answer_options(s, 0.2, last=True)
+    assert options["log_gains"] == 16.0 and options["offsets"] == [LOG_FLOOR, 0.25]
+    assert "log_gains" not in answer_options(s, 0.2)
+    assert "log_gains" not in answer_options(Tuning(design_log=0).settings(space=SPACE), 0.2, last=True)
+    assert s.fingerprint()["design"]["log"] == 16.0
+    assert "log" not in Tuning(design_log=0).settings(space=SPACE).fingerprint()["design"]

@@ -167,8 +167,9 @@ def candidates() -> list[Method]:
     are today's default at the flight goals' budget, capped at the worst run's 112 flights (`capped`) and with its
     designs each point once (`split_designs`), today's default without session 19's wider refit of an answer on
     a design's face (`design_widen`), with the vehicles of a round on distinct points (strategy split, session 20),
-    without session 20's outlier flights left out of the designs' fits (`design_outliers`) and with the last
-    design's refit answered inside its box (`design_widen_bound`, before session 22)). The paper's setting
+    without session 20's outlier flights left out of the designs' fits (`design_outliers`), with the last
+    design's refit answered inside its box (`design_widen_bound`, before session 22) and with the last design's answer
+    in the gains alone (`design_log`, before session 23)). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -182,10 +183,12 @@ def candidates() -> list[Method]:
             Method("default, the vehicles of a round on distinct points (strategy split)", {"strategy": "split"}),
             Method("default without the outlier rule (design_outliers = 0: before session 20)",
                    {"design_outliers": 0.0}),
-            Method(BEFORE_BOUND, {"design_widen_bound": 0.0})]
+            Method(BEFORE_BOUND, {"design_widen_bound": 0.0, "design_log": 0.0}),
+            Method(BEFORE_LOG, {"design_log": 0.0})]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
+BEFORE_LOG = "default before session 23 (the last design's answer in the gains alone: design_log = 0)"
 
 
 def split_designs() -> list[Method]:

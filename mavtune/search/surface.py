@@ -68,6 +68,8 @@ PLANE_LEVEL = 0.2  # a plane replaces the quadratic where the flights do not rej
 GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the design's box (then polished)
 WIDEN_LEVEL = 0.2  # an answer on a face of the design inside the ranges: refit wider where the flights do not reject
 WIDE_REACHES = (6.0, 4.0, 3.0)  # the quadratic at this level, trying these kernel reaches (half-widths) widest first
+LOG_FLOOR = 0.01  # a range from zero (or below) is fitted in the logarithm of its gain plus this share of the range
+LOGGED = ", in the logarithm of the gains"  # (`answer`'s fit name: the fit in the logarithm of the gains answered)
 OUTLIER_SDS = 6.0  # an outlier flight lies this many robust noise sds off the local fit and (times √2) its replicates
 OUTLIER_REACH = 4.0  # the fit that tells an outlier spans this many half-widths of the design from its centre
 
@@ -420,7 +422,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            plane_level: float = PLANE_LEVEL, slope_level: float = 0.0, plane_inside: bool = False,
            risk: float | None = RISK, risk_reach: float | None = None,
            keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK,
-           widen: float = WIDEN_LEVEL, widen_bound: float = 0.0) -> tuple[tuple[float, ...], str]:
+           widen: float = WIDEN_LEVEL, widen_bound: float = 0.0, log_gains: float = 0.0,
+           offsets: Sequence[float] | None = None) -> tuple[tuple[float, ...], str]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
@@ -451,7 +454,21 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     bowl's near-zero eigenvalue sends the minimum to a face though the design is centred on the optimum), which the
     wider designs' flights around it resolve wherever the cost is that quadratic. `widen_bound`: where that face lies
     within this many half-widths of a range's bound, the refit answers up to the bound (0: inside the box): an
-    optimum on an edge or in a corner of the ranges, which the narrow last design stopped short of."""
+    optimum on an edge or in a corner of the ranges, which the narrow last design stopped short of. `log_gains`:
+    where one quadratic in the logarithm of the gains (`LogGains`, each gain offset by its share of `offsets`) fits
+    the flights near the box better than one in the gains by more than this many noise variances, the answer is
+    that of the flights mapped there, mapped back (0: never): gains whose good values span decades, steep below the
+    optimum and shallow above, which a quadratic in the gains answers on the shallow side."""
+    if log_gains and offsets is not None:
+        scale = LogGains(offsets)
+        cv = pool.cv if pool is not None else math.nan
+        if math.isfinite(cv) and scale.fits_better(points, box, log_gains * cv * cv):
+            x, how = answer(scale.points(points), scale.box(box), {scale.to(k) for k in worse}, pool, power=power,
+                            reach=reach, log=log, cubic_level=cubic_level, plane_level=plane_level,
+                            slope_level=slope_level, plane_inside=plane_inside, risk=risk, risk_reach=risk_reach,
+                            keep=None if keep is None else scale.to(keep), keep_risk=keep_risk, widen=widen,
+                            widen_bound=widen_bound)
+            return scale.back(x), how + LOGGED if how else how
     from statistics import NormalDist
 
     import numpy as np
@@ -588,6 +605,58 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
                             risk_reach=risk_reach or reach, keep=keep, keep_risk=keep_risk, widen=0.0)
         return again, f"{how}, refitted wider" if how else how
     return tuple(float(v) for v in out), kind
+
+
+class LogGains:
+    """Shares of each gain's range mapped to shares of its logarithm's range and back: v = (log(u + o) − log o) /
+    (log(1 + o) − log o), with o the gain's offset (`log_offsets`: its range's lower end over its width, the
+    logarithm of the gain itself; LOG_FLOOR for a range from zero or below)."""
+
+    def __init__(self, offsets: Sequence[float]):
+        self.offsets = [float(o) for o in offsets]
+        self.ends = [(math.log(o), math.log(1.0 + o)) for o in self.offsets]
+
+    def to(self, u: Sequence[float]) -> tuple[float, ...]:
+        return tuple((math.log(max(x, 0.0) + o) - a) / (b - a) for x, o, (a, b) in zip(u, self.offsets, self.ends))
+
+    def back(self, v: Sequence[float]) -> tuple[float, ...]:
+        return tuple(min(max(math.exp(a + y * (b - a)) - o, 0.0), 1.0)
+                     for y, o, (a, b) in zip(v, self.offsets, self.ends))
+
+    def points(self, points: Mapping[tuple[float, ...], Sequence[float]]) -> dict[tuple[float, ...], Sequence[float]]:
+        return {self.to(k): c for k, c in points.items()}
+
+    def box(self, box: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
+        return [tuple(self.to([e] * len(box))[i] for e in pair) for i, pair in enumerate(box)]
+
+    def fits_better(self, points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+                    margin: float) -> bool:
+        """Whether one quadratic in the logarithm of the gains fits the flights within a half-width of `box` better
+        than one in the gains by more than `margin` (the weighted residual sums of squares of the same number of
+        coefficients, each point by its flights over its mean cost squared: relative noise)."""
+        import numpy as np
+
+        lo, hi = np.array([b[0] for b in box], float), np.array([b[1] for b in box], float)
+        half = 0.5 * (hi - lo)
+        near = [(k, c) for k, c in points.items() if c and all(map(math.isfinite, c))
+                and np.all((np.asarray(k) >= lo - half - 1e-12) & (np.asarray(k) <= hi + half + 1e-12))]
+        square = _terms(len(box), 2)
+        if len(near) < len(square) + 2:
+            return False
+        y = np.array([math.fsum(c) / len(c) for _, c in near])
+        w = np.array([len(c) for _, c in near], float) / np.maximum(np.abs(y), 1e-9) ** 2
+        try:
+            (_, linear), (_, logged) = (_fit(np.array(x, float), y, w, square)
+                                        for x in ([k for k, _ in near], [self.to(k) for k, _ in near]))
+        except np.linalg.LinAlgError:
+            return False
+        return logged + margin < linear
+
+
+def log_offsets(space: Sequence[tuple[float, float]]) -> list[float]:
+    """Each gain's offset for `LogGains`: its range's lower end over its width (the logarithm of the gain itself),
+    LOG_FLOOR for a range from zero or below."""
+    return [lo / (hi - lo) if lo > 0 else LOG_FLOOR for lo, hi in space]
 
 
 def _wide_reach(x, y, n, cv: float, reach: float, level: float) -> float | None:
