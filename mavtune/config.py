@@ -163,7 +163,8 @@ class Tuning(_Section):
     quadratic; fitted again over the wider designs' flights too where its minimum lies on a face of the design
     inside the ranges and the flights do not reject that wider quadratic: `design_widen`, since session 19, and in
     the last design answered up to a range's bound within two half-widths of that face: `design_widen_bound`, since
-    session 22; without
+    session 22; the last design's in the logarithm of the gains where a quadratic there fits its flights better by 16
+    noise variances: `design_log`, since session 23; without
     the flights that their replicates and their neighbours both put far off, spoiled by something other than the
     gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
