@@ -42,6 +42,10 @@ resolve the curvature poorly (benchmarks/results/selection_widen.md).
 Before the fit, a flight spoiled by something other than its gains (a gust front, a bad take-off) is left out where
 both its own point's other flights and the quadratic through its neighbours disown it (`inliers`;
 benchmarks/results/selection_outliers.md).
+Where one quadratic in the logarithm of the gains fits the flights near the box better than one in the gains (by a
+margin of noise variances, `log_gains`), the answer is fitted there (`LogGains`): a gain whose good values span
+decades costs as the logarithm of its ratio to its best, and a quadratic in the gain answers on its shallow side
+(benchmarks/results/answer_diagnostic_log.md).
 """
 
 from __future__ import annotations
