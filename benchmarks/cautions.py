@@ -31,7 +31,7 @@ from quality import _git_commit, _init_worker, engine_hash  # noqa: E402
 from zoo.methods import Method, tune_run  # noqa: E402
 from zoo.truth import WITHIN_PCT  # noqa: E402
 
-KINDS = ("moving", "wide", "stale", "beside failure", "open face", "divergence",
+KINDS = ("moving", "wide", "stale", "beside failure", "open face", "log scale", "divergence",
          "cost at zero", "outliers")  # TuningResult.caution_kinds
 
 

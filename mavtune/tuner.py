@@ -29,7 +29,7 @@ from mavtune.search.interval import (
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
-    answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
+    LOGGED as SURFACE_LOGGED, answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
     fly_away as surface_fly_away, inliers as surface_inliers, log_offsets as surface_log_offsets,
     next_centre as surface_next_centre, open_faces as surface_open_faces, ruled_out as surface_ruled_out, REACH,
 )
@@ -204,7 +204,8 @@ class TuningResult:
         """Each caution as (kind, line): an answer still moving between bootstraps by more than the search's
         tolerance ("moving"), an interval spanning most of its range ("wide"), a gain whose last line search held
         the others more than half the tolerance from where they ended ("stale"), an answer next to a flight that
-        failed ("beside failure"), a last design that answered on its box's face inside the range ("open face"),
+        failed ("beside failure"), a last design that answered on its box's face inside the range ("open face") or in
+        the logarithm of the gains ("log scale"),
         the answer's fitted divergence chance where flights near it diverged ("divergence"), flights that measured
         a cost at or below zero ("cost at zero"), flights the last design's fit left out as spoiled ("outliers")."""
         out: list[tuple[str, str]] = []
@@ -258,6 +259,11 @@ class TuningResult:
             say("open face", f"the last design answered {faces} on the edge of the box it flew, inside the range: "
                 "it did not surround its answer, so the optimum may lie beyond (a design around the answer, or a "
                 "larger budget, would tell)")
+        if designed and self.designs and self.designs[-1].how.endswith(SURFACE_LOGGED):
+            say("log scale", "the last design's flights fit a quadratic in the logarithm of the gains better than one "
+                "in the gains, and the answer is that fit's: gains whose good values span decades (the cost steep "
+                "below the optimum, shallow above); the map and the line searches stepped through the ranges evenly, "
+                "so giving such a gain as its logarithm (api.md) or a narrower range would search it finer")
         if self.outliers and designed:
             worst = max(self.outliers, key=lambda f: f["cost"])
             at = ", ".join(f"{n} {v:.4g}" for n, v in worst["gains"].items())

@@ -929,3 +929,18 @@ def test_only_the_last_design_is_answered_in_the_logarithm_of_the_gains():
     assert "log_gains" not in answer_options(Tuning(design_log=0).settings(space=SPACE), 0.2, last=True)
     assert s.fingerprint()["design"]["log"] == 16.0
     assert "log" not in Tuning(design_log=0).settings(space=SPACE).fingerprint()["design"]
+
+
+def test_a_run_answered_in_the_logarithm_of_its_gains_says_so():
+    """A run on a cost quadratic in the logarithm of the gains (8 % lognormal noise, the zoo's decades plant) whose
+    last design answered in their logarithm cautions "log scale", naming the remedy; the simulator's default run,
+    answered in its gains, does not."""
+    def cost(gains, context):
+        return [_decades((g["kp"], g["kd"])) * math.exp(0.08 * random.Random(c.seed).gauss(0, 1))
+                for g, c in zip(gains, context)]
+
+    result = mavtune.tune(cost, space=SPACE, seed=0, draws=0)
+    assert result.designs[-1].how.endswith(", in the logarithm of the gains")
+    line = dict(result.caution_kinds())["log scale"]
+    assert "logarithm (api.md)" in line and "narrower range" in line
+    assert "log scale" not in dict(mavtune.tune(draws=0).caution_kinds())
