@@ -87,12 +87,8 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "wider refit answering up to a range's bound within 4 half-widths of its face": {"widen_bound": 4.0},
     "bagged: the median answer of 15 bootstrap resamples of the flights": {"widen_bound": 2.0, "bag": 15},
     "bagged: the median answer of 40 bootstrap resamples of the flights": {"widen_bound": 2.0, "bag": 40},
-    "the last answer fitted in the logarithm of the gains where that fits better by 4 noise variances": {
-        "widen_bound": 2.0, "log_gains": 4.0},
-    "the last answer fitted in the logarithm of the gains where that fits better by 16 noise variances": {
-        "widen_bound": 2.0, "log_gains": 16.0},
-    "the last answer fitted in the logarithm of the gains where that fits better by 64 noise variances": {
-        "widen_bound": 2.0, "log_gains": 64.0},
+    **{f"the last answer fitted in the logarithm of the gains where that fits better by {m} noise variances": {
+        "widen_bound": 2.0, "log_gains": float(m)} for m in (4, 16, 64)},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]

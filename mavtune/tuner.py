@@ -29,8 +29,8 @@ from mavtune.search.interval import (
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
-    LOGGED as SURFACE_LOGGED, answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    fly_away as surface_fly_away, inliers as surface_inliers, log_offsets as surface_log_offsets,
+    LOGGED as SURFACE_LOGGED, answer as surface_answer, beside_wall, coefficients as surface_coefficients,
+    design as surface_design, fly_away as surface_fly_away, inliers as surface_inliers, log_offsets as surface_log_offsets,
     next_centre as surface_next_centre, open_faces as surface_open_faces, ruled_out as surface_ruled_out, REACH,
 )
 from mavtune.search.risk import KEEP_RISK, RISK

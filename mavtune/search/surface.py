@@ -463,16 +463,18 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     the flights near the box better than one in the gains by more than this many noise variances, the answer is
     that of the flights mapped there, mapped back (0: never): gains whose good values span decades, steep below the
     optimum and shallow above, which a quadratic in the gains answers on the shallow side."""
+    # the fit's options that each refit below keeps (in the logarithm of the gains; over a wider kernel)
+    refit = {"power": power, "log": log, "cubic_level": cubic_level, "plane_level": plane_level,
+           "slope_level": slope_level, "plane_inside": plane_inside, "risk": risk, "keep_risk": keep_risk}
     if log_gains and offsets is not None:
         scale = LogGains(offsets)
         cv = pool.cv if pool is not None else math.nan
         if math.isfinite(cv) and scale.fits_better(points, box, log_gains * cv * cv):
-            x, how = answer(scale.points(points), scale.box(box), {scale.to(k) for k in worse}, pool, power=power,
-                            reach=reach, log=log, cubic_level=cubic_level, plane_level=plane_level,
-                            slope_level=slope_level, plane_inside=plane_inside, risk=risk, risk_reach=risk_reach,
-                            keep=None if keep is None else scale.to(keep), keep_risk=keep_risk, widen=widen,
-                            widen_bound=widen_bound)
-            return scale.back(x), how + LOGGED if how else how
+            flown = {scale.to(k): tuple(k) for k in [*points, *([keep] if keep is not None else [])]}
+            x, how = answer(scale.points(points), scale.box(box), {scale.to(k) for k in worse}, pool, reach=reach,
+                            risk_reach=risk_reach, keep=None if keep is None else scale.to(keep), widen=widen,
+                            widen_bound=widen_bound, **refit)
+            return flown.get(x) or scale.back(x), how + LOGGED if how else how  # (a point flown: exactly that)
     from statistics import NormalDist
 
     import numpy as np
@@ -604,9 +606,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         grown = [(0.0 if abs(v - a) < 1e-9 and a <= widen_bound * h else a,  # (a face within `widen_bound`
                   1.0 if abs(v - b) < 1e-9 and 1.0 - b <= widen_bound * h else b)  # half-widths of a range's bound:
                  for (a, b), v, h in zip(box, out, half)]  # the refit may answer up to that bound)
-        again, how = answer(points, grown, worse, pool, power=power, reach=wide, log=log, cubic_level=cubic_level,
-                            plane_level=plane_level, slope_level=slope_level, plane_inside=plane_inside, risk=risk,
-                            risk_reach=risk_reach or reach, keep=keep, keep_risk=keep_risk, widen=0.0)
+        again, how = answer(points, grown, worse, pool, reach=wide, risk_reach=risk_reach or reach, keep=keep,
+                            widen=0.0, **refit)
         return again, f"{how}, refitted wider" if how else how
     return tuple(float(v) for v in out), kind
 
