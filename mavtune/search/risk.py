@@ -8,13 +8,6 @@ model of the divergence chance, linear in the gains (a wall is locally a plane),
 kernel (local likelihood), its slopes under a normal prior (flights that a plane separates, every failure beyond
 every survivor, have no finite maximum; the prior keeps the wall as wide as `SLOPE_SD` allows, so a few flights
 never make it a knife edge). An answer's fitted chance must not exceed `RISK`.
-
-The chance an answer is held to is the fit's upper bound (`upper` standard errors of the log-odds above the most
-likely fit's, from the posterior's Laplace approximation), not the most likely fit's: a wall that twenty flights
-locate leaves its place uncertain by more than its flight-to-flight spread, and the most likely fit's chance,
-0.1 % at an answer 2.3 spreads from the wall's mean, was 1 % there (the cliff's run 69:
-benchmarks/results/answer_diagnostic_spread.md). (The chance averaged over the posterior is no bound: an uncertain
-slope keeps it above a floor far from any wall.)
 """
 
 from __future__ import annotations
@@ -40,20 +33,13 @@ class Divergence:
     centre: np.ndarray
     half: np.ndarray
     coef: np.ndarray
-    cov: np.ndarray | None = None  # the coefficients' posterior covariance (None: the most likely fit's chance)
-    upper: float = 0.0  # with `cov`: the chance at this many standard errors of the log-odds above the fit's
 
     def chance(self, x: np.ndarray) -> np.ndarray:
-        """The fitted divergence chance at each gain vector (rows of `x`, in shares of each range); with `cov`,
-        its upper bound at `upper` standard errors of the log-odds."""
+        """The fitted divergence chance at each gain vector (rows of `x`, in shares of each range)."""
         import numpy as np
         from scipy.special import expit
 
-        design = _design(np.atleast_2d(x), self.centre, self.half)
-        eta = design @ self.coef
-        if self.cov is not None and self.upper:
-            eta = eta + self.upper * np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", design, self.cov, design), 0.0))
-        return expit(eta)
+        return expit(_design(np.atleast_2d(x), self.centre, self.half) @ self.coef)
 
 
 def _design(x: np.ndarray, centre: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -63,11 +49,10 @@ def _design(x: np.ndarray, centre: np.ndarray, half: np.ndarray) -> np.ndarray:
 
 
 def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequence[float], half: Sequence[float],
-               weight: Callable[[np.ndarray], np.ndarray], upper: float = 0.0) -> Divergence | None:
+               weight: Callable[[np.ndarray], np.ndarray]) -> Divergence | None:
     """The divergence chance fitted to every flight of `points` (gain vector in shares of each range → its
     flights' costs, a failed flight's inf), each point weighted by `weight(u)` (the surface fit's kernel at
-    u = (x − centre) / half), its upper bound at `upper` standard errors of the log-odds (0: the most likely fit's);
-    None when no flight the kernel reaches failed (no wall to keep off)."""
+    u = (x − centre) / half); None when no flight the kernel reaches failed (no wall to keep off)."""
     import numpy as np
     from scipy.optimize import minimize
     from scipy.special import expit, log_expit
@@ -91,10 +76,4 @@ def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequ
                 precision * beta - design.T @ (f - n * expit(eta)))
 
     fit = minimize(loss, np.zeros(design.shape[1]), jac=True, method="BFGS")
-    if not np.all(np.isfinite(fit.x)):
-        return None
-    if not upper:
-        return Divergence(centre, half, fit.x)
-    p = expit(design @ fit.x)  # the Laplace approximation: the inverse of the loss's curvature at its minimum
-    cov = np.linalg.pinv(np.diag(precision) + design.T @ (design * (n * p * (1.0 - p))[:, None]))
-    return Divergence(centre, half, fit.x, cov, upper)
+    return Divergence(centre, half, fit.x) if np.all(np.isfinite(fit.x)) else None

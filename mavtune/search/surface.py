@@ -411,12 +411,12 @@ def _tricube(reach: float) -> Callable[[np.ndarray], np.ndarray]:
 
 
 def fly_away(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
-             reach: float = REACH, upper: float = 0.0) -> Divergence | None:
+             reach: float = REACH) -> Divergence | None:
     """The chance that a flight diverges (`Divergence.chance`, gain vectors in shares of each range), as the run's
     flights near the design of `box` fit it (`risk.divergence` under the answer's kernel: the chance `answer` keeps
     below `risk`); None where no flight the kernel reaches failed."""
     _, _, centre, half = _frame(box)
-    return divergence(points, centre, half, _tricube(reach), upper)
+    return divergence(points, centre, half, _tricube(reach))
 
 
 def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
@@ -424,7 +424,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            pool: NoisePool | None = None, *, power: float = POWER, reach: float = REACH,
            log: bool = False, cubic_level: float = CUBIC_LEVEL,
            plane_level: float = PLANE_LEVEL, slope_level: float = 0.0, plane_inside: bool = False,
-           risk: float | None = RISK, risk_reach: float | None = None, risk_upper: float = 0.0,
+           risk: float | None = RISK, risk_reach: float | None = None,
            keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK,
            widen: float = WIDEN_LEVEL, widen_bound: float = 0.0, log_gains: float = 0.0,
            offsets: Sequence[float] | None = None) -> tuple[tuple[float, ...], str]:
@@ -443,8 +443,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     (the plane's minimum answered on a face of the design inside the ranges too) are the fit's variants
     benchmarks/answer_diagnostic.py --replay measures; the defaults are the measured choice. `risk_reach`: the
     divergence chance is fitted to the flights within that many half-widths of the design (None: `reach`), so a
-    narrow design sees the walls the wider ones before it flew into. `risk_upper`: that chance at its upper bound, this many
-    standard errors of its log-odds above the most likely fit's (`risk.divergence`'s `upper`; 0: the most likely). With `keep` (the previous design's answer, in
+    narrow design sees the walls the wider ones before it flew into. With `keep` (the previous design's answer, in
     shares of each range: bounded by that design's own divergence fit), the answer is `keep` wherever a flight
     within the fit's kernel (`reach`) failed — unless a failed flight lies nearest it or on the way to it from the
     best point flown, or it lies outside the box, or this design's own divergence fit puts it above `keep_risk`
@@ -466,8 +465,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     optimum and shallow above, which a quadratic in the gains answers on the shallow side."""
     # the fit's options that each refit below keeps (in the logarithm of the gains; over a wider kernel)
     refit = {"power": power, "log": log, "cubic_level": cubic_level, "plane_level": plane_level,
-             "slope_level": slope_level, "plane_inside": plane_inside, "risk": risk, "risk_upper": risk_upper,
-             "keep_risk": keep_risk}
+           "slope_level": slope_level, "plane_inside": plane_inside, "risk": risk, "keep_risk": keep_risk}
     if log_gains and offsets is not None:
         scale = LogGains(offsets)
         cv = pool.cv if pool is not None else math.nan
@@ -509,7 +507,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
             near_ok, pick = near_ok & off_wall, inside & off_wall  # no answer beside a wall (else a caution)
     tricube = _tricube(reach)
     near = _tricube(risk_reach or reach)
-    fly_away = divergence(points, centre, half, near, risk_upper) if risk is not None and not np.all(ok) else None
+    fly_away = divergence(points, centre, half, near) if risk is not None and not np.all(ok) else None
     fitted = fly_away  # (`keep`'s ceiling reads it even where the bound below chooses nothing)
     if fly_away is not None:
         likely = fly_away.chance(every) > risk
