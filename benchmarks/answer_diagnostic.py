@@ -89,6 +89,9 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     "bagged: the median answer of 40 bootstrap resamples of the flights": {"widen_bound": 2.0, "bag": 40},
     **{f"the last answer fitted in the logarithm of the gains where that fits better by {m} noise variances": {
         "widen_bound": 2.0, "log_gains": float(m)} for m in (4, 16, 64)},
+    **{f"today's answer with the cubic {name} (session 24)": {"widen_bound": 2.0, "log_gains": 16.0} | o
+       for name, o in (("never", {"cubic_level": 0.0}), ("at the 1 % level", {"cubic_level": 0.01}),
+                       ("at the 0.1 % level", {"cubic_level": 0.001}))},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
