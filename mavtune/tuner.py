@@ -263,7 +263,8 @@ class TuningResult:
             say("log scale", "the last design's flights fit a quadratic in the logarithm of the gains better than one "
                 "in the gains, and the answer is that fit's: gains whose good values span decades (the cost steep "
                 "below the optimum, shallow above); the map and the line searches stepped through the ranges evenly, "
-                "so giving such a gain as its logarithm (api.md) or a narrower range would search it finer")
+                "so stepping such a gain's logarithm (log = true in its [mavlink.gains] table; your own cost's "
+                "gains: api.md) or a narrower range would search it finer")
         if self.outliers and designed:
             worst = max(self.outliers, key=lambda f: f["cost"])
             at = ", ".join(f"{n} {v:.4g}" for n, v in worst["gains"].items())

@@ -34,6 +34,9 @@ def one_line(code: int, err: str, *expected: str) -> None:
     ("[flight]\nprimitive_s = 0.001\n", ("flight.primitive_s", "greater than or equal to 1")),
     ("[tuning]\nseed = 18446744073709551616\n", ("tuning.seed", "less than or equal to")),
     ("[tuning.space]\nkp = [0.5, 0.5000000001]\nkd = [0.0, 1.0]\n", ("space.kp", "too narrow to tune")),
+    ('[fleet]\nkind = "mavlink"\n[mavlink]\nurls = ["tcp:127.0.0.1:5"]\n[mavlink.gains.kp]\nparam = "MPC_Z_P"\n'
+     'min = 0.1\nmax = 1.5\n[mavlink.gains.kd]\nparam = "MPC_Z_VEL_P_ACC"\nmin = 0.0\nmax = 15.0\nlog = true\n',
+     ("mavlink.gains.kd", "log = true needs min > 0")),  # (no logarithm of zero; refused before any link)
 ])
 def test_values_no_run_can_use_are_refused_naming_the_field(tmp_path, toml, expected):
     path = tmp_path / "bad.toml"

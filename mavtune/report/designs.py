@@ -208,6 +208,7 @@ def _pair(ax, names: Sequence[str], i: int, j: int | None, points, designs, fina
         ax.set_xlabel(U.label(gi, units))
         ax.set_ylabel("mean cost of the point")
         ax.set_xlim(*_limits(gi, space, x))
+        U.scale(ax, "x", gi, units)
         ax.set_title(f"cost against {U.label(gi, units)}: each design's span (grey bars, top) and answer (tick)",
                      fontsize=9)
         return None
@@ -241,6 +242,8 @@ def _pair(ax, names: Sequence[str], i: int, j: int | None, points, designs, fina
         ax.plot(x(gi, final[gi]), x(gj, final[gj]), "*", ms=15, color=ANSWER_COLOUR, mec="black", mew=0.6, zorder=8)
     ax.set_xlim(*_limits(gi, space, x))
     ax.set_ylim(*_limits(gj, space, x))
+    U.scale(ax, "x", gi, units)
+    U.scale(ax, "y", gj, units)
     ax.set_xlabel(U.label(gi, units))
     ax.set_ylabel(U.label(gj, units))
     ax.set_title(f"{U.label(gi, units)} and {U.label(gj, units)}", fontsize=9)

@@ -30,6 +30,7 @@ from matplotlib.transforms import blended_transform_factory  # noqa: E402
 from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter  # noqa: E402
 
 from mavtune.fleet import Status  # noqa: E402
+from mavtune.report import units as U  # noqa: E402
 from mavtune.report.figure_rules import (  # noqa: E402
     ABOVE, BAND, BAND_TEXT, count_text, fit_titles, many, mark_above, normal, scale_top, band,
 )
@@ -346,10 +347,12 @@ def _gain(ax, rounds: Sequence, vehicles: list[str], gain: str, round_s: float, 
                 xs.append(xs[-1] + round_s)
                 ys.append(ys[-1])
                 ax.plot(xs, ys, drawstyle="steps-post", color=colours(j % 10), lw=1.2, alpha=0.85)
-    if unit:
+    if unit and unit.log:  # (stepped through its logarithm: drawn so, its ticks 1-2-5; no normalised axis beside)
         ax.set_ylabel(text(unit.param), fontsize=9)
-        span = unit.hi - unit.lo
-        side = ax.secondary_yaxis("right", functions=(lambda y: (y - unit.lo) / span, lambda g: unit.lo + g * span))
+        U.scale(ax, "y", gain, {gain: unit})
+    elif unit:
+        ax.set_ylabel(text(unit.param), fontsize=9)
+        side = ax.secondary_yaxis("right", functions=unit.axis())
         side.set_ylabel(text(f"{gain} (normalised)"), fontsize=7)
         side.tick_params(labelsize=7)
     else:

@@ -25,6 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.gridspec import GridSpec, GridSpecFromSubplotSpec  # noqa: E402
 from matplotlib.transforms import blended_transform_factory  # noqa: E402
 
+from mavtune.report import units as U  # noqa: E402
 from mavtune.report.figure_rules import count_text, fit_titles, many, mark_above, normal, scale_top  # noqa: E402
 from mavtune.report.searches import SearchView  # noqa: E402
 from mavtune.report.timeline import text  # noqa: E402
@@ -75,8 +76,8 @@ class _Axis:
         g = to_draw(g)
         return self.unit.value(g) if self.unit and math.isfinite(g) else g
 
-    def width(self, dg: float) -> float:
-        return self.unit.width(dg) if self.unit else dg
+    def width(self, dg: float, g: float) -> float:
+        return self.unit.width(dg, g) if self.unit else dg
 
     @property
     def name(self) -> str:
@@ -113,6 +114,7 @@ def tuning_figure(views: Sequence[SearchView], final: dict[str, float], uncertai
             ladder_ax = fig.add_subplot(pair[1], sharex=cost_ax)
             view = next((v for v in views if v.bootstrap == b and v.gain == g), None)
             cost_ax.set_xlim(*(axis[g].x(x) for x in limits[g]))
+            U.scale(cost_ax, "x", g, units or {})
             _cost_panel(cost_ax, view, colour, b, axis[g], summarise)
             _ladder_panel(ladder_ax, view, axis[g])
             if view is not None and view is _last_search(views, g) and g in uncertainty:
@@ -125,6 +127,7 @@ def tuning_figure(views: Sequence[SearchView], final: dict[str, float], uncertai
     for c, g in enumerate(columns):
         ax = fig.add_subplot(outer[-1, c])
         ax.set_xlim(*(axis[g].x(x) for x in limits[g]))
+        U.scale(ax, "x", g, units or {})
         _final_panel(ax, axis[g], views, rows, final.get(g, math.nan), uncertainty.get(g))
     fig.suptitle("the tuning: cost against gain in each line search (black: mean ± standard error per point; linear "
                  "cost scaled to the normal flights, ^ above it, red x: failed), the comparisons and the final gains"
@@ -278,19 +281,21 @@ def _final_panel(ax, axis: _Axis, views: Sequence[SearchView], rows: list[int], 
     ax.set_yticks([-i for i in range(len(rows))] + [y_final])
     ax.set_yticklabels([f"b{b}" for b in rows] + ["final"], fontsize=7)
     ax.set_ylim(y_final - 0.7, 0.7)
-    if axis.unit:
+    if axis.unit and axis.unit.log:  # (no normalised axis beside a log one: it would need a log of its negatives)
+        ax.set_xlabel(text(f"{axis.unit.param} (autopilot units, log scale)"), fontsize=8)
+        pad = 2
+    elif axis.unit:
         unit = axis.unit
-        span = unit.hi - unit.lo
         ax.set_xlabel(text(f"{unit.param} (autopilot units)"), fontsize=8)
-        top = ax.secondary_xaxis("top", functions=(lambda p: (p - unit.lo) / span, lambda g: unit.lo + g * span))
+        top = ax.secondary_xaxis("top", functions=unit.axis())
         top.tick_params(labelsize=6, pad=1)
         top.set_xlabel(text(f"{gain} (normalised)"), fontsize=6, labelpad=2)
         pad = 20
     else:
         ax.set_xlabel(text(gain), fontsize=8)
         pad = 2
-    ax.set_title(text(f"{axis.name} = {_final_text(axis.x(value), axis.width(se), axis.x(lo), axis.x(hi), level)}"),
-                 fontsize=8, loc="left", pad=pad)
+    final = _final_text(axis.x(value), axis.width(se, value), axis.x(lo), axis.x(hi), level)
+    ax.set_title(text(f"{axis.name} = {final}"), fontsize=8, loc="left", pad=pad)
 
 
 def _final_text(value: float, se: float, lo: float, hi: float, level: float) -> str:

@@ -28,7 +28,7 @@ def gains_table(final: dict[str, float], uncertainty: dict[str, dict[str, float]
                     if math.isfinite(lo) and math.isfinite(hi) else "—")
         per_bootstrap = ", ".join(f"b{v.bootstrap}: {U.num(name, v.result, units)}" for v in views
                                   if v.gain == name and v.finished)
-        se = md.num(U.width(name, u.get("se"), units), 2) if _known(u.get("se")) else "—"
+        se = md.num(U.width(name, u.get("se"), as_float(value), units), 2) if _known(u.get("se")) else "—"
         row = [name, U.num(name, as_float(value), units, 6), se, interval, per_bootstrap or "—"]
         if units:
             unit = units.get(name)

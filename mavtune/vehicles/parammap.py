@@ -36,7 +36,8 @@ def _near(a: float, b: float) -> bool:
 
 
 class GainBinding(BaseModel):
-    """One gain g ∈ [0, 1] driving parameter `param` = lo + g·(hi − lo), in the autopilot's units."""
+    """One gain g ∈ [0, 1] driving parameter `param` = lo + g·(hi − lo), in the autopilot's units; with `log`,
+    param = lo·(hi/lo)^g: the tuner steps the parameter's logarithm (a gain whose good values span decades)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -46,11 +47,14 @@ class GainBinding(BaseModel):
     scale: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1.0  # on-vehicle units per configured unit
     limit_lo: Finite | None = None  # the autopilot's documented limits of `param`, when known
     limit_hi: Finite | None = None
+    log: bool = False  # the parameter = lo·(hi/lo)^g (lo > 0) instead of lo + g·(hi − lo)
 
     @model_validator(mode="after")
     def _check(self) -> "GainBinding":
         if not self.lo < self.hi:
             raise ValueError(f"{self.param}: range [{self.lo}, {self.hi}] is empty")
+        if self.log and not self.lo > 0:
+            raise ValueError(f"{self.param}: a log scale needs a range above zero, got [{self.lo}, {self.hi}]")
         if self.limit_lo is not None and self.lo < self.limit_lo and not _near(self.lo, self.limit_lo):
             raise ValueError(f"{self.param}: range starts at {self.lo}, below the autopilot's limit {self.limit_lo}")
         if self.limit_hi is not None and self.hi > self.limit_hi and not _near(self.hi, self.limit_hi):
@@ -62,11 +66,39 @@ class GainBinding(BaseModel):
         g = float(normalised)
         if not math.isfinite(g) or g < -_SLACK or g > 1 + _SLACK:
             raise MavtuneError(f"normalised gain for {self.param} must be a finite number in [0, 1], got {normalised!r}")
-        return self.lo + min(max(g, 0.0), 1.0) * (self.hi - self.lo)
+        return scaled(min(max(g, 0.0), 1.0), self.lo, self.hi, self.log)
+
+    def normalised(self, value: float) -> float:
+        """The normalised gain of a parameter value (the inverse of `value`, not clipped: a stock value outside
+        the range lies outside [0, 1]; NaN for a value at or below zero on a log scale)."""
+        return unscaled(float(value), self.lo, self.hi, self.log)
+
+    def width(self, dg: float, g: float) -> float:
+        """A normalised width `dg` at the normalised gain `g` (a standard error, a tolerance) in the parameter's
+        units: on a log scale it grows with the value."""
+        return scaled_width(dg, g, self.lo, self.hi, self.log)
 
     def limit(self, upper: bool) -> float | None:
         """The autopilot's documented limit on that side, if known."""
         return self.limit_hi if upper else self.limit_lo
+
+
+def scaled(g: float, lo: float, hi: float, log: bool = False) -> float:
+    """A parameter's value at normalised gain `g` of its range [lo, hi]: evenly, or evenly in its logarithm."""
+    return lo * (hi / lo) ** g if log else lo + g * (hi - lo)
+
+
+def unscaled(value: float, lo: float, hi: float, log: bool = False) -> float:
+    """The normalised gain of a parameter's value (the inverse of `scaled`; NaN at or below zero on a log scale)."""
+    if log:
+        return math.log(value / lo) / math.log(hi / lo) if value > 0 else math.nan
+    return (value - lo) / (hi - lo)
+
+
+def scaled_width(dg: float, g: float, lo: float, hi: float, log: bool = False) -> float:
+    """A normalised width `dg` at normalised gain `g` in the parameter's units (on a log scale, the value's
+    slope there: value·ln(hi/lo)·dg)."""
+    return dg * scaled(g, lo, hi, True) * math.log(hi / lo) if log else dg * (hi - lo)
 
 
 class ParamMap(BaseModel):
@@ -92,11 +124,12 @@ class ParamMap(BaseModel):
     def normalised(self, params: Mapping[str, float]) -> dict[str, float]:
         """{gain: normalised value} of on-vehicle parameter values (the inverse of `values`, not clipped: a stock
         value outside the tuned range lies outside [0, 1]); gains whose parameter is not given are left out."""
-        return {g: (float(params[b.param]) - b.lo) / (b.hi - b.lo) for g, b in self.gains.items() if b.param in params}
+        return {g: b.normalised(params[b.param]) for g, b in self.gains.items() if b.param in params}
 
-    def tolerances(self, tolerance: Mapping[str, float]) -> dict[str, float]:
-        """{parameter: ± value}: a normalised tolerance per gain in each parameter's units."""
-        return {b.param: tolerance[g] * (b.hi - b.lo) for g, b in self.gains.items()}
+    def tolerances(self, tolerance: Mapping[str, float], gains: Mapping[str, float]) -> dict[str, float]:
+        """{parameter: ± value}: a normalised tolerance per gain in each parameter's units, at the normalised
+        `gains` (a log-scale parameter's tolerance grows with its value)."""
+        return {b.param: b.width(tolerance[g], gains[g]) for g, b in self.gains.items()}
 
     def explain_edge(self, edge: RangeEdge) -> RangeEdge:
         """The edge with the parameter it drives and what to widen: the tuning space when it ends inside the

@@ -66,7 +66,7 @@ def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
         tolerance = {n: epsilon * (hi - lo) for n, (lo, hi) in space.items()}
         files = write_tuned_files(usable, gains, out_dir)
         outcome |= {"tuned_params": {v: m.values(gains) for v, m in usable.items()},
-                    "tuned_params_tolerance": {v: m.tolerances(tolerance) for v, m in usable.items()},
+                    "tuned_params_tolerance": {v: m.tolerances(tolerance, gains) for v, m in usable.items()},
                     "param_files": list(files), "param_file_vehicles": files}
     outcome["range_edges"] = [e.to_dict() for e in edges]
     return outcome

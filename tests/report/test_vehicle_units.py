@@ -46,9 +46,37 @@ def _table(text: str, heading: str) -> tuple[list[str], list[list[str]]]:
 def test_units_are_given_only_for_gains_every_vehicle_binds_alike():
     assert gain_units({}) == {} and gain_units({"param_maps": "junk"}) == {}
     same = gain_units({"param_maps": _maps(PSC, PSC)})
-    assert same["kp"].param == "PSC_POSZ_P" and same["kp"].value(0.5) == 2.0 and same["kd"].width(0.25) == 1.75
+    assert same["kp"].param == "PSC_POSZ_P" and same["kp"].value(0.5) == 2.0 and same["kd"].width(0.25, 0.5) == 1.75
     mixed = gain_units({"param_maps": _maps(PSC, {**PSC, "kp": {**PSC["kp"], "param": "MPC_Z_P", "hi": 1.5}})})
     assert set(mixed) == {"kd"}  # kp drives different parameters: it stays normalised
+
+
+def test_a_gain_stepped_through_its_logarithm_is_reported_on_its_map():
+    logged = {**PSC, "kd": {**PSC["kd"], "log": True}}
+    kd = gain_units({"param_maps": _maps(logged, logged)})["kd"]
+    assert kd.value(0.0) == 1.0 and kd.value(1.0) == pytest.approx(8.0) and kd.value(0.5) == pytest.approx(8 ** 0.5)
+    assert kd.normalised(kd.value(0.3)) == pytest.approx(0.3)
+    assert kd.width(0.1, 0.9) > 3 * kd.width(0.1, 0.1)  # a standard error grows with the value it is at
+    assert "kd" not in gain_units({"param_maps": _maps({**logged, "kd": {**logged["kd"], "lo": 0.0}})})
+    result = _result()
+    fig = tuning_figure(search_views(result), result.gains, result.uncertainty, {"kp": [0, 1], "kd": [0, 1]},
+                        ["m0", "m1"], {"kd": kd})
+    try:
+        fig.canvas.draw()
+        final = next(ax for ax in fig.axes if ax.get_xlabel() == "PSC_VELZ_P (autopilot units, log scale)")
+        lo, hi = final.get_xlim()
+        assert 0.9 < lo < 1.0 and 8.0 < hi < 8.6 and final.get_xscale() == "log"  # evenly stepped, evenly drawn
+        assert [t.get_text() for t in final.get_xticklabels() if lo <= t.get_position()[0] <= hi] == ["1", "2", "5"]
+        kp = next(ax for ax in fig.axes if ax.get_xlabel() == "kp")
+        assert kp.get_xscale() == "linear"
+    finally:
+        plt.close(fig)
+    fig = timeline_figure(result.rounds, ["kp", "kd"], 9.0, units={"kd": kd})
+    try:
+        kd_ax = next(ax for ax in fig.axes if ax.get_ylabel() == "PSC_VELZ_P")
+        assert kd_ax.get_yscale() == "log" and 0.8 <= kd_ax.get_ylim()[0] < 1.0 and 8.0 < kd_ax.get_ylim()[1] <= 10.0
+    finally:
+        plt.close(fig)
 
 
 def test_the_report_of_a_vehicle_run_names_the_parameters_in_their_units(tmp_path):

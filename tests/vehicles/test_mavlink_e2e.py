@@ -77,7 +77,7 @@ def test_tune_two_vehicles_px4_and_ardupilot_47_concurrently(tmp_path):
 
 def test_vehicle_for_the_swarm_agent_sets_gains_flies_and_restores():
     cfg = fast_config(gains={"kp": GainParam(param="PSC_ACCZ_P", min=0.2, max=1.0),
-                             "kd": GainParam(param="PSC_VELZ_P", min=1.0, max=8.0)})
+                             "kd": GainParam(param="PSC_VELZ_P", min=1.0, max=8.0, log=True)})
     with mavsim(autopilot="ardupilot-4.7") as url:
         vehicle = make_mavlink_vehicle(url, cfg)
         try:
@@ -86,6 +86,7 @@ def test_vehicle_for_the_swarm_agent_sets_gains_flies_and_restores():
             flight = vehicle.fly({"kp": 0.5, "kd": 0.5}, 0)
             assert flight.status is Status.OK and math.isfinite(flight.cost) and flight.trace is not None
             assert flight.info["params"]["PSC_D_ACC_P"] == pytest.approx(0.06)  # 0.6 in ≤4.6 units × 0.1
+            assert flight.info["params"]["PSC_D_VEL_P"] == pytest.approx(math.sqrt(8.0))  # log: halfway is ×√8
             assert read_params(url, ["PSC_D_ACC_P"])["PSC_D_ACC_P"] == pytest.approx(0.06)
             with pytest.raises(MavtuneError):
                 vehicle.fly({"kp": math.nan, "kd": 0.5}, 1)  # never sent

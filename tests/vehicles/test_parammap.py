@@ -3,6 +3,8 @@ by parameter, parameter files grouped per vehicle only where the vehicles' files
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -30,6 +32,25 @@ def test_values_stay_inside_each_range_and_follow_the_gain(kp, kd):
     assert values["MPC_Z_P"] == pytest.approx(0.3 + 1.2 * kp)
 
 
+@given(st.floats(0.0, 1.0), st.floats(0.0, 0.5))
+def test_a_log_scale_steps_the_parameters_logarithm(g, dg):
+    b = GainBinding(param="MPC_Z_VEL_I_ACC", lo=0.02, hi=2.0, log=True)  # two decades
+    assert 0.02 <= b.value(g) <= 2.0 + 1e-12 and b.normalised(b.value(g)) == pytest.approx(g, abs=1e-12)
+    assert b.value(0.5) == pytest.approx(0.2)  # halfway is the geometric mean, a decade from each end
+    assert b.width(dg, g) == pytest.approx(dg * b.value(g) * math.log(100.0))  # the map's slope there
+    assert math.isnan(b.normalised(0.0))  # a stock value at zero has no place on a log scale
+
+
+def test_a_log_scale_tolerance_follows_the_value_it_is_at(tmp_path):
+    logged = ParamMap(stack="px4", gains={"ki": GainBinding(param="MPC_Z_VEL_I_ACC", lo=0.02, hi=2.0, log=True)})
+    low, high = ({"ki": g} for g in (0.1, 0.9))
+    tol = {"ki": 0.125}
+    assert (logged.tolerances(tol, high)["MPC_Z_VEL_I_ACC"]
+            == pytest.approx(logged.tolerances(tol, low)["MPC_Z_VEL_I_ACC"] * 100 ** 0.8))
+    out = tuned_outcome({"a": logged}, low, {"ki": (0.0, 1.0)}, 0.125, tmp_path)
+    assert out["tuned_params"]["a"]["MPC_Z_VEL_I_ACC"] == pytest.approx(0.02 * 100 ** 0.1)
+
+
 @pytest.mark.parametrize("gains", [{"kp": float("nan"), "kd": 0.5}, {"kp": 1.5, "kd": 0.5}, {"kp": 0.5}])
 def test_values_refuse_what_no_vehicle_should_get(gains):
     with pytest.raises(MavtuneError):
@@ -39,7 +60,7 @@ def test_values_refuse_what_no_vehicle_should_get(gains):
 @pytest.mark.parametrize("change", [
     dict(param="PSC_POSZ_P\nFENCE_ENABLE 0"),  # a line of its own in a parameter file
     dict(param="A" * 17), dict(lo=2.0, hi=1.0), dict(hi=float("inf")), dict(lo=0.5),  # below the documented limit
-    dict(hi=3.5), dict(scale=0.0),
+    dict(hi=3.5), dict(scale=0.0), dict(lo=0.0, limit_lo=0.0, log=True),  # no logarithm of zero
 ])
 def test_a_binding_that_could_write_a_wrong_file_is_refused(change):
     fields = dict(param="PSC_POSZ_P", lo=1.0, hi=3.0, limit_lo=1.0, limit_hi=3.0) | change

@@ -17,23 +17,27 @@ from mavtune.vehicles.parammap import GAIN_SET_BINDINGS, PARAM_PATTERN, GainBind
 
 
 class GainParam(BaseModel):
-    """One tuning-space gain: normalised g in [0, 1] sets `param` to min + g·(max − min) (the param's units)."""
+    """One tuning-space gain: normalised g in [0, 1] sets `param` to min + g·(max − min) (the param's units); with
+    `log`, to min·(max/min)^g: the tuner steps the parameter's logarithm."""
 
     model_config = ConfigDict(extra="forbid")
 
     param: str = Field(pattern=PARAM_PATTERN)  # a MAVLink parameter id: at most 16 letters, digits, '_'
     min: float  # the parameter's value at normalised gain 0 (its own units)
     max: float  # … and at 1
+    log: bool = False  # step the parameter's logarithm (min > 0): for a gain whose good values span decades
 
     @model_validator(mode="after")
     def _check(self) -> "GainParam":
         if not (math.isfinite(self.min) and math.isfinite(self.max)) or not self.min < self.max:
             raise ValueError(f"{self.param}: need finite min < max, got [{self.min}, {self.max}]")
+        if self.log and not self.min > 0:
+            raise ValueError(f"{self.param}: log = true needs min > 0, got [{self.min}, {self.max}]")
         return self
 
     def physical(self, normalised: float) -> float:
         """The parameter value (this model's units) for a normalised gain; refuses NaN and values outside [0, 1]."""
-        return GainBinding(param=self.param, lo=self.min, hi=self.max).value(normalised)
+        return GainBinding(param=self.param, lo=self.min, hi=self.max, log=self.log).value(normalised)
 
 
 LOOP_OF_GAIN_SET = {"horizontal": "horizontal"}  # the other gain sets tune the altitude loop

@@ -116,4 +116,4 @@ def resolve_gain(gain: str, cfg: GainParam, profile: AutopilotProfile, present: 
         )
     limits = (None, None) if spec is None else (spec.min, spec.max)
     return ResolvedGain(gain, cfg, GainBinding(param=name, lo=lo, hi=hi, scale=scale, limit_lo=limits[0],
-                                               limit_hi=limits[1]))
+                                               limit_hi=limits[1], log=cfg.log))
