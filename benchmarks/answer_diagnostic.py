@@ -92,6 +92,8 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     **{f"today's answer with the cubic {name} (session 24)": {"widen_bound": 2.0, "log_gains": 16.0} | o
        for name, o in (("never", {"cubic_level": 0.0}), ("at the 1 % level", {"cubic_level": 0.01}),
                        ("at the 0.1 % level", {"cubic_level": 0.001}))},
+    **{f"today's answer keeping the answer before beside a wall only below a {k:g} % divergence chance (session 24)": {
+        "widen_bound": 2.0, "log_gains": 16.0, "keep_risk": k / 100} for k in (0.1, 0.3)},
 }
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
