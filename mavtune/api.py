@@ -107,6 +107,7 @@ def tune(
     design_widen_bound: float = DEFAULT,
     design_outliers: float = DEFAULT,
     design_log: float = DEFAULT,
+    design_log_layout: bool = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
     draws: int = DRAWS,
     max_rounds: int = MAX_ROUNDS,
@@ -164,7 +165,7 @@ def tune(
         design_shrink_wall=design_shrink_wall, design_shrink_fit=design_shrink_fit,
         design_pass_box=design_pass_box, wall_span=wall_span, wall_keep=wall_keep,
         composite_reach=composite_reach, design_widen=design_widen, design_widen_bound=design_widen_bound,
-        design_outliers=design_outliers, design_log=design_log,
+        design_outliers=design_outliers, design_log=design_log, design_log_layout=design_log_layout,
         budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "

@@ -64,7 +64,8 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.bootstraps": 2, "tuning.design_width": 0.15, "tuning.design_steps": 1, "tuning.design_shrink": 1.0,
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
-    "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0}
+    "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0,
+    "tuning.design_log_layout": False}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -146,7 +147,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
                    "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "design_log",
-                   "budget")
+                   "design_log_layout", "budget")
 
 
 
@@ -164,7 +165,8 @@ class Tuning(_Section):
     inside the ranges and the flights do not reject that wider quadratic: `design_widen`, since session 19, and in
     the last design answered up to a range's bound within two half-widths of that face: `design_widen_bound`, since
     session 22; the last design's in the logarithm of the gains where a quadratic there fits its flights better by 16
-    noise variances: `design_log`, since session 23; without
+    noise variances: `design_log`, since session 23, and every design after the passes laid out there where the
+    run's flights before them fit that better: `design_log_layout`, since session 24; without
     the flights that their replicates and their neighbours both put far off, spoiled by something other than the
     gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
@@ -313,6 +315,14 @@ class Tuning(_Section):
                               "its box better than one in the gains by more than this many noise variances: gains "
                               "whose good values span decades, steep below the optimum and shallow above (0: "
                               "never; 16 chosen on the zoo's select half, answer_diagnostic_log.md)")
+    design_log_layout: StrictBool = Field(True, description="design (with `design_log`): where one quadratic in the "
+                                          "logarithm of the gains fits the run's flights around the first design "
+                                          "after the passes better than one in the gains, by `design_log` noise "
+                                          "variances and to at most a quarter of its residual, every design from "
+                                          "then on is laid out there (and answered there where its flights fit "
+                                          "that better): its points spread evenly in the logarithm, so a design "
+                                          "around an optimum near a range's low end samples it finely (session 24, "
+                                          "selection_log_layout.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

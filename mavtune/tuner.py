@@ -29,9 +29,10 @@ from mavtune.search.interval import (
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
-    LOGGED as SURFACE_LOGGED, answer as surface_answer, beside_wall, coefficients as surface_coefficients,
-    design as surface_design, fly_away as surface_fly_away, inliers as surface_inliers, log_offsets as surface_log_offsets,
-    next_centre as surface_next_centre, open_faces as surface_open_faces, ruled_out as surface_ruled_out, REACH,
+    LAYOUT_SHARE as SURFACE_LAYOUT_SHARE, LOGGED as SURFACE_LOGGED, REACH, LogGains, answer as surface_answer,
+    beside_wall, coefficients as surface_coefficients, design as surface_design, fly_away as surface_fly_away,
+    inliers as surface_inliers, log_offsets as surface_log_offsets, next_centre as surface_next_centre,
+    open_faces as surface_open_faces, ruled_out as surface_ruled_out,
 )
 from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
@@ -154,8 +155,9 @@ class DesignRecord:
     it is ("quadratic", "cubic" or "plane", ", refitted wider" over the wider designs' flights too: `surface.answer`),
     "best flown" (no usable fit: the best point flown in the box) or "kept" (beside a failed flight, the design
     before's answer, `wall_keep`); whether the box surrounded that answer (inside it or on a range's bound) or
-    answered on its face inside the range (`open_face`, the gains there), and whether the next design moved past
-    that face (`design_move`)."""
+    answered on its face inside the range (`open_face`, the gains there), whether the next design moved past
+    that face (`design_move`), and whether it was laid out in the logarithm of the gains (`design_log_layout`: its
+    half-width a share of that)."""
 
     step: int  # 0-based, in the order flown
     before_passes: bool  # flown before the passes over the gains (`design_first`: the first a map of the box)
@@ -169,12 +171,13 @@ class DesignRecord:
     surrounded: bool
     open_face: list[str] = field(default_factory=list)
     moves: bool = False
+    logged: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {"step": self.step, "before_passes": self.before_passes, "half": self.half,
                 "box": {n: list(b) for n, b in self.box.items()}, "points": self.points, "flights": self.flights,
                 "rounds": list(self.rounds), "answer": self.answer, "how": self.how, "surrounded": self.surrounded,
-                "open_face": self.open_face, "moves": self.moves}
+                "open_face": self.open_face, "moves": self.moves, "logged": self.logged}
 
 
 @dataclass
@@ -259,12 +262,16 @@ class TuningResult:
             say("open face", f"the last design answered {faces} on the edge of the box it flew, inside the range: "
                 "it did not surround its answer, so the optimum may lie beyond (a design around the answer, or a "
                 "larger budget, would tell)")
-        if designed and self.designs and self.designs[-1].how.endswith(SURFACE_LOGGED):
-            say("log scale", "the last design's flights fit a quadratic in the logarithm of the gains better than one "
-                "in the gains, and the answer is that fit's: gains whose good values span decades (the cost steep "
-                "below the optimum, shallow above); the map and the line searches stepped through the ranges evenly, "
-                "so stepping such a gain's logarithm (log = true in its [mavlink.gains] table; your own cost's "
-                "gains: api.md) or a narrower range would search it finer")
+        last = self.designs[-1] if self.designs else None
+        if designed and last is not None and (last.logged or last.how.endswith(SURFACE_LOGGED)):
+            fit = ("the flights before the designs after the passes fit a quadratic in the logarithm of the gains "
+                   "better than one in the gains, and those designs were laid out there" if last.logged else
+                   "the last design's flights fit a quadratic in the logarithm of the gains better than one in the "
+                   "gains, and the answer is that fit's")
+            say("log scale", f"{fit}: gains whose good values span decades (the cost steep below the optimum, shallow "
+                "above); the map and the line searches stepped through the ranges evenly, so stepping such a gain's "
+                "logarithm (log = true in its [mavlink.gains] table; your own cost's gains: api.md) or a narrower "
+                "range would search it finer")
         if self.outliers and designed:
             worst = max(self.outliers, key=lambda f: f["cost"])
             at = ", ".join(f"{n} {v:.4g}" for n, v in worst["gains"].items())
@@ -392,6 +399,7 @@ class Settings:
     design_widen_bound: float = 0.0
     design_outliers: float = 0.0
     design_log: float = 0.0
+    design_log_layout: bool = False
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -672,6 +680,7 @@ class Settings:
                         | ({"widen_bound": float(self.design_widen_bound)} if self.design_widen_bound else {})
                         | ({"outliers": float(self.design_outliers)} if self.design_outliers else {})
                         | ({"log": float(self.design_log)} if self.design_log else {})
+                        | ({"log_layout": True} if self.design_log_layout and self.design_log else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
@@ -679,13 +688,14 @@ class Settings:
 
 
 def answer_options(s: Settings, half: float, keep: list[float] | None = None,
-                   last: bool = False) -> dict[str, Any]:
+                   last: bool = False, logged: bool = False) -> dict[str, Any]:
     """`surface.answer`'s options for a design of half-width `half` under settings `s`: the wall rules (`wall_span`
     in half-widths, `wall_keep` with the previous design's answer `keep`) and a composite design's kernel
     (`composite_reach`), each left out when off (the answer's defaults); the level of the wider refit of an
     answer on a face of the design (`design_widen`, 0: off), always given; and for the `last` design how near a
-    range's bound that refit answers up to it (`design_widen_bound`: the run's answer, after which nothing flies)
-    and by how much a quadratic in the logarithm of the gains must fit better to answer (`design_log`).
+    range's bound that refit answers up to it (`design_widen_bound`: the run's answer, after which nothing flies);
+    for the `last` design and every design laid out in the logarithm of the gains (`logged`), by how much a
+    quadratic there must fit better to answer there (`design_log`).
     (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
     reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
     return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
@@ -693,7 +703,7 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
         "widen": float(s.design_widen)} | (
         {"widen_bound": float(s.design_widen_bound)} if last and s.design_widen_bound else {}) | (
         {"log_gains": float(s.design_log), "offsets": surface_log_offsets(list(s.space.values()))}
-        if last and s.design_log else {})
+        if (last or logged) and s.design_log else {})
 
 
 class StageDone(Exception):
@@ -742,6 +752,8 @@ class Tuner:
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self._step: tuple[list[tuple[float, float]], tuple[float, ...], bool] | None = None  # last design's box,
         # its answer, and whether a flight failed within its half-width of the answer (`_shrink`)
+        self._log_layout: LogGains | None = None  # the designs' layout from the first after the passes, where the
+        # flights fit a quadratic in the logarithm of the gains better (`design_log_layout`); None: in the gains
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
         self._shares: list[tuple[LineSearch, int, int]] = []  # budget: each line search, flights before it, its share
 
@@ -928,7 +940,18 @@ class Tuner:
         width = [s.space[n][1] - s.space[n][0] for n in names]
         step = len(self._design_answers)
         centre = self._centre or [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # (a move: `_surface`)
-        points = surface_design(centre, half, s.design_inner_at(step))
+        if step == s.designs_before_passes() and s.design_log_layout and s.design_log:  # (once: from then on)
+            scale = LogGains(surface_log_offsets(list(s.space.values())))
+            before = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
+            even = surface_design(centre, half, s.design_inner_at(step))  # (judged where this design would fly)
+            near = [(min(p[i] for p in even), max(p[i] for p in even)) for i in range(len(names))]
+            cv = self.pool.cv
+            if math.isfinite(cv) and scale.fits_better(before, near, s.design_log * cv * cv, SURFACE_LAYOUT_SHARE):
+                self._log_layout = scale
+        layout = self._log_layout
+        points = surface_design(layout.to(centre) if layout else centre, half, s.design_inner_at(step))
+        if layout is not None:  # (evenly in the logarithm of the gains: finer towards each range's low end)
+            points = [layout.back(p) for p in points]
         per_point = s.design_per_point(step)
         queue = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, p)}
                  for _ in range(int(s.design_repeats)) for p in points for _ in range(per_point)]
@@ -965,10 +988,12 @@ class Tuner:
         # the divergence chance there (a map's coarse fit over failures at the box's edges sent its answer to the far
         # corner however badly that flew: the 60 ms latency plant, session 15); every design after the passes keeps it
         final = step + 1 == s.design_count()  # (the run's answer: `design_widen_bound`)
-        options = answer_options(self.settings, half, keep, final) | ({"risk": None} if start else {})
+        logged = layout is not None
+        options = answer_options(self.settings, half, keep, final, logged) | ({"risk": None} if start else {})
         best, fitted = surface_answer(flown, box, ruled, self.pool, **options)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
-        self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None, final)
+        self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None, final,
+                                           logged)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
@@ -994,7 +1019,7 @@ class Tuner:
                                 for n, a, w, (b0, b1) in zip(names, lo, width, box)},
             len(points), sum(len(r.flights) for r in self.rounds[first_round:]), (first_round, len(self.rounds) - 1),
             dict(self.gains), fitted or ("kept" if kept else "best flown"), surrounded,
-            list(self.open_face), moved))
+            list(self.open_face), moved, logged))
         return surrounded and not moved
 
     def _designs_first(self) -> float:
@@ -1024,13 +1049,13 @@ class Tuner:
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
                     ruled: Any, best: tuple[float, ...], half: float,
                     keep: list[float] | None = None, free: tuple[float, ...] | None = None,
-                    last: bool = False) -> dict[str, Any] | None:
+                    last: bool = False, logged: bool = False) -> dict[str, Any] | None:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
         (the previous design's answer `keep` included; `free` when the caller already has it: a design answered
         unbounded) and its chance when the bound moved it (None when not), and whether the answer is `keep`
         ("kept"); None when no flight near the design failed (`last`: the run's last design)."""
-        options = answer_options(self.settings, half, keep, last)
+        options = answer_options(self.settings, half, keep, last, logged)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None

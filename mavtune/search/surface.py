@@ -45,7 +45,8 @@ benchmarks/results/selection_outliers.md).
 Where one quadratic in the logarithm of the gains fits the flights near the box better than one in the gains (by a
 margin of noise variances, `log_gains`), the answer is fitted there (`LogGains`): a gain whose good values span
 decades costs as the logarithm of its ratio to its best, and a quadratic in the gain answers on its shallow side
-(benchmarks/results/answer_diagnostic_log.md).
+(benchmarks/results/answer_diagnostic_log.md). Where that quadratic also leaves at most `LAYOUT_SHARE` of the other's
+residual, the tuner lays its designs out in the logarithm too (`design`'s points even there: `tuner.Tuner._surface`).
 """
 
 from __future__ import annotations
@@ -73,6 +74,9 @@ GRID_POINTS = 20_000  # candidates of the fit's minimiser tried on a grid of the
 WIDEN_LEVEL = 0.2  # an answer on a face of the design inside the ranges: refit wider where the flights do not reject
 WIDE_REACHES = (6.0, 4.0, 3.0)  # the quadratic at this level, trying these kernel reaches (half-widths) widest first
 LOG_FLOOR = 0.01  # a range from zero (or below) is fitted in the logarithm of its gain plus this share of the range
+LAYOUT_SHARE = 0.25  # the designs are laid out in the logarithm of the gains only where a quadratic there leaves at
+# most this share of the gains' quadratic's residual (tuner `design_log_layout`): on the select half's decades plant
+# 0.03-0.17, on the heavier vehicle, the wide box and the nominal simulator 0.46 and more (selection_log_layout.md)
 LOGGED = ", in the logarithm of the gains"  # (`answer`'s fit name: the fit in the logarithm of the gains answered)
 OUTLIER_SDS = 6.0  # an outlier flight lies this many robust noise sds off the local fit and (times √2) its replicates
 OUTLIER_REACH = 4.0  # the fit that tells an outlier spans this many half-widths of the design from its centre
@@ -635,10 +639,11 @@ class LogGains:
         return [tuple(self.to([e] * len(box))[i] for e in pair) for i, pair in enumerate(box)]
 
     def fits_better(self, points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
-                    margin: float) -> bool:
+                    margin: float, share: float = 1.0) -> bool:
         """Whether one quadratic in the logarithm of the gains fits the flights within a half-width of `box` better
-        than one in the gains by more than `margin` (the weighted residual sums of squares of the same number of
-        coefficients, each point by its flights over its mean cost squared: relative noise)."""
+        than one in the gains by more than `margin` and leaves at most `share` of its residual (the weighted residual
+        sums of squares of the same number of coefficients, each point by its flights over its mean cost squared:
+        relative noise; their ratio is the likelihood ratio, whatever noise the run's pool misjudges)."""
         import numpy as np
 
         lo, hi = np.array([b[0] for b in box], float), np.array([b[1] for b in box], float)
@@ -655,7 +660,7 @@ class LogGains:
                                         for x in ([k for k, _ in near], [self.to(k) for k, _ in near]))
         except np.linalg.LinAlgError:
             return False
-        return logged + margin < linear
+        return logged + margin < linear and logged <= share * linear
 
 
 def log_offsets(space: Sequence[tuple[float, float]]) -> list[float]:
