@@ -110,7 +110,8 @@ def pick(plain: Mapping[str, float], points: Sequence[FlownPoint], stock: Sequen
     width = {n: (hi - lo) or 1.0 for n, (lo, hi) in space.items()}
     plain = {n: float(plain[n]) for n in names}
     stock = [dict(t) for t in dict.fromkeys(tuple((n, float(s[n])) for n in names) for s in stock
-                                              if all(n in s for n in names))]  # each stock vector once
+                                              if all(n in s and math.isfinite(float(s[n])) for n in names))]
+    # (each stock vector once; none with a gain of no place in its range: a stock 0 on a log scale)
     here = next((p for p in points if _same(p.gains, plain, width)), None)
     plain_dict = {"gains": plain, "flown": here is not None,
                   **({"cost": here.mean, "se": here.se, "flights": len(here.costs)} if here is not None else {})}

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from hypothesis import given, settings, strategies as st
 
 from mavtune.near_stock import flown, k_se, pick
@@ -66,6 +67,8 @@ def test_without_noise_or_stock_the_plain_answer_stands():
     points = flown(flights, ["kp", "kd"], math.nan)
     assert "noise is unknown" in pick({"kp": 1.0, "kd": 0.5}, points, STOCK, SPACE, math.nan, 0).reason
     assert "stock gains are unknown" in pick({"kp": 1.0, "kd": 0.5}, points, [], SPACE, 0.2, MANY).reason
+    nowhere = [{"kp": math.nan, "kd": 0.5}]  # (a stock 0 on a log scale has no place in its range)
+    assert "stock gains are unknown" in pick({"kp": 1.0, "kd": 0.5}, points, nowhere, SPACE, 0.2, MANY).reason
     p = pick({"kp": 0.7, "kd": 0.5}, flown(flights, ["kp", "kd"], 0.2), STOCK, SPACE, 0.2, MANY)
     assert p.plain["flown"] is False and p.to_dict()["plain"] == {"gains": {"kp": 0.7, "kd": 0.5}, "flown": False}
 
@@ -121,6 +124,8 @@ def test_stock_parameters_normalise_by_the_vehicle_map():
     assert stock == {"kp": 0.0, "kd": 4.0 / 7.0}
     assert m.values(stock) == {"PSC_POSZ_P": 1.0, "PSC_VELZ_P": 5.0}
     assert m.normalised({"PSC_POSZ_P": 0.5}) == {"kp": -0.25}  # a stock value outside the range stays outside
+    logged = ParamMap(stack="px4", gains={"ki": GainBinding(param="MPC_Z_VEL_I_ACC", lo=0.02, hi=2.0, log=True)})
+    assert logged.normalised({"MPC_Z_VEL_I_ACC": 0.2}) == {"ki": pytest.approx(0.5)}  # a decade of two
 
 
 def test_the_simulator_answers_nearest_stock_only_when_asked(tmp_path):
