@@ -16,7 +16,7 @@ import numbers
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains
@@ -706,6 +706,11 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
         if (last or logged) and s.design_log else {})
 
 
+def _span(points: Sequence[Sequence[float]]) -> list[tuple[float, float]]:
+    """The box of a design's points: per gain its lowest and highest share of the range."""
+    return [(min(column), max(column)) for column in zip(*points)]
+
+
 class StageDone(Exception):
     """A stage of a run (e.g. one battery pack) has flown its rounds; the journal holds them, resume continues."""
 
@@ -843,6 +848,11 @@ class Tuner:
         told = (pair for r in self.rounds for pair in zip(*Strategy.measured([f.gains for f in r.flights], r.flights)))
         return {key: costs for key, (_, costs) in by_gains(told, names, digits=None).items()}
 
+    def _flown_shares(self) -> dict[tuple[float, ...], list[float]]:
+        """`_flown` with each gain vector in shares of each range (what the response surface fits)."""
+        ranges = list(self.settings.space.values())
+        return {tuple((x - a) / (b - a) for x, (a, b) in zip(key, ranges)): c for key, c in self._flown().items()}
+
     def run(self) -> TuningResult:
         s = self.settings
         found: list[Gains] = []
@@ -940,22 +950,20 @@ class Tuner:
         width = [s.space[n][1] - s.space[n][0] for n in names]
         step = len(self._design_answers)
         centre = self._centre or [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # (a move: `_surface`)
+        points = surface_design(centre, half, s.design_inner_at(step))
         if step == s.designs_before_passes() and s.design_log_layout and s.design_log:  # (once: from then on)
             scale = LogGains(surface_log_offsets(list(s.space.values())))
-            before = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
-            even = surface_design(centre, half, s.design_inner_at(step))  # (judged where this design would fly)
-            near = [(min(p[i] for p in even), max(p[i] for p in even)) for i in range(len(names))]
-            cv = self.pool.cv
-            if math.isfinite(cv) and scale.fits_better(before, near, s.design_log * cv * cv, SURFACE_LAYOUT_SHARE):
+            cv = self.pool.cv  # (judged around where this design would fly in the gains)
+            if math.isfinite(cv) and scale.fits_better(self._flown_shares(), _span(points), s.design_log * cv * cv,
+                                                       SURFACE_LAYOUT_SHARE):
                 self._log_layout = scale
         layout = self._log_layout
-        points = surface_design(layout.to(centre) if layout else centre, half, s.design_inner_at(step))
         if layout is not None:  # (evenly in the logarithm of the gains: finer towards each range's low end)
-            points = [layout.back(p) for p in points]
+            points = [layout.back(p) for p in surface_design(layout.to(centre), half, s.design_inner_at(step))]
         per_point = s.design_per_point(step)
         queue = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, p)}
                  for _ in range(int(s.design_repeats)) for p in points for _ in range(per_point)]
-        box = [(min(p[i] for p in points), max(p[i] for p in points)) for i in range(len(names))]
+        box = _span(points)
         reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
         todo, limit = self._design_budget(queue, points, names, lo, width, step)
         first_round = len(self.rounds)
@@ -972,9 +980,8 @@ class Tuner:
             todo += [a for a, f in zip(batch, flights) if not f.measured]  # a lost flight is flown again
             for a, cost in zip(*Strategy.measured(batch + spare, flights)):  # repeats of a point: the run's noise
                 self.pool.add((SURFACE, tuple(a[n] for n in names)), cost)
-        flown = {tuple((x - a) / w for x, a, w in zip(key, lo, width)): c for key, c in self._flown().items()}
-        flown, left = surface_inliers(flown, box, float(s.design_outliers))  # (0: as flown; the run's noise keeps
-        # them: the fits' tests allow for the outliers no replicate told)
+        flown, left = surface_inliers(self._flown_shares(), box, float(s.design_outliers))  # (0: as flown; the
+        # run's noise keeps them: the fits' tests allow for the outliers no replicate told)
         self.outliers = [{"gains": {n: a + w * u for n, a, w, u in zip(names, lo, width, k)}, "cost": c}
                          for k, costs in left.items() for c in costs]
         ruled = surface_ruled_out(flown, self.pool)

@@ -57,7 +57,7 @@ def how_line(d: Any) -> str:
         how += f"; on its box's face inside the range ({', '.join(d.open_face)})"
     if d.moves:
         how += "; the next design moved past that face"
-    if getattr(d, "logged", False):
+    if d.logged:
         how += "; laid out in the logarithm of the gains (its half-width a share of that)"
     return how
 
