@@ -488,10 +488,12 @@ def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path, c
 
 def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
     """The tuned parameters of each vehicle, the files to load them from, and any range edge reached."""
-    tolerance = outcome.get("tuned_params_tolerance", {})
+    from mavtune.vehicles.tuned import tolerance_text
+
     for vehicle, params in outcome.get("tuned_params", {}).items():
-        values = ", ".join(f"{n} = {v:.4g} ± {tolerance.get(vehicle, {}).get(n, 0):.2g}" for n, v in params.items())
-        console.print(f"{vehicle}: {values} (± the search tolerance)", highlight=False)
+        values = ", ".join(f"{n} = {v:.4g} {tolerance_text(outcome, vehicle, n, inline=True)}"
+                           for n, v in params.items())
+        console.print(f"{vehicle}: {values} (the search tolerance)", highlight=False)
     if outcome.get("param_files"):
         console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
                       f"{', '.join(outcome['param_files'])}", highlight=False)

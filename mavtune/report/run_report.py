@@ -39,6 +39,7 @@ from mavtune.report.figure_rules import many
 from mavtune.report.points import flown_points, points_section
 from mavtune.report.traces import has_traces, vehicle_order
 from mavtune.report.units import GainUnit, gain_units
+from mavtune.vehicles.tuned import tolerance_text
 
 REPORT = "report.md"
 TIMELINE_PNG = "timeline.png"
@@ -138,20 +139,19 @@ def _write(out: Path, result, config, surface: Any, title: str | None, status: s
 
 
 def tuned_params_section(summary: dict) -> list[str]:
-    """The tuned gains as each vehicle's parameters (± the search tolerance), the parameter files, the range
+    """The tuned gains as each vehicle's parameters (with the search tolerance), the parameter files, the range
     edges the gains reached and the run's cautions with what its intervals hold (from result.json; nothing when
     it has none)."""
     parts: list[str] = answer_section(summary)
-    tolerance = summary.get("tuned_params_tolerance") or {}
-    rows = [[f"`{vehicle}`", f"`{name}`", md.num(value, 4), md.num(tolerance.get(vehicle, {}).get(name, math.nan), 2)]
+    rows = [[f"`{vehicle}`", f"`{name}`", md.num(value, 4), tolerance_text(summary, vehicle, name)]
             for vehicle, params in (summary.get("tuned_params") or {}).items() for name, value in params.items()]
     if rows:
         parts += ["## Tuned parameters", "",
-                  md.table(["vehicle", "parameter", "value", "± search tolerance (ε × range)"], rows,
+                  md.table(["vehicle", "parameter", "value", "search tolerance (ε of the range)"], rows,
                            ["l", "l", "r", "r"]), "",
-                  "± here is the search's tolerance, how close to the optimum a line search narrows (ε of the "
-                  "parameter's range), not a statistical error: the final gains' standard errors and intervals are "
-                  "under Final gains.", ""]
+                  "The search tolerance is how close to the optimum a line search narrows (± ε of the parameter's "
+                  "range; on a log scale the values ε of its logarithm spans either side, a factor, not a ±), not a "
+                  "statistical error: the final gains' standard errors and intervals are under Final gains.", ""]
         if summary.get("param_files"):
             whose = summary.get("param_file_vehicles") or {}
             several = len({tuple(v) for v in whose.values()}) > 1  # a file per vehicle: say whose

@@ -78,6 +78,11 @@ class GainBinding(BaseModel):
         units: on a log scale it grows with the value."""
         return scaled_width(dg, g, self.lo, self.hi, self.log)
 
+    def band(self, dg: float, g: float) -> tuple[float, float]:
+        """The parameter's values a normalised width `dg` either side of `g` reaches inside the range: on a log scale
+        a factor (hi/lo)^dg each way, which no single ± says."""
+        return self.value(max(g - dg, 0.0)), self.value(min(g + dg, 1.0))
+
     def limit(self, upper: bool) -> float | None:
         """The autopilot's documented limit on that side, if known."""
         return self.limit_hi if upper else self.limit_lo
@@ -130,6 +135,11 @@ class ParamMap(BaseModel):
         """{parameter: ± value}: a normalised tolerance per gain in each parameter's units, at the normalised
         `gains` (a log-scale parameter's tolerance grows with its value)."""
         return {b.param: b.width(tolerance[g], gains[g]) for g, b in self.gains.items()}
+
+    def bands(self, tolerance: Mapping[str, float], gains: Mapping[str, float]) -> dict[str, tuple[float, float]]:
+        """{parameter: (low, high)} a normalised tolerance per gain spans at the normalised `gains`, for the
+        log-scale parameters (a linear one's is its ±)."""
+        return {b.param: b.band(tolerance[g], gains[g]) for g, b in self.gains.items() if b.log}
 
     def explain_edge(self, edge: RangeEdge) -> RangeEdge:
         """The edge with the parameter it drives and what to widen: the tuning space when it ends inside the

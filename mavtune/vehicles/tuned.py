@@ -68,8 +68,21 @@ def tuned_outcome(maps: Mapping[str, ParamMap], gains: Mapping[str, float],
         outcome |= {"tuned_params": {v: m.values(gains) for v, m in usable.items()},
                     "tuned_params_tolerance": {v: m.tolerances(tolerance, gains) for v, m in usable.items()},
                     "param_files": list(files), "param_file_vehicles": files}
+        if bands := {v: b for v, m in usable.items() if (b := m.bands(tolerance, gains))}:
+            outcome["tuned_params_band"] = bands
     outcome["range_edges"] = [e.to_dict() for e in edges]
     return outcome
+
+
+def tolerance_text(outcome: Mapping[str, Any], vehicle: str, param: str, inline: bool = False) -> str:
+    """One tuned parameter's search tolerance as said to a user (result.json's `tuned_params_tolerance` and
+    `tuned_params_band`): "± 0.4", or on a log scale the values it spans, "3.5 – 8" (`inline`: "(3.5 – 8)", to
+    follow a value); "—" where unknown."""
+    band = (outcome.get("tuned_params_band") or {}).get(vehicle, {}).get(param)
+    if band is not None:
+        return f"({band[0]:.3g} – {band[1]:.3g})" if inline else f"{band[0]:.3g} – {band[1]:.3g}"
+    tolerance = (outcome.get("tuned_params_tolerance") or {}).get(vehicle, {}).get(param)
+    return "—" if tolerance is None else f"± {tolerance:.2g}"
 
 
 def explained_edges(maps: Mapping[str, ParamMap], gains: Mapping[str, float],

@@ -11,9 +11,17 @@ def test_lists_each_vehicles_parameters_files_and_edges():
                "param_files": ["tuned.parm", "tuned.params"],
                "range_edges": [{"message": "kd = 0.812 lies within ... PSC_VELZ_P ..."}]}
     text = "\n".join(tuned_params_section(summary))
-    assert "| `tcp:a` | `PSC_POSZ_P` | 2.625 | 0.5 |" in text and "`PSC_VELZ_P` | 6.688 | 1.8 |" in text
+    assert "| `tcp:a` | `PSC_POSZ_P` | 2.625 | ± 0.5 |" in text and "`PSC_VELZ_P` | 6.688 | ± 1.8 |" in text
     assert "`tuned.parm`" in text and "QGroundControl" in text
     assert "## Range edges" in text and "- kd = 0.812" in text
+
+
+def test_a_log_scale_parameters_tolerance_is_the_values_it_spans_not_a_plus_minus():
+    summary = {"tuned_params": {"m0": {"PSC_POSZ_P": 2.0, "PSC_VELZ_P": 8.0}},
+               "tuned_params_tolerance": {"m0": {"PSC_POSZ_P": 0.4, "PSC_VELZ_P": 3.33}},
+               "tuned_params_band": {"m0": {"PSC_VELZ_P": [5.278, 8.0]}}}
+    text = "\n".join(tuned_params_section(summary))
+    assert "`PSC_POSZ_P` | 2 | ± 0.4 |" in text and "`PSC_VELZ_P` | 8 | 5.28 – 8 |" in text and "not a ±" in text
 
 
 def test_says_whose_file_is_whose_when_each_vehicle_has_its_own():

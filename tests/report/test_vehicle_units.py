@@ -126,7 +126,7 @@ def test_every_table_gives_one_meaning_of_plus_minus_and_names_it(tmp_path):
                     if any(re.search(w, h) for w in words)}
         assert len(meanings) == 1, h  # one meaning, named in the header
     _, rows = _table(text, "## Tuned parameters")
-    assert rows[0][1:] == ["`PSC_POSZ_P`", "2", "0.4"]
+    assert rows[0][1:] == ["`PSC_POSZ_P`", "2", "± 0.4"]
 
 
 def test_the_figures_of_a_vehicle_run_are_in_the_autopilots_units():

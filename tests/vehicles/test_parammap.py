@@ -14,7 +14,7 @@ from pymavlink import mavparm
 from mavtune.edges import RangeEdge
 from mavtune.errors import MavtuneError
 from mavtune.vehicles.parammap import GainBinding, ParamMap
-from mavtune.vehicles.tuned import file_groups, tuned_outcome
+from mavtune.vehicles.tuned import file_groups, tolerance_text, tuned_outcome
 
 SPACE = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
 ARDU = ParamMap(stack="ardupilot", system_id=1, gains={
@@ -49,6 +49,15 @@ def test_a_log_scale_tolerance_follows_the_value_it_is_at(tmp_path):
             == pytest.approx(logged.tolerances(tol, low)["MPC_Z_VEL_I_ACC"] * 100 ** 0.8))
     out = tuned_outcome({"a": logged}, low, {"ki": (0.0, 1.0)}, 0.125, tmp_path)
     assert out["tuned_params"]["a"]["MPC_Z_VEL_I_ACC"] == pytest.approx(0.02 * 100 ** 0.1)
+    lo, hi = out["tuned_params_band"]["a"]["MPC_Z_VEL_I_ACC"]  # a factor 100^ε each way, not one ±
+    assert (lo, hi) == pytest.approx((0.02, 0.02 * 100 ** 0.225))  # (below: clipped at the range's bottom)
+    assert tolerance_text(out, "a", "MPC_Z_VEL_I_ACC") == f"{lo:.3g} – {hi:.3g}" == "0.02 – 0.0564"
+
+
+def test_a_linear_parameters_tolerance_is_said_as_a_plus_minus_and_has_no_band(tmp_path):
+    out = tuned_outcome({"a": ARDU}, {"kp": 0.5, "kd": 0.25}, SPACE, 0.125, tmp_path)
+    assert "tuned_params_band" not in out and tolerance_text(out, "a", "PSC_VELZ_P") == "± 0.88"
+    assert tolerance_text(out, "a", "PSC_POSZ_P", inline=True) == "± 0.25" and tolerance_text(out, "b", "X") == "—"
 
 
 @pytest.mark.parametrize("gains", [{"kp": float("nan"), "kd": 0.5}, {"kp": 1.5, "kd": 0.5}, {"kp": 0.5}])
