@@ -95,6 +95,9 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
     **{f"today's answer keeping the answer before beside a wall only below a {k:g} % divergence chance (session 24)": {
         "widen_bound": 2.0, "log_gains": 16.0, "keep_risk": k / 100} for k in (0.1, 0.3)},
 }
+VARIANTS.update({f"a Gaussian process's lowest mean {where} (session 25)": {"widen_bound": 2.0, "log_gains": 16.0,
+                                                                           "gp": region}
+                 for where, region in (("in the last design's box", "box"), ("across every flown gain", "flown"))})
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
 
@@ -254,6 +257,10 @@ def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, An
     if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
         given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
     bag = given.pop("bag", 0)
+    region = given.pop("gp", None)
+    if region is not None and pool is not None and math.isfinite(pool.cv):
+        offsets = surface.log_offsets(list(PLANTS[row["plant"]].space.values()))
+        return list(gp_answer(points, box, pool.cv, region, offsets, given["log_gains"]))
     if given.get("log_gains"):  # (the engine's offsets: `tuner.answer_options`)
         given["offsets"] = surface.log_offsets(list(PLANTS[row["plant"]].space.values()))
     worse = surface.ruled_out(points, pool or NoisePool())
@@ -282,6 +289,45 @@ def bagged(points, box, worse, pool, draws: int, options: dict[str, Any]) -> tup
     if not all(map(math.isfinite, points[nearest])):
         return surface.answer(points, box, worse, pool, **options)[0]
     return x
+
+
+def gp_answer(points, box, cv: float, region: str, offsets, log_margin: float) -> tuple[float, ...]:
+    """The lowest posterior mean of a Gaussian process (scikit-learn's; Matérn 5/2 with a length per gain, fitted
+    by likelihood) through the log of each point's mean cost, each with its noise (cv² / flights), on a grid over
+    the last design's box (`region` "box") or over every flown gain ("flown"): among grid points whose nearest
+    flown point did not fail and which lie in the hull of the safe points; in the logarithm of the gains where
+    `surface.answer`'s own test says so. The generic model-based answer, against the engine's local quadratic."""
+    from scipy.spatial import Delaunay, QhullError, cKDTree
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
+
+    from mavtune.search.surface import LogGains
+
+    scale = LogGains(offsets)
+    if scale.fits_better(points, box, log_margin * cv * cv):
+        return scale.back(gp_answer(scale.points(points), scale.box(box), cv, region, offsets, 0.0))
+    every = [k for k, c in points.items() if c]
+    safe = np.array([all(map(math.isfinite, points[k])) for k in every])
+    x = np.array([k for k, s in zip(every, safe) if s], float)
+    flights = np.array([len(points[tuple(k)]) for k in x], float)
+    means = np.array([np.mean(points[tuple(k)]) for k in x])
+    d = x.shape[1]
+    kernel = ConstantKernel(1.0, (1e-3, 1e3)) * Matern([0.3] * d, (0.03, 10.0), nu=2.5) + WhiteKernel(1e-3, (1e-6, 1.0))
+    gp = GaussianProcessRegressor(kernel, alpha=cv * cv / flights, normalize_y=True, n_restarts_optimizer=2,
+                                  random_state=0).fit(x, np.log(means / means.min()))
+    lo, hi = (np.array(box, float).T if region == "box" else (x.min(axis=0), x.max(axis=0)))
+    per = {1: 201, 2: 41, 3: 13}.get(d, 9)
+    grid = np.stack([a.ravel() for a in np.meshgrid(*np.linspace(lo, hi, per).T, indexing="ij")], axis=1)
+    inside = x[np.all((x >= lo - 1e-12) & (x <= hi + 1e-12), axis=1)]
+    grid = np.concatenate([grid, inside])
+    if not np.all(safe):  # no answer whose nearest flight failed, nor outside the safe flights' hull
+        ok = safe[cKDTree(np.array(every, float)).query(grid)[1]]
+        try:
+            ok &= Delaunay(inside).find_simplex(grid, tol=1e-9) >= 0
+        except (QhullError, ValueError):
+            pass
+        grid = grid[ok] if np.any(ok) else inside
+    return tuple(float(v) for v in grid[np.argmin(gp.predict(grid))])
 
 
 def replay_summary(base: list[dict[str, Any]], rows: list[dict[str, Any]]) -> dict[str, Any]:
