@@ -98,6 +98,11 @@ VARIANTS = {  # the surface fit's variants replayed (`surface.answer`'s options)
 VARIANTS.update({f"a Gaussian process's lowest mean {where} (session 25)": {"widen_bound": 2.0, "log_gains": 16.0,
                                                                            "gp": region}
                  for where, region in (("in the last design's box", "box"), ("across every flown gain", "flown"))})
+VARIANTS.update({f"today's answer with a two-sided quadratic {name} (session 25)": {
+    "widen_bound": 2.0, "log_gains": 16.0} | o for name, o in (
+    ("reaching 2 half-widths", {"two_sided_reach": 2.0}), ("reaching 3 half-widths", {"two_sided": 1.0}),
+    ("reaching 4 half-widths", {"two_sided_reach": 4.0}),
+    *((f"reaching 3 half-widths at the {p:g} % level", {"two_sided": p / 100}) for p in (20, 5, 1)))})
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
 
@@ -257,6 +262,13 @@ def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, An
     if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
         given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
     bag = given.pop("bag", 0)
+    reach = given.pop("two_sided_reach", None)
+    if reach is not None:  # (the engine's two-sided quadratic over another kernel: `surface.answer`'s last step)
+        if given.get("log_gains"):
+            given["offsets"] = surface.log_offsets(list(PLANTS[row["plant"]].space.values()))
+        x, how = surface.answer(points, box, surface.ruled_out(points, pool or NoisePool()), pool, **given)
+        steep = None if how.endswith(surface.LOGGED) else surface.two_sided_minimum(points, box, 1.0, reach)
+        return list(steep or x)
     region = given.pop("gp", None)
     if region is not None and pool is not None and math.isfinite(pool.cv):
         offsets = surface.log_offsets(list(PLANTS[row["plant"]].space.values()))

@@ -65,7 +65,7 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
     "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0,
-    "tuning.design_log_layout": False}
+    "tuning.design_log_layout": False, "tuning.design_two_sided": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -147,7 +147,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
                    "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "design_log",
-                   "design_log_layout", "budget")
+                   "design_log_layout", "design_two_sided", "budget")
 
 
 
@@ -166,7 +166,9 @@ class Tuning(_Section):
     the last design answered up to a range's bound within two half-widths of that face: `design_widen_bound`, since
     session 22; the last design's in the logarithm of the gains where a quadratic there fits its flights better by 16
     noise variances: `design_log`, since session 23, and every design after the passes laid out there where the
-    run's flights before them fit that better: `design_log_layout`, since session 24; without
+    run's flights before them fit that better: `design_log_layout`, since session 24; the last design's the minimum
+    of a quadratic steeper on one side of it where that fits its flights better at the 5 % level:
+    `design_two_sided`, since session 25; without
     the flights that their replicates and their neighbours both put far off, spoiled by something other than the
     gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
@@ -323,6 +325,14 @@ class Tuning(_Section):
                                           "that better): its points spread evenly in the logarithm, so a design "
                                           "around an optimum near a range's low end samples it finely (session 24, "
                                           "selection_log_layout.md)")
+    design_two_sided: float = Field(0.05, ge=0.0, lt=1.0, description="design: the last design's answer is the "
+                                    "minimum of a quadratic whose curvature differs on the two sides of it along "
+                                    "each gain, fitted to the flights within three half-widths of the design, where "
+                                    "it fits them better than the quadratic at this level (an F test) and its minimum "
+                                    "lies in the design; not beside a failed flight, nor where the answer is fitted "
+                                    "in the logarithm of the gains: a cost that rises faster towards oscillating "
+                                    "gains than towards sluggish ones, whose quadratic answers on the shallow side "
+                                    "(0: never; 0.05 chosen on the zoo's select half, answer_diagnostic_two_sided.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

@@ -400,6 +400,7 @@ class Settings:
     design_outliers: float = 0.0
     design_log: float = 0.0
     design_log_layout: bool = False
+    design_two_sided: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -490,6 +491,10 @@ class Settings:
             raise MavtuneError(f"design_log {self.design_log} is outside [0, 1000]: noise variances by which a "
                                "quadratic in the logarithm of the gains must fit the last design's flights better "
                                "for its answer to be taken (0: never)")
+        if not 0.0 <= float(self.design_two_sided) < 1.0:
+            raise MavtuneError(f"design_two_sided {self.design_two_sided} is outside [0, 1): the level at which a "
+                               "quadratic steeper on one side of its minimum must fit the last design's flights "
+                               "better for its minimum to be the answer (0: never)")
         if not 0.0 <= float(self.design_outliers) <= 100.0:
             raise MavtuneError(f"design_outliers {self.design_outliers} is outside [0, 100]: robust noise sds off the "
                                "local fit and off its point's other flights that make a flight an outlier (0: none)")
@@ -512,7 +517,7 @@ class Settings:
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
                   "wall_span", "composite_reach", "design_widen", "design_widen_bound", "design_outliers",
-                  "design_log")
+                  "design_log", "design_two_sided")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -681,6 +686,7 @@ class Settings:
                         | ({"outliers": float(self.design_outliers)} if self.design_outliers else {})
                         | ({"log": float(self.design_log)} if self.design_log else {})
                         | ({"log_layout": True} if self.design_log_layout and self.design_log else {})
+                        | ({"two_sided": float(self.design_two_sided)} if self.design_two_sided else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
@@ -695,7 +701,8 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
     answer on a face of the design (`design_widen`, 0: off), always given; and for the `last` design how near a
     range's bound that refit answers up to it (`design_widen_bound`: the run's answer, after which nothing flies);
     for the `last` design and every design laid out in the logarithm of the gains (`logged`), by how much a
-    quadratic there must fit better to answer there (`design_log`).
+    quadratic there must fit better to answer there (`design_log`); for the `last` design the level at which a
+    quadratic steeper on one side of its minimum must fit better (`design_two_sided`).
     (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
     reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
     return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
@@ -703,7 +710,8 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
         "widen": float(s.design_widen)} | (
         {"widen_bound": float(s.design_widen_bound)} if last and s.design_widen_bound else {}) | (
         {"log_gains": float(s.design_log), "offsets": surface_log_offsets(list(s.space.values()))}
-        if (last or logged) and s.design_log else {})
+        if (last or logged) and s.design_log else {}) | (
+        {"two_sided": float(s.design_two_sided)} if last and s.design_two_sided else {})
 
 
 def _span(points: Sequence[Sequence[float]]) -> list[tuple[float, float]]:

@@ -29,6 +29,8 @@ MAX_PANEL_GAINS = 4  # the figure's panels are the pairs of the first this many 
 ANSWER_COLOUR = "#d62728"
 HOW = {"quadratic": "the minimum in its box of the quadratic fitted to the flights near it",
        "cubic": "the minimum in its box of a cubic fitted to the flights near it (they reject the quadratic)",
+       "two-sided quadratic": "the minimum in its box of a quadratic steeper on one side of it than on the other, "
+                              "fitted to the flights near it (they fit it better than the quadratic)",
        "plane": "the minimum of a plane fitted to the flights near it (they need no curvature), on a range's bound",
        "best flown": "the best point flown in its box (no usable fit)",
        "kept": "the design before's answer, kept beside a failed flight"}

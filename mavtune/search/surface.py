@@ -78,6 +78,9 @@ LAYOUT_SHARE = 0.25  # the designs are laid out in the logarithm of the gains on
 # most this share of the gains' quadratic's residual (tuner `design_log_layout`): on the select half's decades plant
 # 0.03-0.17, on the heavier vehicle, the wide box and the nominal simulator 0.46 and more (selection_log_layout.md)
 LOGGED = ", in the logarithm of the gains"  # (`answer`'s fit name: the fit in the logarithm of the gains answered)
+TWO_SIDED = "two-sided quadratic"  # (`answer`'s fit name: `two_sided_minimum` answered)
+TWO_SIDED_REACH = 3.0  # the two-sided quadratic is fitted to the flights within this many half-widths of the design
+TWO_SIDED_STEEP = 4.0  # its curvature on one side of the minimum is at most e^this times the other side's
 OUTLIER_SDS = 6.0  # an outlier flight lies this many robust noise sds off the local fit and (times √2) its replicates
 OUTLIER_REACH = 4.0  # the fit that tells an outlier spans this many half-widths of the design from its centre
 
@@ -395,6 +398,78 @@ def plane(x, y, n, cv: float, level: float, slope_level: float = 0.0):
     return _polynomial(x, y, n, _terms(d, 1))
 
 
+def two_sided_minimum(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+                      level: float, reach: float = TWO_SIDED_REACH) -> tuple[float, ...] | None:
+    """The minimum m of a quadratic whose curvature differs on the two sides of m along each gain — cost
+    c + |Lᵀs|², s_i = (x_i − m_i)·e^(±a_i/2) — fitted (weighted as `answer`'s quadratic, from that quadratic's own
+    fit) to the flights within `reach` half-widths of the design of `box`, where it fits them better than the
+    quadratic at `level` (an F test on the weighted residuals, a_i its d more coefficients) and m lies in the box;
+    None otherwise, where a flight that near failed, or where the quadratic has no minimum. A control cost rises
+    faster towards the gains that oscillate than towards sluggish ones: a quadratic through both sides answers on
+    the shallow one, and no narrower design cures it, as each narrows around the last one's biased answer (the
+    zoo's analytic valley: 57 % of runs within 2 % of the optimum, 92 % with it; answer_diagnostic_two_sided*.md)."""
+    import numpy as np
+    from scipy.optimize import least_squares
+    from scipy.stats import f as f_dist
+
+    from mavtune.search.joint import quadratic
+
+    lo, hi, centre, half = _frame(box)
+    keys = [k for k, c in points.items() if c]
+    if not keys:
+        return None
+    u = (np.array(keys, float) - centre) / half
+    kernel = _tricube(reach)(u)
+    near = [k for k, w in zip(keys, kernel) if w > 0]
+    if not all(math.isfinite(c) for k in near for c in points[k]):
+        return None  # (beside a wall the answer's own rules hold)
+    d = len(lo)
+    extra = d  # the curvature ratios
+    coefficients_ = 1 + d + d * (d + 1) // 2
+    if len(near) < coefficients_ + extra + 3:
+        return None
+    x = u[kernel > 0]
+    means = np.array([math.fsum(points[k]) / len(points[k]) for k in near])
+    y = means / np.max(means)
+    w = np.array([len(points[k]) for k in near], float) / y ** POWER * kernel[kernel > 0]
+    w = w / np.max(w)
+    fit = quadratic(x, y, w)
+    if fit is None:
+        return None
+    c0, gradient, hessian = fit
+    try:
+        root = np.linalg.cholesky(0.5 * hessian)  # (a minimum: the curvature positive every way)
+    except np.linalg.LinAlgError:
+        return None
+    step = np.linalg.solve(hessian, gradient)
+    lower = np.tril_indices(d)
+    start = np.concatenate([np.clip(-step, -2.9, 2.9), [c0 - 0.5 * gradient @ step], root[lower], np.zeros(d)])
+    sw = np.sqrt(w)
+
+    def residuals(t: np.ndarray) -> np.ndarray:
+        m, c, factor, a = t[:d], t[d], np.zeros((d, d)), t[-d:]
+        factor[lower] = t[d + 1:-d]
+        dx = x - m
+        s = dx * np.exp(np.sign(dx) * a / 2.0)
+        return sw * (c + np.sum((s @ factor) ** 2, axis=1) - y)
+
+    bound = np.full(start.shape, np.inf)
+    bound[:d], bound[-d:] = 3.0, TWO_SIDED_STEEP
+    try:
+        out = least_squares(residuals, start, bounds=(-bound, bound), method="trf")
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    two = float(np.sum(out.fun ** 2))
+    one = float(np.sum((sw * (c0 + x @ gradient + 0.5 * np.einsum("ni,ij,nj->n", x, hessian, x) - y)) ** 2))
+    dof = len(x) - coefficients_ - extra
+    if not (dof > 0 and two > 0 and f_dist.sf((one - two) / extra / (two / dof), extra, dof) <= level):
+        return None
+    m = out.x[:d]
+    if np.any(np.abs(m) > 1.0):
+        return None
+    return tuple(float(v) for v in np.clip(m * half + centre, lo, hi))
+
+
 def _frame(box: Sequence[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A design's box (per gain (lo, hi), shares of each range) as arrays: lo, hi, its centre and half-widths."""
     import numpy as np
@@ -431,7 +506,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            risk: float | None = RISK, risk_reach: float | None = None,
            keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK,
            widen: float = WIDEN_LEVEL, widen_bound: float = 0.0, log_gains: float = 0.0,
-           offsets: Sequence[float] | None = None) -> tuple[tuple[float, ...], str]:
+           offsets: Sequence[float] | None = None, two_sided: float = 0.0) -> tuple[tuple[float, ...], str]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
@@ -466,10 +541,17 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     where one quadratic in the logarithm of the gains (`LogGains`, each gain offset by its share of `offsets`) fits
     the flights near the box better than one in the gains by more than this many noise variances, the answer is
     that of the flights mapped there, mapped back (0: never): gains whose good values span decades, steep below the
-    optimum and shallow above, which a quadratic in the gains answers on the shallow side."""
+    optimum and shallow above, which a quadratic in the gains answers on the shallow side. `two_sided`: where
+    that answer is not fitted in the logarithm of the gains, `two_sided_minimum` at this level replaces it (0:
+    never): a cost steeper on one side of its optimum than on the other."""
     # the fit's options that each refit below keeps (in the logarithm of the gains; over a wider kernel)
     refit = {"power": power, "log": log, "cubic_level": cubic_level, "plane_level": plane_level,
-           "slope_level": slope_level, "plane_inside": plane_inside, "risk": risk, "keep_risk": keep_risk}
+             "slope_level": slope_level, "plane_inside": plane_inside, "risk": risk, "keep_risk": keep_risk}
+    if two_sided:  # the answer without it first: in the logarithm of the gains, that answer stands
+        x, how = answer(points, box, worse, pool, reach=reach, risk_reach=risk_reach, keep=keep, widen=widen,
+                        widen_bound=widen_bound, log_gains=log_gains, offsets=offsets, **refit)
+        steep = None if how.endswith(LOGGED) else two_sided_minimum(points, box, two_sided)
+        return (steep, TWO_SIDED) if steep is not None else (x, how)
     if log_gains and offsets is not None:
         scale = LogGains(offsets)
         cv = pool.cv if pool is not None else math.nan
