@@ -424,9 +424,8 @@ def two_sided_minimum(points: Mapping[tuple[float, ...], Sequence[float]], box: 
     if not all(math.isfinite(c) for k in near for c in points[k]):
         return None  # (beside a wall the answer's own rules hold)
     d = len(lo)
-    extra = d  # the curvature ratios
-    coefficients_ = 1 + d + d * (d + 1) // 2
-    if len(near) < coefficients_ + extra + 3:
+    extra = d  # the curvature ratios, beyond the quadratic's coefficients
+    if len(near) < coefficients(d) + extra + 3:
         return None
     x = u[kernel > 0]
     means = np.array([math.fsum(points[k]) / len(points[k]) for k in near])
@@ -461,8 +460,9 @@ def two_sided_minimum(points: Mapping[tuple[float, ...], Sequence[float]], box: 
         return None
     two = float(np.sum(out.fun ** 2))
     one = float(np.sum((sw * (c0 + x @ gradient + 0.5 * np.einsum("ni,ij,nj->n", x, hessian, x) - y)) ** 2))
-    dof = len(x) - coefficients_ - extra
-    if not (dof > 0 and two > 0 and f_dist.sf((one - two) / extra / (two / dof), extra, dof) <= level):
+    dof = len(x) - coefficients(d) - extra
+    better = two == 0.0 or f_dist.sf((one - two) / extra / (two / dof), extra, dof) <= level if dof > 0 else False
+    if not (one > two and better):  # (an exact fit is better at any level)
         return None
     m = out.x[:d]
     if np.any(np.abs(m) > 1.0):
