@@ -152,7 +152,8 @@ class LineSearchRecord:
 class DesignRecord:
     """One response-surface design as flown: its box (per gain, in the gain's units), its half-width (a share of
     each range), its rounds and flights, and its answer with how it was reached: the fit whose minimum inside the box
-    it is ("quadratic", "cubic" or "plane", ", refitted wider" over the wider designs' flights too: `surface.answer`),
+    it is ("quadratic", "cubic", "plane" or "two-sided quadratic", ", refitted wider" over the wider designs' flights
+    too: `surface.answer`),
     "best flown" (no usable fit: the best point flown in the box) or "kept" (beside a failed flight, the design
     before's answer, `wall_keep`); whether the box surrounded that answer (inside it or on a range's bound) or
     answered on its face inside the range (`open_face`, the gains there), whether the next design moved past

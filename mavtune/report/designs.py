@@ -90,8 +90,8 @@ def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mappin
             "(see Answer).")
     parts = ["## Designs", "", lead + " Each design flew a box of gains (its half-width a share of each range) and "
              "fitted the cost to the run's flights near it (a quadratic in every gain; a cubic where the flights "
-             "reject it, a plane where they need no curvature); the next design narrowed around an answer its box "
-             "surrounded.", "",
+             "reject it, a plane where they need no curvature; for the last, a quadratic steeper on one side of its "
+             "minimum where they fit that better); the next design narrowed around an answer its box surrounded.", "",
              md.table(["design", "rounds", "box", "half-width (share of the range)", "points (flights)", "answer",
                        "how"], rows,
                       ["l", "l", "l", "r", "r", "l", "l"]), ""]
