@@ -702,8 +702,9 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
     answer on a face of the design (`design_widen`, 0: off), always given; and for the `last` design how near a
     range's bound that refit answers up to it (`design_widen_bound`: the run's answer, after which nothing flies);
     for the `last` design and every design laid out in the logarithm of the gains (`logged`), by how much a
-    quadratic there must fit better to answer there (`design_log`); for the `last` design the level at which a
-    quadratic steeper on one side of its minimum must fit better (`design_two_sided`).
+    quadratic there must fit better to answer there (`design_log`); for the `last` design, unless laid out in the
+    logarithm (whose scale is already steep on one side and shallow on the other), the level at which a quadratic
+    steeper on one side of its minimum must fit better (`design_two_sided`).
     (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
     reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
     return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
@@ -712,7 +713,7 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
         {"widen_bound": float(s.design_widen_bound)} if last and s.design_widen_bound else {}) | (
         {"log_gains": float(s.design_log), "offsets": surface_log_offsets(list(s.space.values()))}
         if (last or logged) and s.design_log else {}) | (
-        {"two_sided": float(s.design_two_sided)} if last and s.design_two_sided else {})
+        {"two_sided": float(s.design_two_sided)} if last and s.design_two_sided and not logged else {})
 
 
 def _span(points: Sequence[Sequence[float]]) -> list[tuple[float, float]]:
