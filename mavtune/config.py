@@ -329,8 +329,8 @@ class Tuning(_Section):
                                     "minimum of a quadratic whose curvature differs on the two sides of it along "
                                     "each gain, fitted to the flights within three half-widths of the design, where "
                                     "it fits them better than the quadratic at this level (an F test) and its minimum "
-                                    "lies in the design; not beside a failed flight, nor where the answer is fitted "
-                                    "in the logarithm of the gains: a cost that rises faster towards oscillating "
+                                    "lies in the design; not beside a failed flight, nor on a design laid out or "
+                                    "answered in the logarithm of the gains: a cost that rises faster towards oscillating "
                                     "gains than towards sluggish ones, whose quadratic answers on the shallow side "
                                     "(0: never; 0.05 chosen on the zoo's select half, answer_diagnostic_two_sided.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "

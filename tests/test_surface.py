@@ -1074,6 +1074,7 @@ def test_the_two_sided_answer_is_the_last_designs_fingerprinted_and_checked():
 
     s = Tuning().settings(space=SPACE)
     assert answer_options(s, 0.08, last=True)["two_sided"] == 0.05 and "two_sided" not in answer_options(s, 0.2)
+    assert "two_sided" not in answer_options(s, 0.08, last=True, logged=True)  # (laid out in the logarithm)
     assert s.fingerprint()["design"]["two_sided"] == 0.05
     assert "two_sided" not in Tuning(design_two_sided=0).settings(space=SPACE).fingerprint()["design"]
     with pytest.raises(MavtuneError, match="design_two_sided 1.5 is outside"):
