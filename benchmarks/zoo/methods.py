@@ -188,7 +188,8 @@ def candidates() -> list[Method]:
             Method(BEFORE_BOUND, {"design_widen_bound": 0.0, "design_log": 0.0} | NO_TWO_SIDED),
             Method(BEFORE_LOG, {"design_log": 0.0} | NO_TWO_SIDED),
             Method(BEFORE_LAYOUT, {"design_log_layout": False} | NO_TWO_SIDED),
-            Method(BEFORE_TWO_SIDED, NO_TWO_SIDED)]
+            Method(BEFORE_TWO_SIDED, NO_TWO_SIDED),
+            Method("default, the two-sided quadratic at the 1 % level", {"design_two_sided": 0.01})]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
