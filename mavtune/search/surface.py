@@ -358,13 +358,21 @@ def _rejects(x, y, n, cv: float, small: list, large: list, level: float) -> bool
     return bool((rss_a - rss_b) / (cv * cv) > chi2.isf(level, len(large) - len(small)))
 
 
+def _by_cost(n, y, power: float = POWER):
+    """Each point's weight in a fit: `n` (its flights, times the kernel) over its cost to `power` (2: the inverse
+    variance of a relative noise; a cost at zero weighs as one of 1e-6)."""
+    import numpy as np
+
+    return n / np.maximum(np.abs(y), 1e-6) ** power
+
+
 def _polynomial(x, y, n, which: list[tuple[int, ...]]):
     """The value function of the polynomial of monomials `which` through `x`, `y` weighted as the quadratic (`n`: each
     point's flights times the kernel, over its cost to the POWER); None when the solve fails or is not finite."""
     import numpy as np
 
     try:
-        beta, _ = _fit(x, y, n / np.maximum(np.abs(y), 1e-6) ** POWER, which)
+        beta, _ = _fit(x, y, _by_cost(n, y), which)
     except np.linalg.LinAlgError:
         return None
     if not np.all(np.isfinite(beta)):
@@ -429,8 +437,10 @@ def two_sided_minimum(points: Mapping[tuple[float, ...], Sequence[float]], box: 
         return None
     x = u[kernel > 0]
     means = np.array([math.fsum(points[k]) / len(points[k]) for k in near])
-    y = means / np.max(means)
-    w = np.array([len(points[k]) for k in near], float) / y ** POWER * kernel[kernel > 0]
+    if not np.max(np.abs(means)) > 0:
+        return None
+    y = means / np.max(np.abs(means))
+    w = _by_cost(np.array([len(points[k]) for k in near], float), y) * kernel[kernel > 0]
     w = w / np.max(w)
     fit = quadratic(x, y, w)
     if fit is None:
@@ -640,7 +650,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     if log and np.all(y > 0):  # relative noise is even on the log scale: each point by its flights
         y, w = np.log(y), counts[ok] * kernel
     else:
-        w = counts[ok] / np.maximum(np.abs(y), 1e-6) ** power * kernel
+        w = _by_cost(counts[ok], y, power) * kernel
     if np.count_nonzero(w > 0) < coefficients(d) + 1:
         return fallback, ""
     fit = quadratic(x, y, w / np.max(w))
