@@ -65,7 +65,8 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.design_split": False, "tuning.design_inner": False, "tuning.design_first": False,
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
     "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0,
-    "tuning.design_log_layout": False, "tuning.design_two_sided": 0.0}
+    "tuning.design_log_layout": False, "tuning.design_two_sided": 0.0,
+    "tuning.design_reach": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -147,7 +148,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
                    "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "design_log",
-                   "design_log_layout", "design_two_sided", "budget")
+                   "design_log_layout", "design_two_sided", "design_reach", "budget")
 
 
 
@@ -168,7 +169,8 @@ class Tuning(_Section):
     noise variances: `design_log`, since session 23, and every design after the passes laid out there where the
     run's flights before them fit that better: `design_log_layout`, since session 24; the last design's the minimum
     of a quadratic steeper on one side of it where that fits its flights better at the 5 % level:
-    `design_two_sided`, since session 25; without
+    `design_two_sided`, since session 25; each answer before the last fitted to the flights within three
+    half-widths of its design, not two: `design_reach`, since session 26; without
     the flights that their replicates and their neighbours both put far off, spoiled by something other than the
     gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
@@ -333,6 +335,11 @@ class Tuning(_Section):
                                     "answered in the logarithm of the gains: a cost that rises faster towards oscillating "
                                     "gains than towards sluggish ones, whose quadratic answers on the shallow side "
                                     "(0: never; 0.05 chosen on the zoo's select half, answer_diagnostic_two_sided.md)")
+    design_reach: float = Field(3.0, ge=0.0, le=10.0, description="design: the half-widths of a design that the "
+                                "fit of its answer reaches, for every design but the last (0: the answer's own, 2): "
+                                "the answer that centres the next design, fitted to more of the wider designs' "
+                                "flights around it, so the last design is laid nearer the optimum (3 chosen on the "
+                                "zoo's select half, selection_reach.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

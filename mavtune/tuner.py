@@ -402,6 +402,7 @@ class Settings:
     design_log: float = 0.0
     design_log_layout: bool = False
     design_two_sided: float = 0.0
+    design_reach: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -496,6 +497,9 @@ class Settings:
             raise MavtuneError(f"design_two_sided {self.design_two_sided} is outside [0, 1): the level at which a "
                                "quadratic steeper on one side of its minimum must fit the last design's flights "
                                "better for its minimum to be the answer (0: never)")
+        if not (self.design_reach == 0.0 or 1.0 <= float(self.design_reach) <= 10.0):
+            raise MavtuneError(f"design_reach {self.design_reach} is outside [1, 10]: half-widths of a design the fit "
+                               "of each answer but the last reaches (0: the answer's own, 2)")
         if not 0.0 <= float(self.design_outliers) <= 100.0:
             raise MavtuneError(f"design_outliers {self.design_outliers} is outside [0, 100]: robust noise sds off the "
                                "local fit and off its point's other flights that make a flight an outlier (0: none)")
@@ -518,7 +522,7 @@ class Settings:
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
                   "wall_span", "composite_reach", "design_widen", "design_widen_bound", "design_outliers",
-                  "design_log", "design_two_sided")
+                  "design_log", "design_two_sided", "design_reach")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -688,6 +692,7 @@ class Settings:
                         | ({"log": float(self.design_log)} if self.design_log else {})
                         | ({"log_layout": True} if self.design_log_layout and self.design_log else {})
                         | ({"two_sided": float(self.design_two_sided)} if self.design_two_sided else {})
+                        | ({"reach": float(self.design_reach)} if self.design_reach else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
@@ -704,9 +709,11 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
     for the `last` design and every design laid out in the logarithm of the gains (`logged`), by how much a
     quadratic there must fit better to answer there (`design_log`); for the `last` design, unless laid out in the
     logarithm (whose scale is already steep on one side and shallow on the other), the level at which a quadratic
-    steeper on one side of its minimum must fit better (`design_two_sided`).
+    steeper on one side of its minimum must fit better (`design_two_sided`); for every design but the `last`, the
+    kernel's reach (`design_reach`, where no composite design's applies).
     (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
-    reach = float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else REACH
+    reach = (float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else
+             float(s.design_reach) if s.design_reach and not last else REACH)
     return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
         {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {}) | {
         "widen": float(s.design_widen)} | (

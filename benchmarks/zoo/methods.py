@@ -171,7 +171,8 @@ def candidates() -> list[Method]:
     design's refit answered inside its box (`design_widen_bound`, before session 22) and with the last design's answer
     in the gains alone (`design_log`, before session 23) and with the designs laid out in the gains alone
     (`design_log_layout`, before session 24) and with the last answer a quadratic's alone (`design_two_sided`, before
-    session 25), and today's with the two-sided quadratic at the 1 % level). The paper's setting
+    session 25), today's with the two-sided quadratic at the 1 % level, with each answer fitted over 2 half-widths
+    of its design (`design_reach`, before session 26) and over 4). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -185,18 +186,23 @@ def candidates() -> list[Method]:
             Method("default, the vehicles of a round on distinct points (strategy split)", {"strategy": "split"}),
             Method("default without the outlier rule (design_outliers = 0: before session 20)",
                    {"design_outliers": 0.0}),
-            Method(BEFORE_BOUND, {"design_widen_bound": 0.0, "design_log": 0.0} | NO_TWO_SIDED),
-            Method(BEFORE_LOG, {"design_log": 0.0} | NO_TWO_SIDED),
-            Method(BEFORE_LAYOUT, {"design_log_layout": False} | NO_TWO_SIDED),
-            Method(BEFORE_TWO_SIDED, NO_TWO_SIDED),
-            Method("default, the two-sided quadratic at the 1 % level", {"design_two_sided": 0.01})]
+            Method(BEFORE_BOUND, {"design_widen_bound": 0.0, "design_log": 0.0} | NO_TWO_SIDED | NO_REACH),
+            Method(BEFORE_LOG, {"design_log": 0.0} | NO_TWO_SIDED | NO_REACH),
+            Method(BEFORE_LAYOUT, {"design_log_layout": False} | NO_TWO_SIDED | NO_REACH),
+            Method(BEFORE_TWO_SIDED, NO_TWO_SIDED | NO_REACH),
+            Method("default, the two-sided quadratic at the 1 % level", {"design_two_sided": 0.01} | NO_REACH),
+            Method(BEFORE_REACH, NO_REACH),
+            Method("default, each answer but the last fitted over 4 half-widths (design_reach = 4)",
+                   {"design_reach": 4.0})]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
 BEFORE_LOG = "default before session 23 (the last design's answer in the gains alone: design_log = 0)"
 BEFORE_LAYOUT = "default before session 24 (the designs laid out in the gains alone: design_log_layout = false)"
 BEFORE_TWO_SIDED = "default before session 25 (the last answer a quadratic's alone: design_two_sided = 0)"
+BEFORE_REACH = "default before session 26 (each answer fitted over 2 half-widths of its design: design_reach = 0)"
 NO_TWO_SIDED = {"design_two_sided": 0.0}  # (each default before session 25 answered without it)
+NO_REACH = {"design_reach": 0.0}  # (each default before session 26 fitted its answers over 2 half-widths)
 
 
 def split_designs() -> list[Method]:
