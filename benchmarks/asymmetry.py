@@ -15,7 +15,6 @@ import os
 
 os.environ.setdefault("SCIPY_ARRAY_API", "1")  # Crazyflow needs it before scipy is imported
 
-import argparse  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from datetime import datetime, timezone  # noqa: E402
@@ -25,8 +24,8 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import cpu_model, write_results  # noqa: E402
-from quality import CACHE, _git_commit, engine_hash  # noqa: E402
+from common import write_results  # noqa: E402
+from quality import CACHE, study_args, study_line, study_meta  # noqa: E402
 from zoo.plants import ALL_PLANTS  # noqa: E402
 from zoo.truth import Truth, fly_repeats, key  # noqa: E402
 
@@ -65,23 +64,13 @@ def _cell(row: dict[str, Any] | None) -> str:
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--plants", default=",".join(PLANTS), help="comma-separated plant names")
-    ap.add_argument("--repeats", type=int, default=64)
-    ap.add_argument("--name", default="asymmetry", help="results file name (markdown + json)")
-    args = ap.parse_args(argv)
-    plants = [p.strip() for p in args.plants.split(",") if p.strip()]
+    args, plants = study_args(__doc__, PLANTS, 64, "asymmetry", argv)
     started, load, t0 = datetime.now(timezone.utc), os.getloadavg(), time.time()
     per = {p: profile(p, args.repeats) for p in plants}
-    meta = {"command": " ".join(["python benchmarks/asymmetry.py", *(argv if argv is not None else sys.argv[1:])]),
-            "commit": _git_commit(), "engine": engine_hash(), "started_utc": started.isoformat(timespec="seconds"),
-            "wall_s": time.time() - t0, "cpu_model": cpu_model(), "cpus": os.cpu_count(), "load_start": list(load),
-            "repeats": args.repeats}
+    meta = study_meta("asymmetry.py", argv, started, load, t0, repeats=args.repeats)
     offsets = [f"{s * t:+.4f}" for s in (-1, 1) for t in (STEPS[::-1] if s < 0 else STEPS)]
     lines = ["# How lopsided is each plant's cost about its optimum? (session 25)", "",
-             f"Command: `{meta['command']}` at commit `{meta['commit']}` (mavtune source hash `{meta['engine']}`), "
-             f"{meta['started_utc']}, wall {meta['wall_s']:.0f} s; machine: {meta['cpu_model']}, {meta['cpus']} CPUs "
-             f"shared with other jobs; load average {load[0]:.2f} at the start.", "",
+             study_line(meta), "",
              f"The mean cost of {args.repeats} repeats (the truth's common random numbers) at steps of the range either "
              "side of the optimum along one gain, the others at the optimum, as % above the optimum's own mean on the "
              "same repeats; a failed repeat is left out of the mean and counted.", "",

@@ -12,7 +12,6 @@ on the report half (benchmarks/results/quality.json).
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -24,8 +23,8 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, cpu_model, write_results  # noqa: E402
-from quality import CACHE, _git_commit, engine_hash  # noqa: E402
+from common import RESULTS, write_results  # noqa: E402
+from quality import CACHE, study_args, study_line, study_meta  # noqa: E402
 from zoo.plants import ALL_PLANTS  # noqa: E402
 from zoo.truth import Truth, fly_repeats, key  # noqa: E402
 
@@ -70,23 +69,13 @@ def answer_offsets(plants: list[str]) -> dict[str, dict[str, list[float]]]:
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--plants", default=",".join(PLANTS), help="comma-separated plant names")
-    ap.add_argument("--repeats", type=int, default=1024)
-    ap.add_argument("--name", default="noise_skew", help="results file name (markdown + json)")
-    args = ap.parse_args(argv)
-    plants = [p.strip() for p in args.plants.split(",") if p.strip()]
+    args, plants = study_args(__doc__, PLANTS, 1024, "noise_skew", argv)
     started, load, t0 = datetime.now(timezone.utc), os.getloadavg(), time.time()
     per = {p: profile(p, args.repeats) for p in plants}
     answers = answer_offsets(plants)
-    meta = {"command": " ".join(["python benchmarks/noise_skew.py", *(argv if argv is not None else sys.argv[1:])]),
-            "commit": _git_commit(), "engine": engine_hash(), "started_utc": started.isoformat(timespec="seconds"),
-            "wall_s": time.time() - t0, "cpu_model": cpu_model(), "cpus": os.cpu_count(), "load_start": list(load),
-            "repeats": args.repeats}
+    meta = study_meta("noise_skew.py", argv, started, load, t0, repeats=args.repeats)
     lines = ["# Skewed flights: the lowest typical flight lies below the lowest mean cost (session 26)", "",
-             f"Command: `{meta['command']}` at commit `{meta['commit']}` (mavtune source hash `{meta['engine']}`), "
-             f"{meta['started_utc']}, wall {meta['wall_s']:.0f} s; machine: {meta['cpu_model']}, {meta['cpus']} CPUs "
-             f"shared with other jobs; load average {load[0]:.2f} at the start.", "",
+             study_line(meta), "",
              f"{args.repeats} repeats (the truth's common random numbers) at steps of 1/32 of the range along one gain "
              "through the optimum, the other at the optimum. Where each statistic of one flight's cost is lowest, as "
              "an offset from the optimum (the mean's, found on the truth's finer search) in shares of the range; the "

@@ -37,7 +37,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from datetime import datetime, timezone  # noqa: E402
 from multiprocessing import get_context  # noqa: E402
 from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
+from typing import Any, Sequence  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -193,6 +193,34 @@ def _git_commit() -> str:
                               timeout=10).stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
+
+
+def study_args(doc: str, plants: Sequence[str], repeats: int, name: str,
+               argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
+    """A zoo study's command line (--plants, --repeats, --name of its results files) and the plants it names."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--plants", default=",".join(plants), help="comma-separated plant names")
+    ap.add_argument("--repeats", type=int, default=repeats)
+    ap.add_argument("--name", default=name, help="results file name (markdown + json)")
+    args = ap.parse_args(argv)
+    return args, [p.strip() for p in args.plants.split(",") if p.strip()]
+
+
+def study_meta(script: str, argv: list[str] | None, started: datetime, load: tuple[float, ...], t0: float,
+               **extra: Any) -> dict[str, Any]:
+    """A zoo study's run facts (benchmarks/asymmetry.py, noise_skew.py): its command, commit, engine hash, start, wall
+    time, machine and load at the start, then `extra`."""
+    return {"command": " ".join([f"python benchmarks/{script}", *(argv if argv is not None else sys.argv[1:])]),
+            "commit": _git_commit(), "engine": engine_hash(), "started_utc": started.isoformat(timespec="seconds"),
+            "wall_s": time.time() - t0, "cpu_model": cpu_model(), "cpus": os.cpu_count(), "load_start": list(load),
+            **extra}
+
+
+def study_line(meta: dict[str, Any]) -> str:
+    """The results' line saying how a zoo study was run (`study_meta`)."""
+    return (f"Command: `{meta['command']}` at commit `{meta['commit']}` (mavtune source hash `{meta['engine']}`), "
+            f"{meta['started_utc']}, wall {meta['wall_s']:.0f} s; machine: {meta['cpu_model']}, {meta['cpus']} CPUs "
+            f"shared with other jobs; load average {meta['load_start'][0]:.2f} at the start.")
 
 
 def _clean(o: Any) -> Any:
