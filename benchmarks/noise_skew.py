@@ -1,6 +1,7 @@
-"""Why every method's answer sits below the simulator's optimum in kp: one flight's cost is skewed (a long tail of
-bad flights), more so at low gains, so the gain with the lowest typical flight (median, lower quartile) lies below
-the gain with the lowest mean cost, which is what the zoo scores (session 26).
+"""Is a flight's skewed cost why every method answers below the simulator's optimum in kp? One flight's cost has a
+long tail of bad flights, longer at low gains; if the gain with the lowest typical flight (median, lower quartile)
+lay below the gain with the lowest mean cost (what the zoo scores), a method led by typical flights would answer low
+(session 26: it does not; only nominal kp's lower quartile lies lower).
 
 Along each gain through the optimum (its truth, quality.py's cache), at steps of 1/32 of the range, the cost of many
 repeats on the truth's common random numbers: the mean, median and lower quartile, the coefficient of variation and
@@ -74,7 +75,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     per = {p: profile(p, args.repeats) for p in plants}
     answers = answer_offsets(plants)
     meta = study_meta("noise_skew.py", argv, started, load, t0, repeats=args.repeats)
-    lines = ["# Skewed flights: the lowest typical flight lies below the lowest mean cost (session 26)", "",
+    lines = ["# Does a flight's skewed cost put the lowest typical flight below the lowest mean cost? (session 26)", "",
              study_line(meta), "",
              f"{args.repeats} repeats (the truth's common random numbers) at steps of 1/32 of the range along one gain "
              "through the optimum, the other at the optimum. Where each statistic of one flight's cost is lowest, as "

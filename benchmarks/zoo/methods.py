@@ -171,7 +171,7 @@ def candidates() -> list[Method]:
     design's refit answered inside its box (`design_widen_bound`, before session 22) and with the last design's answer
     in the gains alone (`design_log`, before session 23) and with the designs laid out in the gains alone
     (`design_log_layout`, before session 24) and with the last answer a quadratic's alone (`design_two_sided`, before
-    session 25), today's with the two-sided quadratic at the 1 % level, with each answer fitted over 2 half-widths
+    session 25), session 25's default with the two-sided quadratic at the 1 % level, today's with each answer fitted over 2 half-widths
     of its design (`design_reach`, before session 26) and over 4). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
