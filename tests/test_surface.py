@@ -888,10 +888,17 @@ def _decades(p) -> float:
     return 1.0 + 0.3 * a * a + 0.2 * b * b + 0.1 * a * b
 
 
-def _noisy_decades(gains, context):
-    """The zoo's decades plant: `_decades` with 8 % lognormal noise drawn from each flight's seed."""
-    return [_decades((g["kp"], g["kd"])) * math.exp(0.08 * random.Random(c.seed).gauss(0, 1))
-            for g, c in zip(gains, context)]
+def _lognormal(cost, sigma: float):
+    """An `evaluate` flying `cost` (of (kp, kd)) with lognormal noise of `sigma` drawn from each flight's seed."""
+
+    def evaluate(gains, context):
+        return [cost((g["kp"], g["kd"])) * math.exp(sigma * random.Random(c.seed).gauss(0, 1))
+                for g, c in zip(gains, context)]
+
+    return evaluate
+
+
+_noisy_decades = _lognormal(_decades, 0.08)  # the zoo's decades plant: 8 % noise
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -1108,9 +1115,7 @@ def test_a_run_whose_middle_answer_reaches_wider_lays_its_last_design_nearer_the
     designs' flights around it too) lies nearer the optimum, over 12 seeds, than the one fitted over 2 half-widths
     (the zoo's select half: 324 runs better, 246 worse; selection_reach.md)."""
 
-    def bowl(gains, context):
-        return [(1.0 + 4.0 * (g["kp"] - 0.42) ** 2 + 3.0 * (g["kd"] - 0.55) ** 2)
-                * math.exp(0.15 * random.Random(c.seed).gauss(0, 1)) for g, c in zip(gains, context)]
+    bowl = _lognormal(lambda p: 1.0 + 4.0 * (p[0] - 0.42) ** 2 + 3.0 * (p[1] - 0.55) ** 2, 0.15)
 
     def centre_miss(reach):
         runs = [mavtune.tune(bowl, space=SPACE, seed=seed, draws=0, design_reach=reach) for seed in range(12)]
@@ -1119,10 +1124,7 @@ def test_a_run_whose_middle_answer_reaches_wider_lays_its_last_design_nearer_the
     assert centre_miss(3.0) < centre_miss(0.0)
 
 
-def _noisy_steep(gains, context):
-    """`_steep` with 5 % lognormal noise drawn from each flight's seed."""
-    return [_steep((g["kp"], g["kd"])) * math.exp(0.05 * random.Random(c.seed).gauss(0, 1))
-            for g, c in zip(gains, context)]
+_noisy_steep = _lognormal(_steep, 0.05)
 
 
 def test_a_run_on_a_cost_steeper_on_one_side_ends_nearer_its_optimum_with_the_two_sided_answer():
