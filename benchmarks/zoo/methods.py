@@ -172,7 +172,9 @@ def candidates() -> list[Method]:
     in the gains alone (`design_log`, before session 23) and with the designs laid out in the gains alone
     (`design_log_layout`, before session 24) and with the last answer a quadratic's alone (`design_two_sided`, before
     session 25), session 25's default with the two-sided quadratic at the 1 % level, today's with each answer fitted over 2 half-widths
-    of its design (`design_reach`, before session 26) and over 4). The paper's setting
+    of its design (`design_reach`, before session 26) and over 4, with each line search of the pass answering two
+    half-parabolas (`answer = "valley"`) and with each design 0.3 or 0.5 as wide as the one before
+    (`design_shrink`; session 27's screens). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -193,7 +195,13 @@ def candidates() -> list[Method]:
             Method("default, the two-sided quadratic at the 1 % level", {"design_two_sided": 0.01} | NO_REACH),
             Method(BEFORE_REACH, NO_REACH),
             Method("default, each answer but the last fitted over 4 half-widths (design_reach = 4)",
-                   {"design_reach": 4.0})]
+                   {"design_reach": 4.0}),
+            Method(VALLEY_PASS, {"answer": "valley"}),
+            *(Method(f"default, each design {s:g} as wide as the one before (design_shrink = {s:g})",
+                     {"design_shrink": s}) for s in (0.3, 0.5)),
+            *(Method(f"default, each design {s:g} as wide as the one before, less where its answer moved far "
+                     f"(design_shrink = {s:g}, design_trust)", {"design_shrink": s, "design_trust": True})
+              for s in (0.3, 0.4))]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
@@ -201,6 +209,7 @@ BEFORE_LOG = "default before session 23 (the last design's answer in the gains a
 BEFORE_LAYOUT = "default before session 24 (the designs laid out in the gains alone: design_log_layout = false)"
 BEFORE_TWO_SIDED = "default before session 25 (the last answer a quadratic's alone: design_two_sided = 0)"
 BEFORE_REACH = "default before session 26 (each answer fitted over 2 half-widths of its design: design_reach = 0)"
+VALLEY_PASS = "default, each line search of the pass answering two half-parabolas (answer = valley)"
 NO_TWO_SIDED = {"design_two_sided": 0.0}  # (each default before session 25 answered without it)
 NO_REACH = {"design_reach": 0.0}  # (each default before session 26 fitted its answers over 2 half-widths)
 
