@@ -288,10 +288,15 @@ class TuningResult:
             said = f"fitted to the run's flights, some of which diverged, a flight at the answer diverges with " \
                    f"chance {chance:.2%}"
             if chance > bound and risk.get("kept"):
+                safer = risk.get("off_wall")
+                nearest = "" if not safer else (
+                    "; the nearest gains the last design's flights put under the bound are "
+                    + ", ".join(f"{n} {v:.4g}" for n, v in safer.items())
+                    + f" (chance {risk['off_wall_chance']:.2%}; not flown themselves)")
                 say("divergence", f"{said}, above the {bound:.1%} an answer keeps to: it is the design before's "
                     "answer, kept beside the wall (that design's flights put it under the bound; the last one's, "
-                    f"nearer the wall, do not, though under the {KEEP_RISK:.0%} a kept answer may have): fly "
-                    "narrower ranges away from the failed flights before trusting it")
+                    f"nearer the wall, do not, though under the {KEEP_RISK:.0%} a kept answer may have){nearest}: "
+                    "fly narrower ranges away from the failed flights before trusting it")
             elif chance > bound:
                 say("divergence", f"{said}, above the {bound:.1%} an answer keeps to, which no point flown in the "
                     "design meets: fly the design away from the failed flights (narrower ranges) before trusting it")
@@ -1077,8 +1082,10 @@ class Tuner:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
         (the previous design's answer `keep` included; `free` when the caller already has it: a design answered
-        unbounded) and its chance when the bound moved it (None when not), and whether the answer is `keep`
-        ("kept"); None when no flight near the design failed (`last`: the run's last design)."""
+        unbounded) and its chance when the bound moved it (None when not), whether the answer is `keep` ("kept"),
+        and where a kept answer is above the bound the nearest gains under it and their chance ("off_wall",
+        `surface.answer`'s `keep_bound`; None otherwise); None when no flight near the design failed (`last`: the
+        run's last design)."""
         options = answer_options(self.settings, half, keep, last, logged)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
@@ -1088,10 +1095,18 @@ class Tuner:
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
         names, s = list(self.settings.space), self.settings
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
-        return {"chance": chance, "risk": RISK,
-                "unbounded": {n: s.space[n][0] + (s.space[n][1] - s.space[n][0]) * u for n, u in zip(names, free)}
-                if moved else None, "unbounded_chance": free_chance if moved else None,
-                "kept": keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))}
+        kept = keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))
+        safer = surface_answer(flown, box, ruled, self.pool, keep_bound=True, **options)[0] \
+            if kept and chance > RISK else best
+        off = any(abs(a - b) > 1e-9 for a, b in zip(safer, best))
+
+        def gains(u: Sequence[float]) -> dict[str, float]:
+            return {n: s.space[n][0] + (s.space[n][1] - s.space[n][0]) * v for n, v in zip(names, u)}
+
+        return {"chance": chance, "risk": RISK, "unbounded": gains(free) if moved else None,
+                "unbounded_chance": free_chance if moved else None, "kept": kept,
+                "off_wall": gains(safer) if off else None,
+                "off_wall_chance": float(fit.chance([safer])[0]) if off else None}
 
     def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]], names: list[str], lo: list[float],
                        width: list[float], step: int) -> tuple[list[Gains], int | None]:

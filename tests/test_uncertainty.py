@@ -407,6 +407,10 @@ def test_an_answer_kept_from_the_design_before_beside_a_wall_says_so_when_the_la
     said = [c for c in result.cautions() if "diverges with chance" in c]
     assert len(said) == 1 and "the design before's answer, kept beside the wall" in said[0]
     assert "which no point flown in the design meets" not in said[0]
+    safer = risk["off_wall"]  # the nearest gains that fit puts under the bound: named, truly safer, not answered
+    assert safer is not None and risk["off_wall_chance"] <= RISK and chance(safer) < chance(result.gains)
+    assert f"kp {safer['kp']:.4g}, kd {safer['kd']:.4g} (chance {risk['off_wall_chance']:.2%}" in said[0]
+    assert math.dist(list(safer.values()), list(result.gains.values())) < 0.2
 
 
 def test_an_answer_above_the_divergence_bound_is_cautioned():

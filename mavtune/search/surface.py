@@ -480,6 +480,19 @@ def two_sided_minimum(points: Mapping[tuple[float, ...], Sequence[float]], box: 
     return tuple(float(v) for v in np.clip(m * half + centre, lo, hi))
 
 
+def _off_wall(k: np.ndarray, fitted: Divergence, risk: float, lo: np.ndarray, hi: np.ndarray,
+              allowed: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """The point of the box `lo`..`hi` nearest `k` whose `fitted` divergence chance is at most `risk`, among those
+    `allowed` (on a grid of GRID_POINTS); `k` itself where none is."""
+    import numpy as np
+
+    axes = [np.linspace(a, b, max(3, int(GRID_POINTS ** (1.0 / len(k))))) for a, b in zip(lo, hi)]
+    grid = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+    grid = grid[fitted.chance(grid) <= risk]
+    grid = grid[allowed(grid)] if len(grid) else grid
+    return grid[np.argmin(np.sum((grid - k) ** 2, axis=1))] if len(grid) else k
+
+
 def _frame(box: Sequence[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A design's box (per gain (lo, hi), shares of each range) as arrays: lo, hi, its centre and half-widths."""
     import numpy as np
@@ -516,7 +529,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
            risk: float | None = RISK, risk_reach: float | None = None,
            keep: Sequence[float] | None = None, keep_risk: float | None = KEEP_RISK,
            widen: float = WIDEN_LEVEL, widen_bound: float = 0.0, log_gains: float = 0.0,
-           offsets: Sequence[float] | None = None, two_sided: float = 0.0) -> tuple[tuple[float, ...], str]:
+           offsets: Sequence[float] | None = None, two_sided: float = 0.0,
+           keep_bound: bool = False) -> tuple[tuple[float, ...], str]:
     """The minimiser of one weighted quadratic (of a plane where the flights do not reject the plane, `plane`; of a
     cubic where they reject the quadratic, `cubic`, and its minimiser lies inside the box, not `beside_wall`) through
     `points` (gain vector in shares of each range → every flight's cost there; a failed flight's infinite) inside `box` (the design's, per gain (lo, hi)), among gain
@@ -553,10 +567,14 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     that of the flights mapped there, mapped back (0: never): gains whose good values span decades, steep below the
     optimum and shallow above, which a quadratic in the gains answers on the shallow side. `two_sided`: where
     that answer is not fitted in the logarithm of the gains, `two_sided_minimum` at this level replaces it (0:
-    never): a cost steeper on one side of its optimum than on the other."""
+    never): a cost steeper on one side of its optimum than on the other. `keep_bound`: a kept answer whose chance
+    by this design's divergence fit exceeds `risk` moves to the nearest point of the box under it (`_off_wall`):
+    not the run's answer (replayed on the zoo's cliff it lost 1 run to 10 of the select half), the caution's safer
+    gains."""
     # the fit's options that each refit below keeps (in the logarithm of the gains; over a wider kernel)
     refit = {"power": power, "log": log, "cubic_level": cubic_level, "plane_level": plane_level,
-             "slope_level": slope_level, "plane_inside": plane_inside, "risk": risk, "keep_risk": keep_risk}
+             "slope_level": slope_level, "plane_inside": plane_inside, "risk": risk, "keep_risk": keep_risk,
+             "keep_bound": keep_bound}
     if two_sided:  # the answer without it first: in the logarithm of the gains, that answer stands
         x, how = answer(points, box, worse, pool, reach=reach, risk_reach=risk_reach, keep=keep, widen=widen,
                         widen_bound=widen_bound, log_gains=log_gains, offsets=offsets, **refit)
@@ -640,6 +658,8 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
         if (np.all((k >= lo - 1e-9) & (k <= hi + 1e-9)) and allowed(k[None], ok, False)[0]
                 and (fitted is None or keep_risk is None or fitted.chance(k[None])[0] <= keep_risk)
                 and not _outdone(points, keys[int(tree.query(k)[1])], [q for q, o in zip(keys, pick) if o], pool)):
+            if keep_bound and fitted is not None and risk is not None and fitted.chance(k[None])[0] > risk:
+                k = _off_wall(k, fitted, risk, lo, hi, lambda c: allowed(c, ok, False))
             return tuple(float(v) for v in k), ""
     x = (every[ok] - centre) / half
     y = means[ok]
