@@ -14,9 +14,7 @@ The runs are the report half's (1, 3 … 79), as quality.py reports the zoo and 
 from __future__ import annotations
 
 import os
-import shutil
 import sys
-import tempfile
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -25,11 +23,12 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from answer_diagnostic import truth_for  # noqa: E402
 from common import write_results  # noqa: E402
-from quality import CACHE, study_args, study_line, study_meta  # noqa: E402
+from quality import study_args, study_line, study_meta  # noqa: E402
 from zoo.methods import ZooFleet, candidates, tune_seed  # noqa: E402
 from zoo.plants import ALL_PLANTS  # noqa: E402
-from zoo.truth import WITHIN_PCT, Truth, key  # noqa: E402
+from zoo.truth import WITHIN_PCT, key  # noqa: E402
 
 PLANTS = ("analytic cliff", "unseen analytic damping wall", "unseen crazyflow payload figure-8")
 
@@ -39,26 +38,21 @@ def runs_named(plant: str, runs: range, repeats: int) -> list[dict[str, Any]]:
     their fitted chances, and each one's excess (%) and diverged share on the same truth repeats."""
     import mavtune.tuner as tuner
 
-    method, p = candidates()[0], ALL_PLANTS[plant]
-    with tempfile.TemporaryDirectory() as private:  # (the points judged here do not grow the shared cache)
-        cached = Truth(plant, CACHE).path
-        if cached is not None and cached.exists():
-            shutil.copy(cached, Path(private) / cached.name)
-        truth = Truth(plant, Path(private))
-        out = []
-        for run in runs:
-            settings = method.settings(p, run)
-            result = tuner.run_tuning(settings, ZooFleet(p, settings.vehicles, tune_seed(run)))
-            risk = result.divergence or {}
-            if not risk.get("off_wall"):
-                continue
-            answer, named = (key(g[n] for n in p.gains) for g in (result.gains, risk["off_wall"]))
-            truth.ensure([answer, named], repeats, lambda fn, *args: list(map(fn, *args)))
-            out.append({"run": run, "answer": list(answer), "named": list(named), "answer_chance": risk["chance"],
-                        "named_chance": risk["off_wall_chance"],
-                        **{f"{w}_excess_pct": truth.excess(q)[0] for w, q in (("answer", answer), ("named", named))},
-                        **{f"{w}_diverged": truth.fly_away(q) for w, q in (("answer", answer), ("named", named))}})
-        return out
+    method, p, truth = candidates()[0], ALL_PLANTS[plant], truth_for(plant)
+    out = []
+    for run in runs:
+        settings = method.settings(p, run)
+        result = tuner.run_tuning(settings, ZooFleet(p, settings.vehicles, tune_seed(run)))
+        risk = result.divergence or {}
+        if not risk.get("off_wall"):
+            continue
+        answer, named = (key(g[n] for n in p.gains) for g in (result.gains, risk["off_wall"]))
+        truth.ensure([answer, named], repeats, lambda fn, *args: list(map(fn, *args)))
+        out.append({"run": run, "answer": list(answer), "named": list(named), "answer_chance": risk["chance"],
+                    "named_chance": risk["off_wall_chance"],
+                    **{f"{w}_excess_pct": truth.excess(q)[0] for w, q in (("answer", answer), ("named", named))},
+                    **{f"{w}_diverged": truth.fly_away(q) for w, q in (("answer", answer), ("named", named))}})
+    return out
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
