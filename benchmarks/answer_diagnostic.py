@@ -103,6 +103,9 @@ VARIANTS.update({f"today's answer with a two-sided quadratic {name} (session 25)
     ("reaching 2 half-widths", {"two_sided_reach": 2.0}), ("reaching 3 half-widths", {"two_sided": 1.0}),
     ("reaching 4 half-widths", {"two_sided_reach": 4.0}),
     *((f"reaching 3 half-widths at the {p:g} % level", {"two_sided": p / 100}) for p in (20, 5, 1)))})
+VARIANTS["today's answer with a kept answer above the divergence bound moved to the nearest point under it (session 27)"] = {
+    **VARIANTS["today's answer with a two-sided quadratic reaching 3 half-widths at the 5 % level (session 25)"],
+    "keep_bound": True}
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
 
