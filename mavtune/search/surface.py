@@ -480,14 +480,21 @@ def two_sided_minimum(points: Mapping[tuple[float, ...], Sequence[float]], box: 
     return tuple(float(v) for v in np.clip(m * half + centre, lo, hi))
 
 
-def _off_wall(k: np.ndarray, fitted: Divergence, risk: float, lo: np.ndarray, hi: np.ndarray,
-              allowed: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-    """The point of the box `lo`..`hi` nearest `k` whose `fitted` divergence chance is at most `risk`, among those
-    `allowed` (on a grid of GRID_POINTS); `k` itself where none is."""
+def _box_grid(d: int) -> np.ndarray:
+    """About GRID_POINTS candidates evenly over a design's box in `d` gains, in half-widths from its centre."""
     import numpy as np
 
-    axes = [np.linspace(a, b, max(3, int(GRID_POINTS ** (1.0 / len(k))))) for a, b in zip(lo, hi)]
-    grid = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+    axes = [np.linspace(-1.0, 1.0, max(3, int(GRID_POINTS ** (1.0 / d))))] * d
+    return np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+
+
+def _off_wall(k: np.ndarray, fitted: Divergence, risk: float, centre: np.ndarray, half: np.ndarray,
+              allowed: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """The point of the design's box (`centre` ± `half`) nearest `k` whose `fitted` divergence chance is at most
+    `risk`, among those `allowed` (on `_box_grid`); `k` itself where none is."""
+    import numpy as np
+
+    grid = _box_grid(len(k)) * half + centre
     grid = grid[fitted.chance(grid) <= risk]
     grid = grid[allowed(grid)] if len(grid) else grid
     return grid[np.argmin(np.sum((grid - k) ** 2, axis=1))] if len(grid) else k
@@ -659,7 +666,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
                 and (fitted is None or keep_risk is None or fitted.chance(k[None])[0] <= keep_risk)
                 and not _outdone(points, keys[int(tree.query(k)[1])], [q for q, o in zip(keys, pick) if o], pool)):
             if keep_bound and fitted is not None and risk is not None and fitted.chance(k[None])[0] > risk:
-                k = _off_wall(k, fitted, risk, lo, hi, lambda c: allowed(c, ok, False))
+                k = _off_wall(k, fitted, risk, centre, half, lambda c: allowed(c, ok, False))
             return tuple(float(v) for v in k), ""
     x = (every[ok] - centre) / half
     y = means[ok]
@@ -685,10 +692,7 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     def slope(u: np.ndarray) -> np.ndarray:
         return gradient + hessian @ u
 
-    per_gain = max(3, int(GRID_POINTS ** (1.0 / d)))
-    axes = [np.linspace(-1.0, 1.0, per_gain)] * d
-    grid = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
-    grid = np.concatenate([grid, x[np.all(np.abs(x) <= 1.0 + 1e-12, axis=1)]])
+    grid = np.concatenate([_box_grid(d), x[np.all(np.abs(x) <= 1.0 + 1e-12, axis=1)]])
     grid = grid[allowed(grid * half + centre)]
     if not len(grid):
         return fallback, ""
