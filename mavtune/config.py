@@ -66,7 +66,7 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
     "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0,
     "tuning.design_log_layout": False, "tuning.design_two_sided": 0.0,
-    "tuning.design_reach": 0.0}
+    "tuning.design_reach": 0.0, "tuning.design_hold": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -148,7 +148,7 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
                    "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "design_log",
-                   "design_log_layout", "design_two_sided", "design_reach", "budget")
+                   "design_log_layout", "design_two_sided", "design_reach", "design_hold", "budget")
 
 
 
@@ -170,7 +170,9 @@ class Tuning(_Section):
     run's flights before them fit that better: `design_log_layout`, since session 24; the last design's the minimum
     of a quadratic steeper on one side of it where that fits its flights better at the 5 % level:
     `design_two_sided`, since session 25; each answer before the last fitted to the flights within three
-    half-widths of its design, not two: `design_reach`, since session 26; without
+    half-widths of its design, not two: `design_reach`, since session 26; a gain the design before answered on
+    a range's bound kept there unless the last design's flights tell a move off it better at the 5 % level:
+    `design_hold`, since session 28; without
     the flights that their replicates and their neighbours both put far off, spoiled by something other than the
     gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
@@ -340,6 +342,13 @@ class Tuning(_Section):
                                 "the answer that centres the next design, fitted to more of the wider designs' "
                                 "flights around it, so the last design is laid nearer the optimum (3 chosen on the "
                                 "zoo's select half, selection_reach.md)")
+    design_hold: float = Field(0.05, ge=0.0, lt=1.0, description="design: where the design before answered a gain "
+                               "on a bound of its range and the last design's fitted answer moves it off, the gain "
+                               "stays on the bound unless the last design's flights tell the move better at this "
+                               "level (a one-sided test on one quadratic, each point weighed by its inverse "
+                               "variance; not beside a failed flight): an optimum on a range's bound, where the "
+                               "narrow last design's curvature is the noise's (0: never; 0.05 chosen on the zoo's "
+                               "select half, selection_hold.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

@@ -153,7 +153,8 @@ class DesignRecord:
     """One response-surface design as flown: its box (per gain, in the gain's units), its half-width (a share of
     each range), its rounds and flights, and its answer with how it was reached: the fit whose minimum inside the box
     it is ("quadratic", "cubic", "plane" or "two-sided quadratic", ", refitted wider" over the wider designs' flights
-    too: `surface.answer`),
+    too, ", held on the bound" where a gain the design before answered on its range's bound stayed there:
+    `surface.answer`),
     "best flown" (no usable fit: the best point flown in the box) or "kept" (beside a failed flight, the design
     before's answer, `wall_keep`); whether the box surrounded that answer (inside it or on a range's bound) or
     answered on its face inside the range (`open_face`, the gains there), whether the next design moved past
@@ -408,6 +409,7 @@ class Settings:
     design_log_layout: bool = False
     design_two_sided: float = 0.0
     design_reach: float = 0.0
+    design_hold: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -505,6 +507,10 @@ class Settings:
         if not (self.design_reach == 0.0 or 1.0 <= float(self.design_reach) <= 10.0):
             raise MavtuneError(f"design_reach {self.design_reach} is outside [1, 10]: half-widths of a design the fit "
                                "of each answer but the last reaches (0: the answer's own, 2)")
+        if not 0.0 <= float(self.design_hold) < 1.0:
+            raise MavtuneError(f"design_hold {self.design_hold} is outside [0, 1): the level at which the last "
+                               "design's flights must tell a move off a range's bound better than the bound the "
+                               "design before answered (0: never held)")
         if not 0.0 <= float(self.design_outliers) <= 100.0:
             raise MavtuneError(f"design_outliers {self.design_outliers} is outside [0, 100]: robust noise sds off the "
                                "local fit and off its point's other flights that make a flight an outlier (0: none)")
@@ -527,7 +533,7 @@ class Settings:
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
                   "wall_span", "composite_reach", "design_widen", "design_widen_bound", "design_outliers",
-                  "design_log", "design_two_sided", "design_reach")
+                  "design_log", "design_two_sided", "design_reach", "design_hold")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -698,6 +704,7 @@ class Settings:
                         | ({"log_layout": True} if self.design_log_layout and self.design_log else {})
                         | ({"two_sided": float(self.design_two_sided)} if self.design_two_sided else {})
                         | ({"reach": float(self.design_reach)} if self.design_reach else {})
+                        | ({"hold": float(self.design_hold)} if self.design_hold else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
                         | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
@@ -705,7 +712,7 @@ class Settings:
 
 
 def answer_options(s: Settings, half: float, keep: list[float] | None = None,
-                   last: bool = False, logged: bool = False) -> dict[str, Any]:
+                   last: bool = False, logged: bool = False, hold: list[float] | None = None) -> dict[str, Any]:
     """`surface.answer`'s options for a design of half-width `half` under settings `s`: the wall rules (`wall_span`
     in half-widths, `wall_keep` with the previous design's answer `keep`) and a composite design's kernel
     (`composite_reach`), each left out when off (the answer's defaults); the level of the wider refit of an
@@ -715,7 +722,9 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
     quadratic there must fit better to answer there (`design_log`); for the `last` design, unless laid out in the
     logarithm (whose scale is already steep on one side and shallow on the other), the level at which a quadratic
     steeper on one side of its minimum must fit better (`design_two_sided`); for every design but the `last`, the
-    kernel's reach (`design_reach`, where no composite design's applies).
+    kernel's reach (`design_reach`, where no composite design's applies); for the `last` design the design
+    before's answer `hold` and the level at which a move off a range's bound where it lay must tell better
+    (`design_hold`).
     (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
     reach = (float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else
              float(s.design_reach) if s.design_reach and not last else REACH)
@@ -725,7 +734,8 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
         {"widen_bound": float(s.design_widen_bound)} if last and s.design_widen_bound else {}) | (
         {"log_gains": float(s.design_log), "offsets": surface_log_offsets(list(s.space.values()))}
         if (last or logged) and s.design_log else {}) | (
-        {"two_sided": float(s.design_two_sided)} if last and s.design_two_sided and not logged else {})
+        {"two_sided": float(s.design_two_sided)} if last and s.design_two_sided and not logged else {}) | (
+        {"hold": hold, "hold_level": float(s.design_hold)} if last and s.design_hold and hold is not None else {})
 
 
 def _span(points: Sequence[Sequence[float]]) -> list[tuple[float, float]]:
@@ -1018,11 +1028,13 @@ class Tuner:
         # corner however badly that flew: the 60 ms latency plant, session 15); every design after the passes keeps it
         final = step + 1 == s.design_count()  # (the run's answer: `design_widen_bound`)
         logged = layout is not None
-        options = answer_options(self.settings, half, keep, final, logged) | ({"risk": None} if start else {})
+        hold = before if self._design_answers and self._design_answers[-1] == self.gains else None  # (`design_hold`:
+        # the design before's, not the passes' answer)
+        options = answer_options(self.settings, half, keep, final, logged, hold) | ({"risk": None} if start else {})
         best, fitted = surface_answer(flown, box, ruled, self.pool, **options)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None, final,
-                                           logged)
+                                           logged, hold)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
@@ -1078,15 +1090,16 @@ class Tuner:
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
                     ruled: Any, best: tuple[float, ...], half: float,
                     keep: list[float] | None = None, free: tuple[float, ...] | None = None,
-                    last: bool = False, logged: bool = False) -> dict[str, Any] | None:
+                    last: bool = False, logged: bool = False,
+                    hold: list[float] | None = None) -> dict[str, Any] | None:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
         (the previous design's answer `keep` included; `free` when the caller already has it: a design answered
         unbounded) and its chance when the bound moved it (None when not), whether the answer is `keep` ("kept"),
         and where a kept answer is above the bound the nearest gains under it and their chance ("off_wall",
         `surface.answer`'s `keep_bound`; None otherwise); None when no flight near the design failed (`last`: the
-        run's last design)."""
-        options = answer_options(self.settings, half, keep, last, logged)
+        run's last design; `hold`: the design before's answer, `design_hold`)."""
+        options = answer_options(self.settings, half, keep, last, logged, hold)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None

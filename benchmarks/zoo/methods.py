@@ -174,7 +174,8 @@ def candidates() -> list[Method]:
     session 25), session 25's default with the two-sided quadratic at the 1 % level, today's with each answer fitted over 2 half-widths
     of its design (`design_reach`, before session 26) and over 4, with each line search of the pass answering two
     half-parabolas (`answer = "valley"`) and with each design 0.3 or 0.5 as wide as the one before
-    (`design_shrink`; session 27's screens). The paper's setting
+    (`design_shrink`; session 27's screens), and without the last design's gains held on their range's bound
+    (`design_hold`, before session 28). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -188,12 +189,12 @@ def candidates() -> list[Method]:
             Method("default, the vehicles of a round on distinct points (strategy split)", {"strategy": "split"}),
             Method("default without the outlier rule (design_outliers = 0: before session 20)",
                    {"design_outliers": 0.0}),
-            Method(BEFORE_BOUND, {"design_widen_bound": 0.0, "design_log": 0.0} | NO_TWO_SIDED | NO_REACH),
-            Method(BEFORE_LOG, {"design_log": 0.0} | NO_TWO_SIDED | NO_REACH),
-            Method(BEFORE_LAYOUT, {"design_log_layout": False} | NO_TWO_SIDED | NO_REACH),
-            Method(BEFORE_TWO_SIDED, NO_TWO_SIDED | NO_REACH),
-            Method("default, the two-sided quadratic at the 1 % level", {"design_two_sided": 0.01} | NO_REACH),
-            Method(BEFORE_REACH, NO_REACH),
+            Method(BEFORE_BOUND, {"design_widen_bound": 0.0, "design_log": 0.0} | NO_TWO_SIDED | NO_REACH | NO_HOLD),
+            Method(BEFORE_LOG, {"design_log": 0.0} | NO_TWO_SIDED | NO_REACH | NO_HOLD),
+            Method(BEFORE_LAYOUT, {"design_log_layout": False} | NO_TWO_SIDED | NO_REACH | NO_HOLD),
+            Method(BEFORE_TWO_SIDED, NO_TWO_SIDED | NO_REACH | NO_HOLD),
+            Method("default, the two-sided quadratic at the 1 % level", {"design_two_sided": 0.01} | NO_REACH | NO_HOLD),
+            Method(BEFORE_REACH, NO_REACH | NO_HOLD),
             Method("default, each answer but the last fitted over 4 half-widths (design_reach = 4)",
                    {"design_reach": 4.0}),
             Method(VALLEY_PASS, {"answer": "valley"}),
@@ -201,7 +202,8 @@ def candidates() -> list[Method]:
                      {"design_shrink": s}) for s in (0.3, 0.5)),
             *(Method(f"default, each design {s:g} as wide as the one before, less where its answer moved far "
                      f"(design_shrink = {s:g}, design_trust)", {"design_shrink": s, "design_trust": True})
-              for s in (0.3, 0.4))]
+              for s in (0.3, 0.4)),
+            Method(BEFORE_HOLD, NO_HOLD)]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
@@ -212,6 +214,8 @@ BEFORE_REACH = "default before session 26 (each answer fitted over 2 half-widths
 VALLEY_PASS = "default, each line search of the pass answering two half-parabolas (answer = valley)"
 NO_TWO_SIDED = {"design_two_sided": 0.0}  # (each default before session 25 answered without it)
 NO_REACH = {"design_reach": 0.0}  # (each default before session 26 fitted its answers over 2 half-widths)
+BEFORE_HOLD = "default before session 28 (no gain held on its range's bound: design_hold = 0)"
+NO_HOLD = {"design_hold": 0.0}  # (each default before session 28 let the last design move a gain off its bound)
 
 
 def split_designs() -> list[Method]:

@@ -22,7 +22,7 @@ from mavtune.report import units as U
 from mavtune.report.figure_rules import fit_titles, normal
 from mavtune.report.searches import as_float
 from mavtune.report.units import GainUnit
-from mavtune.search.surface import LOGGED
+from mavtune.search.surface import HELD, LOGGED
 
 DESIGNS_PNG = "designs.png"
 MAX_PANEL_GAINS = 4  # the figure's panels are the pairs of the first this many gains (6 panels at most)
@@ -39,6 +39,8 @@ WIDER = ", refitted wider"  # (`surface.answer`: refitted over the wider designs
 
 def how_text(how: str) -> str:
     """A design's `how` in words."""
+    held = how.endswith(HELD)
+    how = how.removesuffix(HELD)
     logged = how.endswith(LOGGED)
     how = how.removesuffix(LOGGED)
     base = how.removesuffix(WIDER)
@@ -46,7 +48,9 @@ def how_text(how: str) -> str:
     return text + (" (refitted over the wider designs' flights too: the first fit's minimum lay on the box's face)"
                    if how.endswith(WIDER) else "") + (
         ", in the logarithm of the gains (a quadratic there fits the flights better: gains whose good values span "
-        "decades)" if logged else "")
+        "decades)" if logged else "") + (
+        "; a gain the design before answered on its range's bound held there (its flights do not tell the move off "
+        "it better: design_hold)" if held else "")
 
 
 def how_line(d: Any) -> str:
