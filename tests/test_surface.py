@@ -1183,7 +1183,8 @@ def test_an_answer_the_noise_moved_off_the_corner_is_held_on_the_bound():
 def test_a_move_off_the_bound_the_flights_tell_better_stands():
     """An optimum inside the last design (0.9, 0.92), 30 times as curved, 3 % noise: the quadratic's answer stands
     in every seed although the design before answered the corner; so does one where the design before answered
-    inside the ranges, and one beside a failed flight (the wall's rules hold there)."""
+    inside the ranges, and one beside a failed flight, or with one failed within the divergence fit's reach (the
+    wall's rules hold there)."""
     inner = lambda p: 1.0 + 30.0 * ((p[0] - 0.9) ** 2 + (p[1] - 0.92) ** 2)
     pool = NoisePool.prior(0.03, 100)
     for seed in range(6):
@@ -1197,6 +1198,10 @@ def test_a_move_off_the_bound_the_flights_tell_better_stands():
     assert surface.held_on_bound(flat, CORNER_BOX, (1.0, 1.0), x, 0.15, 0.05) == (1.0, 1.0)
     walled = {**flat, (0.92, 1.0): [math.inf]}
     assert surface.held_on_bound(walled, CORNER_BOX, (1.0, 1.0), x, 0.15, 0.05) == x
+    far = {**flat, (0.62, 1.0): [math.inf]}  # (4 half-widths off: the divergence fit's reach, not the kernel's)
+    pool = NoisePool.prior(0.15, 100)
+    assert surface.answer(far, CORNER_BOX, (), pool, hold=(1.0, 1.0), hold_level=0.05)[0] == (1.0, 1.0)
+    assert surface.answer(far, CORNER_BOX, (), pool, hold=(1.0, 1.0), hold_level=0.05, risk_reach=5.0)[0] == x
 
 
 def test_the_hold_on_the_bound_is_the_last_designs_fingerprinted_and_checked():

@@ -624,16 +624,18 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     not the run's answer (replayed on the zoo's cliff it lost 1 run to 10 of the select half), the caution's safer
     gains. `hold` (the previous design's answer, in shares of each range) with `hold_level`: a fitted answer that
     moved a gain off the range's bound where `hold` had it is put back there unless the flights tell the move better
-    at that level (`held_on_bound`; 0: never)."""
+    at that level (`held_on_bound`; 0: never), never where a flight the divergence fit reaches (`risk_reach`) failed."""
     # the fit's options that each refit below keeps (in the logarithm of the gains; over a wider kernel)
     refit = {"power": power, "log": log, "cubic_level": cubic_level, "plane_level": plane_level,
              "slope_level": slope_level, "plane_inside": plane_inside, "risk": risk, "keep_risk": keep_risk,
              "keep_bound": keep_bound}
-    if hold is not None and hold_level:  # the answer without it first: only a fitted one is held
+    if hold is not None and hold_level:  # the answer without it first: only a fitted one is held, and only where
         x, how = answer(points, box, worse, pool, reach=reach, risk_reach=risk_reach, keep=keep, widen=widen,
                         widen_bound=widen_bound, log_gains=log_gains, offsets=offsets, two_sided=two_sided, **refit)
+        _, _, centre, half = _frame(box)  # no flight the divergence fit reaches failed (the bound on its chance
+        walled = divergence(points, centre, half, _tricube(risk_reach or reach)) is not None  # holds there)
         held = held_on_bound(points, box, hold, x, pool.cv if pool is not None else math.nan, hold_level) \
-            if how else x
+            if how and not walled else x
         return (held, how + HELD) if held != x else (x, how)
     if two_sided:  # the answer without it first: in the logarithm of the gains, that answer stands
         x, how = answer(points, box, worse, pool, reach=reach, risk_reach=risk_reach, keep=keep, widen=widen,
