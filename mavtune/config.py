@@ -346,9 +346,9 @@ class Tuning(_Section):
                                "on a bound of its range and the last design's fitted answer moves it off, the gain "
                                "stays on the bound unless the last design's flights tell the move better at this "
                                "level (a one-sided test on one quadratic, each point weighed by its inverse "
-                               "variance; not beside a failed flight): an optimum on a range's bound, where the "
-                               "narrow last design's curvature is the noise's (0: never; 0.05 chosen on the zoo's "
-                               "select half, selection_hold.md)")
+                               "variance; never where a flight the design's divergence fit reaches failed): an "
+                               "optimum on a range's bound, where the narrow last design's curvature is the noise's "
+                               "(0: never; 0.05 chosen on the zoo's select half, selection_hold.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "
