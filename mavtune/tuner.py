@@ -1034,7 +1034,7 @@ class Tuner:
         best, fitted = surface_answer(flown, box, ruled, self.pool, **options)
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None, final,
-                                           logged, hold)
+                                           logged)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
@@ -1090,16 +1090,15 @@ class Tuner:
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
                     ruled: Any, best: tuple[float, ...], half: float,
                     keep: list[float] | None = None, free: tuple[float, ...] | None = None,
-                    last: bool = False, logged: bool = False,
-                    hold: list[float] | None = None) -> dict[str, Any] | None:
+                    last: bool = False, logged: bool = False) -> dict[str, Any] | None:
         """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
         flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
         (the previous design's answer `keep` included; `free` when the caller already has it: a design answered
         unbounded) and its chance when the bound moved it (None when not), whether the answer is `keep` ("kept"),
         and where a kept answer is above the bound the nearest gains under it and their chance ("off_wall",
         `surface.answer`'s `keep_bound`; None otherwise); None when no flight near the design failed (`last`: the
-        run's last design; `hold`: the design before's answer, `design_hold`)."""
-        options = answer_options(self.settings, half, keep, last, logged, hold)
+        run's last design; no `design_hold`: it never holds where a flight near the design failed)."""
+        options = answer_options(self.settings, half, keep, last, logged)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None

@@ -424,24 +424,15 @@ def two_sided_minimum(points: Mapping[tuple[float, ...], Sequence[float]], box: 
     from mavtune.search.joint import quadratic
 
     lo, hi, centre, half = _frame(box)
-    keys = [k for k, c in points.items() if c]
-    if not keys:
-        return None
-    u = (np.array(keys, float) - centre) / half
-    kernel = _tricube(reach)(u)
-    near = [k for k, w in zip(keys, kernel) if w > 0]
-    if not all(math.isfinite(c) for k in near for c in points[k]):
+    near = _near_means(points, box, reach)
+    if near is None:
         return None  # (beside a wall the answer's own rules hold)
+    x, y, flights, kernel = near
     d = len(lo)
     extra = d  # the curvature ratios, beyond the quadratic's coefficients
-    if len(near) < coefficients(d) + extra + 3:
+    if len(x) < coefficients(d) + extra + 3:
         return None
-    x = u[kernel > 0]
-    means = np.array([math.fsum(points[k]) / len(points[k]) for k in near])
-    if not np.max(np.abs(means)) > 0:
-        return None
-    y = means / np.max(np.abs(means))
-    w = _by_cost(np.array([len(points[k]) for k in near], float), y) * kernel[kernel > 0]
+    w = _by_cost(flights, y) * kernel
     w = w / np.max(w)
     fit = quadratic(x, y, w)
     if fit is None:
@@ -481,18 +472,44 @@ def two_sided_minimum(points: Mapping[tuple[float, ...], Sequence[float]], box: 
     return tuple(float(v) for v in np.clip(m * half + centre, lo, hi))
 
 
+def _near_means(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+                reach: float, clear: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The flown points within `reach` half-widths of the design of `box` as a local fit takes them: each in
+    half-widths from the box's centre, its mean cost over the largest, its flights and its kernel weight; None where
+    none is that near, where a flight within `reach` (or `clear`, if wider) failed, or where every mean is zero."""
+    import numpy as np
+
+    _, _, centre, half = _frame(box)
+    keys = [k for k, c in points.items() if c]
+    if not keys:
+        return None
+    u = (np.array(keys, float).reshape(len(keys), len(centre)) - centre) / half
+    kernel = _tricube(reach)(u)
+    walls = _tricube(clear)(u) if clear > reach else kernel
+    if any(not math.isfinite(c) for k, w in zip(keys, walls) if w > 0 for c in points[k]):
+        return None
+    near = [k for k, w in zip(keys, kernel) if w > 0]
+    if not near:
+        return None
+    means = np.array([math.fsum(points[k]) / len(points[k]) for k in near])
+    if not np.max(np.abs(means)) > 0:
+        return None
+    return (u[kernel > 0], means / np.max(np.abs(means)), np.array([len(points[k]) for k in near], float),
+            kernel[kernel > 0])
+
+
 def held_on_bound(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
                   before: Sequence[float], x: Sequence[float], cv: float, level: float,
-                  reach: float = REACH) -> tuple[float, ...]:
+                  reach: float = REACH, clear: float = 0.0) -> tuple[float, ...]:
     """`x` (the last design's answer, in shares of each range) with every gain that `before` (the design before's
     answer) had on a bound of its range and `x` moved off it put back on that bound, unless the flights within
     `reach` half-widths of the design of `box` tell `x` lower than that point: a one-sided test at `level` of the two
     points' difference on one quadratic, each point weighed by its inverse variance from the run's relative noise
-    `cv`. `x` itself where no gain moved off a bound, where a flight that near failed (the wall's rules hold), with
-    the noise unknown or nil, or with too few points. An optimum on a range's bound (a cost still falling at the
-    top of an autopilot's range) lies on the narrow last design's face, whose curvature across a flat, noisy
-    corner is the noise's: the quadratic's minimum strays inside by chance (the zoo's PX4 cascade: within 2 % of
-    the optimum in 38 % of runs, 48 % with it held)."""
+    `cv`. `x` itself where no gain moved off a bound, where a flight that near (or within `clear` half-widths: the
+    divergence fit's reach) failed (the wall's rules hold), with the noise unknown or nil, or with too few points.
+    An optimum on a range's bound (a cost still falling at the top of an autopilot's range) lies on the narrow last
+    design's face, whose curvature across a flat, noisy corner is the noise's: the quadratic's minimum strays inside
+    by chance (the zoo's PX4 cascade: within 2 % of the optimum in 38 % of runs, 48 % with it held)."""
     import numpy as np
     from scipy.stats import norm
 
@@ -500,19 +517,13 @@ def held_on_bound(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequ
     if not moved or not (math.isfinite(cv) and cv > 0 and 0 < level < 1):
         return tuple(float(v) for v in x)
     held = tuple(float(before[i] if i in moved else v) for i, v in enumerate(x))
-    lo, hi, centre, half = _frame(box)
-    keys = [k for k, c in points.items() if c]
-    u = (np.array(keys, float).reshape(len(keys), len(lo)) - centre) / half
-    kernel = _tricube(reach)(u)
-    near = [k for k, w in zip(keys, kernel) if w > 0]
-    square = _terms(len(lo), 2)
-    if len(near) < len(square) + 2 or not all(math.isfinite(c) for k in near for c in points[k]):
+    near = _near_means(points, box, reach, clear)
+    square = _terms(len(held), 2)
+    if near is None or len(near[0]) < len(square) + 2:
         return tuple(float(v) for v in x)
-    means = np.array([math.fsum(points[k]) / len(points[k]) for k in near])
-    if not np.max(np.abs(means)) > 0:
-        return tuple(float(v) for v in x)
-    xs, y = u[kernel > 0], means / np.max(np.abs(means))
-    weights = _test_weights(xs, y, np.array([len(points[k]) for k in near], float) * kernel[kernel > 0])
+    xs, y, flights, kernel = near
+    _, _, centre, half = _frame(box)
+    weights = _test_weights(xs, y, flights * kernel)
     columns = _columns(xs, square)
     try:
         beta, _ = _fit(xs, y, weights, square)
@@ -632,10 +643,9 @@ def answer(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tu
     if hold is not None and hold_level:  # the answer without it first: only a fitted one is held, and only where
         x, how = answer(points, box, worse, pool, reach=reach, risk_reach=risk_reach, keep=keep, widen=widen,
                         widen_bound=widen_bound, log_gains=log_gains, offsets=offsets, two_sided=two_sided, **refit)
-        _, _, centre, half = _frame(box)  # no flight the divergence fit reaches failed (the bound on its chance
-        walled = divergence(points, centre, half, _tricube(risk_reach or reach)) is not None  # holds there)
-        held = held_on_bound(points, box, hold, x, pool.cv if pool is not None else math.nan, hold_level) \
-            if how and not walled else x
+        held = held_on_bound(points, box, hold, x, pool.cv if pool is not None else math.nan, hold_level,
+                             clear=risk_reach or reach) if how else x  # (no flight the divergence fit reaches
+        # failed: there the bound on its chance holds)
         return (held, how + HELD) if held != x else (x, how)
     if two_sided:  # the answer without it first: in the logarithm of the gains, that answer stands
         x, how = answer(points, box, worse, pool, reach=reach, risk_reach=risk_reach, keep=keep, widen=widen,
