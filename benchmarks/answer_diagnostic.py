@@ -130,8 +130,8 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
 
     def recorded(points, box, worse=(), pool=None, **options):
         out = original(points, box, worse, pool, **options)
-        if "risk" in options and options["risk"] is None:  # the divergence caution's unbounded answer: not the
-            return out  # run's answer
+        if "risk" in options and options["risk"] is None or options.get("keep_bound"):  # the divergence caution's
+            return out  # unbounded answer and its safer gains: not the run's answer
         if raw:  # the flights as flown, before `inliers` left outliers out: a replay leaves them out again
             points, options = raw.pop("points"), options | {"outliers": raw.pop("sds")}
         calls.append({"keep": list(options["keep"]) if options.get("keep") is not None else None,
@@ -169,6 +169,12 @@ def engine_options(row: dict[str, Any], call: dict[str, Any]) -> dict[str, Any]:
     return base | ({"keep": call["keep"]} if call["keep"] is not None else {})
 
 
+def answer_calls(row: dict[str, Any]) -> list[dict[str, Any]]:
+    """The run's recorded surface answers, each design's in turn: without the divergence caution's safer gains
+    (`keep_bound`), which records before session 29 kept after the run's answer."""
+    return [c for c in row["surface_calls"] if not c.get("options", {}).get("keep_bound")]
+
+
 def costs_of(pairs) -> dict[tuple[float, ...], list[float]]:
     """A stored flown list back to point → costs (inf for a failed flight)."""
     return {tuple(k): [math.inf if c == "inf" else float(c) for c in v] for k, v in pairs}
@@ -195,7 +201,7 @@ def score(t: Truth, row: dict[str, Any]) -> dict[str, Any]:
     safe = [p for p, c in flown.items() if all(map(math.isfinite, c)) and t.fly_away(p) == 0.0]
     ex = {p: t.excess(p)[0] for p in safe}
     best = min(safe, key=ex.get) if safe else None
-    box = row["surface_calls"][-1]["box"] if row["surface_calls"] else None
+    box = answer_calls(row)[-1]["box"] if row["surface_calls"] else None
     in_box = [p for p in safe if box and all(lo - 1e-9 <= v <= hi + 1e-9 for v, (lo, hi) in zip(p, box))]
     best_box = min(in_box, key=ex.get) if in_box else None
     twice = [p for p in safe if len(flown[p]) >= 2]
@@ -242,7 +248,7 @@ def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) ->
     the last is replayed, the earlier ones' answers having chosen what was flown after them)."""
     out = []
     for row in rows:
-        x = replay_call(row, row["surface_calls"][-1], options) if row["surface_calls"] else row["x"]
+        x = replay_call(row, answer_calls(row)[-1], options) if row["surface_calls"] else row["x"]
         out.append({"plant": row["plant"], "run": row["run"], "x": x})
     judged(t, [tuple(r["x"]) for r in out], pm)
     for r in out:
@@ -263,7 +269,8 @@ def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, An
     if sds:
         points, _ = surface.inliers(points, box, sds)
     if given.get("keep") == PREVIOUS:  # (the passes' answer was never kept: one design answers its fit)
-        given["keep"] = row["surface_calls"][-2]["answer"] if len(row["surface_calls"]) > 1 else None
+        calls = answer_calls(row)
+        given["keep"] = calls[-2]["answer"] if len(calls) > 1 else None
     bag = given.pop("bag", 0)
     reach = given.pop("two_sided_reach", None)
     if reach is not None:  # (the engine's two-sided quadratic over another kernel: `surface.answer`'s last step)

@@ -13,14 +13,15 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 def test_a_replay_with_no_variant_is_the_answer_as_flown(monkeypatch):
     """On the cliff (failed flights beside the optimum: the divergence reach and the kept answer matter), every run's
     replay equals its answer, with the options recorded or derived; without them most runs answer elsewhere (the
-    replay before session 19)."""
+    replay before session 19). Runs 4 and 8 end with a divergence caution, whose safer gains the record took for
+    the run's answer before session 29."""
     monkeypatch.setenv("SCIPY_ARRAY_API", "1")  # (answer_diagnostic sets it for Crazyflow; not left for the session)
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     import answer_diagnostic as ad
     from zoo.methods import candidates
 
     elsewhere = 0
-    for run in range(4):
+    for run in (0, 1, 2, 3, 4, 8):
         row = ad.tune_flights("analytic cliff", candidates()[0], run)
         call = row["surface_calls"][-1]
         points, box = ad.costs_of(call["points"]), [tuple(b) for b in call["box"]]
@@ -30,6 +31,19 @@ def test_a_replay_with_no_variant_is_the_answer_as_flown(monkeypatch):
             assert ad.replay_call(row, record, {}) == row["x"]
         elsewhere += list(surface.answer(points, box, surface.ruled_out(points, pool), pool)[0]) != row["x"]
     assert elsewhere >= 2
+
+
+def test_a_record_from_before_session_29_replays_its_answer_not_the_cautions_safer_gains(monkeypatch):
+    """Records from before session 29 kept the divergence caution's safer gains (`keep_bound`) after the run's
+    answer: `answer_calls` leaves them out, so the last design's answer is what is replayed."""
+    monkeypatch.setenv("SCIPY_ARRAY_API", "1")
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import answer_diagnostic as ad
+
+    answer = {"options": {"reach": 2.0}, "answer": [0.5, 0.5]}
+    safer = {"options": {"reach": 2.0, "keep_bound": True}, "answer": [0.4, 0.5]}
+    row = {"surface_calls": [{"options": {}, "answer": [0.3, 0.3]}, answer, safer]}
+    assert ad.answer_calls(row)[-1] is answer and len(ad.answer_calls(row)) == 2
 
 
 def test_a_replay_leaves_out_the_outlier_flights_the_engine_left_out(monkeypatch):
