@@ -175,7 +175,8 @@ def candidates() -> list[Method]:
     of its design (`design_reach`, before session 26) and over 4, with each line search of the pass answering two
     half-parabolas (`answer = "valley"`) and with each design 0.3 or 0.5 as wide as the one before
     (`design_shrink`; session 27's screens), and without the last design's gains held on their range's bound
-    (`design_hold`, before session 28). The paper's setting
+    (`design_hold`, before session 28), and with a design beside a failed flight narrowing more, to 0.15 or 0.25 of
+    its half-width (`design_shrink_wall`; session 29's screen). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -204,7 +205,9 @@ def candidates() -> list[Method]:
             *(Method(f"default, each design {s:g} as wide as the one before, less where its answer moved far "
                      f"(design_shrink = {s:g}, design_trust)", {"design_shrink": s, "design_trust": True})
               for s in (0.3, 0.4)),
-            Method(BEFORE_HOLD, NO_HOLD)]
+            Method(BEFORE_HOLD, NO_HOLD),
+            *(Method(f"default, a design beside a failed flight narrowing to {w:g} of it (design_shrink_wall = {w:g})",
+                     {"design_shrink_wall": w}) for w in (0.15, 0.25))]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
