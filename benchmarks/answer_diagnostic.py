@@ -130,8 +130,8 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
 
     def recorded(points, box, worse=(), pool=None, **options):
         out = original(points, box, worse, pool, **options)
-        if "risk" in options and options["risk"] is None or options.get("keep_bound"):  # the divergence caution's
-            return out  # unbounded answer and its safer gains: not the run's answer
+        if ("risk" in options and options["risk"] is None) or options.get("keep_bound"):  # the divergence
+            return out  # caution's unbounded answer and its safer gains: not the run's answer
         if raw:  # the flights as flown, before `inliers` left outliers out: a replay leaves them out again
             points, options = raw.pop("points"), options | {"outliers": raw.pop("sds")}
         calls.append({"keep": list(options["keep"]) if options.get("keep") is not None else None,
@@ -201,7 +201,8 @@ def score(t: Truth, row: dict[str, Any]) -> dict[str, Any]:
     safe = [p for p, c in flown.items() if all(map(math.isfinite, c)) and t.fly_away(p) == 0.0]
     ex = {p: t.excess(p)[0] for p in safe}
     best = min(safe, key=ex.get) if safe else None
-    box = answer_calls(row)[-1]["box"] if row["surface_calls"] else None
+    calls = answer_calls(row)
+    box = calls[-1]["box"] if calls else None
     in_box = [p for p in safe if box and all(lo - 1e-9 <= v <= hi + 1e-9 for v, (lo, hi) in zip(p, box))]
     best_box = min(in_box, key=ex.get) if in_box else None
     twice = [p for p in safe if len(flown[p]) >= 2]
@@ -248,7 +249,8 @@ def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) ->
     the last is replayed, the earlier ones' answers having chosen what was flown after them)."""
     out = []
     for row in rows:
-        x = replay_call(row, answer_calls(row)[-1], options) if row["surface_calls"] else row["x"]
+        calls = answer_calls(row)
+        x = replay_call(row, calls[-1], options) if calls else row["x"]
         out.append({"plant": row["plant"], "run": row["run"], "x": x})
     judged(t, [tuple(r["x"]) for r in out], pm)
     for r in out:
