@@ -66,7 +66,7 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
     "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0,
     "tuning.design_log_layout": False, "tuning.design_two_sided": 0.0,
-    "tuning.design_reach": 0.0, "tuning.design_hold": 0.0}
+    "tuning.design_reach": 0.0, "tuning.design_hold": 0.0, "tuning.design_shrink_wall": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -146,9 +146,9 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "replicates", "points", "max_bootstraps", "seed", "adaptive", "confidence", "cap", "stop_undecided",
                    "refly", "answer", "edges", "directions", "design", "design_width", "design_repeats",
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
-                   "design_trust", "design_shrink_wall", "design_shrink_fit", "design_pass_box", "wall_span",
-                   "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers", "design_log",
-                   "design_log_layout", "design_two_sided", "design_reach", "design_hold", "budget")
+                   "design_trust", "design_shrink_wall", "design_wall_rise", "design_shrink_fit", "design_pass_box",
+                   "wall_span", "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers",
+                   "design_log", "design_log_layout", "design_two_sided", "design_reach", "design_hold", "budget")
 
 
 
@@ -172,7 +172,8 @@ class Tuning(_Section):
     `design_two_sided`, since session 25; each answer before the last fitted to the flights within three
     half-widths of its design, not two: `design_reach`, since session 26; a gain the design before answered on
     a range's bound kept there unless the last design's flights tell a move off it better at the 5 % level:
-    `design_hold`, since session 28; without
+    `design_hold`, since session 28; each design after one with a failed flight near its answer, into which the
+    cost rises, a quarter as wide, not 0.4: `design_shrink_wall`, since session 30; without
     the flights that their replicates and their neighbours both put far off, spoiled by something other than the
     gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
@@ -267,10 +268,17 @@ class Tuning(_Section):
                                      "box's centre (its share of the half-width, over the gains off the ranges' "
                                      "bounds): a design that moved the answer far narrows little, so the next one "
                                      "still reaches a narrow optimum the fit approached from afar")
-    design_shrink_wall: float = Field(0.0, ge=0.0, le=1.0, description="design: the next design's half-width over "
-                                      "a design with a failed flight within its half-width of its answer (0: "
-                                      "`design_shrink`): a design beside a "
-                                      "fly-away narrows less, so a few flights next to the wall do not lead its fit")
+    design_shrink_wall: float = Field(0.25, ge=0.0, le=1.0, description="design: the next design's half-width over "
+                                      "a design with a failed flight within its half-width of its answer, where the "
+                                      "cost rises into it (`design_wall_rise`; 0: `design_shrink` there too): a "
+                                      "sharp optimum before a wall of oscillating gains, which bends the wide "
+                                      "design's fit away from it, is found by a much narrower design")
+    design_wall_rise: float = Field(1.4, ge=0.0, le=100.0, description="design: narrow by `design_shrink_wall` only "
+                                    "where the safe flights nearest the failed ones cost at least this many times "
+                                    "the lowest mean inside the design (a sharp optimum before a rising wall: the "
+                                    "zoo's 60 ms of latency, 1.8 to 4), not where they cost about as little (a "
+                                    "cliff, whose optimum lies on the wall: at most 1.14); 0: beside every failed "
+                                    "flight")
     design_shrink_fit: StrictBool = Field(True, description="design: narrow by `design_shrink` to the power of the "
                                           "next design's own flights per three coefficients of its quadratic, at "
                                           "most 1 (4 gains' designs, each point flown once, narrow less: their "

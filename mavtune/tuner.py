@@ -32,7 +32,7 @@ from mavtune.search.surface import (
     LAYOUT_SHARE as SURFACE_LAYOUT_SHARE, LOGGED as SURFACE_LOGGED, REACH, LogGains, answer as surface_answer,
     beside_wall, coefficients as surface_coefficients, design as surface_design, fly_away as surface_fly_away,
     inliers as surface_inliers, log_offsets as surface_log_offsets, next_centre as surface_next_centre,
-    open_faces as surface_open_faces, ruled_out as surface_ruled_out,
+    open_faces as surface_open_faces, ruled_out as surface_ruled_out, wall_rise,
 )
 from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
@@ -397,6 +397,7 @@ class Settings:
     design_first: bool | int = False
     design_trust: bool = False
     design_shrink_wall: float = 0.0
+    design_wall_rise: float = 0.0
     design_shrink_fit: bool = False
     design_pass_box: bool = False
     wall_span: float = 0.0
@@ -481,6 +482,10 @@ class Settings:
         if not (float(self.design_shrink_wall) == 0.0 or 0.0 < float(self.design_shrink_wall) <= 1.0):
             raise MavtuneError(f"design_shrink_wall {self.design_shrink_wall} is outside (0, 1] (or 0: design_shrink): "
                                "the next design's half-width over one in whose box a flight failed")
+        if not 0.0 <= float(self.design_wall_rise) <= 100.0:
+            raise MavtuneError(f"design_wall_rise {self.design_wall_rise} is outside [0, 100]: how many times the "
+                               "box's lowest mean cost the flights next to a failed one must cost to narrow by "
+                               "design_shrink_wall")
         if self.design_shrink_fit not in (True, False):
             raise MavtuneError(f"design_shrink_fit must be true or false, got {self.design_shrink_fit!r}")
         if not 0.0 <= float(self.wall_span) <= 1.0:
@@ -532,8 +537,8 @@ class Settings:
             if not (v is None and name in optional) and (isinstance(v, bool) or not isinstance(v, numbers.Integral)):
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
-                  "wall_span", "composite_reach", "design_widen", "design_widen_bound", "design_outliers",
-                  "design_log", "design_two_sided", "design_reach", "design_hold")
+                  "design_wall_rise", "wall_span", "composite_reach", "design_widen", "design_widen_bound",
+                  "design_outliers", "design_log", "design_two_sided", "design_reach", "design_hold")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -693,6 +698,8 @@ class Settings:
                         | ({"move": float(self.design_move)} if self.design_move else {})
                         | ({"trust": True} if self.design_trust else {})
                         | ({"shrink_wall": float(self.design_shrink_wall)} if self.design_shrink_wall else {})
+                        | ({"wall_rise": float(self.design_wall_rise)}
+                           if self.design_shrink_wall and self.design_wall_rise else {})
                         | ({"shrink_fit": True} if self.design_shrink_fit else {})
                         | ({"wall_span": float(self.wall_span)} if self.wall_span else {})
                         | ({"wall_keep": True} if self.wall_keep else {})
@@ -787,8 +794,9 @@ class Tuner:
         self.open_face: Gains = {}  # the gains the last design answered on its box's face inside the range (`_surface`)
         self.outliers: list[dict[str, Any]] = []  # the flights the last design's fit left out (`_surface`)
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
-        self._step: tuple[list[tuple[float, float]], tuple[float, ...], bool] | None = None  # last design's box,
-        # its answer, and whether a flight failed within its half-width of the answer (`_shrink`)
+        self._step: tuple[list[tuple[float, float]], tuple[float, ...], float | None] | None = None  # last
+        # design's box, its answer, and how steeply the cost rises into the flights failed within its half-width of
+        # the answer (`surface.wall_rise`; None: none failed that near) (`_shrink`)
         self._log_layout: LogGains | None = None  # the designs' layout from the first after the passes, where the
         # flights fit a quadratic in the logarithm of the gains better (`design_log_layout`); None: in the gains
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
@@ -942,19 +950,20 @@ class Tuner:
 
     def _shrink(self) -> float:
         """The next design's half-width over the last one's, once the last answered inside its box: `design_shrink`
-        (`design_shrink_wall` where a flight failed within the design's half-width of its answer: a design beside
-        a fly-away narrows less, so its fit is not led by the noise of a few flights next to the wall); with `design_shrink_fit` that
-        to the power of the next design's own flights per three coefficients of its quadratic, at most 1 (a
-        design with fewer flights than `design_split = "auto"` asks for narrows less: its fit's curvature stays
-        above the noise); with `design_trust` no narrower than the answer's step from the box's centre, in shares
+        (`design_shrink_wall` where a flight failed within the design's half-width of its answer and the safe flights
+        nearest it cost at least `design_wall_rise` times the box's lowest mean: a sharp optimum before a rising wall
+        of oscillating gains is found only by a design much narrower than the one whose fit the wall bends); with
+        `design_shrink_fit` that to the power of the next design's own flights per three coefficients of its
+        quadratic, at most 1 (a design with fewer flights than `design_split = "auto"` asks for narrows less: its
+        fit's curvature stays above the noise); with `design_trust` no narrower than the answer's step from the box's centre, in shares
         of the box's half-width along each gain whose answer is off the ranges' bounds (a trust region: a design
         that moved the answer far narrows little)."""
         s = self.settings
         shrink = float(s.design_shrink)
         if self._step is None:
             return shrink
-        box, best, failed = self._step
-        if failed and s.design_shrink_wall:
+        box, best, rise = self._step
+        if rise is not None and s.design_shrink_wall and rise >= float(s.design_wall_rise):
             shrink = float(s.design_shrink_wall)
         if s.design_shrink_fit:
             flights = s.design_flights(len(self._design_answers))
@@ -1046,9 +1055,7 @@ class Tuner:
             if names[i] in last:
                 last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
         self._design_answers.append(dict(self.gains))
-        failed_near = any(not all(map(math.isfinite, c)) for k, c in flown.items()  # within the design's
-                          if c and max(abs(v - b) for v, b in zip(k, best)) <= half + 1e-9)  # half-width of its answer
-        self._step = (box, tuple(best), failed_near)
+        self._step = (box, tuple(best), wall_rise(flown, box, best, half))
         self._centre, moved = None, False
         if s.design_move and step + 1 < s.design_count():  # the design's own fit says the minimum lies beyond a face
             self._centre, moved = surface_next_centre(flown, box, half, self.pool, s.design_move, best,

@@ -14,6 +14,7 @@ from hypothesis import given, settings, strategies as st
 
 import mavtune
 from mavtune.config import preset_fields
+from mavtune.errors import MavtuneError
 from mavtune.plan import make_plan
 from mavtune.search import surface
 from mavtune.search.evidence import NoisePool
@@ -206,20 +207,41 @@ def test_a_trusted_design_narrows_no_more_than_its_answer_moved(trust, halves):
     assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((0.5, 0.31), abs=1e-6)
 
 
-@pytest.mark.parametrize("wall, halves", [(0.0, [0.15, 0.075, 0.0375]),  # design_shrink, failure or not
-                                          (0.8, [0.15, 0.12, 0.096])])  # a failed flight near the answer: 0.8
-def test_a_design_beside_a_failed_flight_narrows_by_its_own_shrink(wall, halves):
+@pytest.mark.parametrize("scale, wall, rise, halves", [
+    (3.0, 0.0, 1.4, [0.15, 0.075, 0.0375]),  # design_shrink, failure or not
+    (3.0, 0.8, 0.0, [0.15, 0.12, 0.096]),  # a failed flight near the answer: 0.8 (no rise asked)
+    (3.0, 0.8, 1.4, [0.15, 0.075, 0.0375]),  # the cost beside it 1.07 times the lowest: design_shrink
+    (40.0, 0.25, 1.4, [0.15, 0.0375, 0.01875])])  # 1.9 times: 0.25, then no failed flight that near
+def test_a_design_beside_a_failed_flight_narrows_by_its_own_shrink(scale, wall, rise, halves):
     """`design_shrink_wall`: a design with a failed flight within its half-width of its answer (kp + kd above 1.2:
     each design's far corner, the answer at the bowl's minimum (0.5, 0.5)) narrows the next one by that shrink
-    instead of `design_shrink`."""
-    wallcost = bowl((0.5, 0.5))
-    result = mavtune.tune(lambda gs: [math.inf if g["kp"] + g["kd"] > 1.2 else c for g, c in zip(gs, wallcost(gs))],
-                          space=SPACE, vehicles=2, bootstraps=0, design_width=0.15, design_steps=3,
+    instead of `design_shrink`, where the safe flights nearest that corner cost at least `design_wall_rise` times
+    the design's lowest mean (a steep bowl), not where they cost about as little (a shallow one)."""
+    def cost(gs):
+        return [math.inf if g["kp"] + g["kd"] > 1.2 else
+                1.0 + scale * ((g["kp"] - 0.5) ** 2 + (g["kd"] - 0.5) ** 2) for g in gs]
+
+    result = mavtune.tune(cost, space=SPACE, vehicles=2, bootstraps=0, design_width=0.15, design_steps=3,
                           design_shrink=0.5, initial={"kp": 0.5, "kd": 0.5}, draws=0, budget=None,
-                          design_shrink_wall=wall)
+                          design_shrink_wall=wall, design_wall_rise=rise)
     assert any(not math.isfinite(f.cost) for r in result.rounds[:9] for f in r.flights)
     assert [r.bracket[1] for r in result.rounds[::9]] == pytest.approx(halves)
     assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((0.5, 0.5), abs=1e-6)
+
+
+def test_the_wall_rise_is_the_cost_beside_the_failed_flights_over_the_box_best():
+    """`surface.wall_rise`: the median mean of the safe points nearest each failed point within `half` of the answer
+    (each gain's distance), over the lowest mean inside the box; None with no failed point that near, 0 with no safe
+    point in the box."""
+    box = [(0.4, 0.6), (0.4, 0.6)]
+    points = {(0.5, 0.5): [1.0, 1.2], (0.6, 0.6): [2.0], (0.7, 0.7): [math.inf], (0.4, 0.4): [1.5],
+              (0.95, 0.95): [math.inf], (0.9, 0.9): [9.0]}
+    assert surface.wall_rise(points, box, (0.5, 0.5), 0.2) == pytest.approx(2.0 / 1.1)
+    assert surface.wall_rise(points, box, (0.5, 0.5), 0.45) == pytest.approx(0.5 * (2.0 + 9.0) / 1.1)
+    assert surface.wall_rise(points, box, (0.5, 0.5), 0.1) is None
+    assert surface.wall_rise({(0.7, 0.7): [math.inf], (0.9, 0.9): [1.0]}, box, (0.5, 0.5), 0.2) == 0.0
+    with pytest.raises(MavtuneError, match="design_wall_rise 101 is outside"):
+        Settings(space=SPACE, design=True, design_wall_rise=101)
 
 
 @pytest.mark.parametrize("gains", [2, 4])
@@ -237,7 +259,6 @@ def test_a_design_with_few_flights_per_coefficient_narrows_less(gains):
 
 def test_no_passes_without_a_design_is_refused():
     from mavtune.config import Tuning
-    from mavtune.errors import MavtuneError
 
     with pytest.raises(MavtuneError, match="bootstraps"):
         Settings(space=SPACE, bootstraps=0)
@@ -1076,7 +1097,6 @@ def test_no_two_sided_answer_beside_a_failed_flight_or_outside_the_design():
 
 def test_the_two_sided_answer_is_the_last_designs_fingerprinted_and_checked():
     from mavtune.config import Tuning
-    from mavtune.errors import MavtuneError
     from mavtune.tuner import answer_options
 
     s = Tuning().settings(space=SPACE)
@@ -1093,7 +1113,6 @@ def test_the_reach_of_each_answer_but_the_last_is_fingerprinted_and_checked():
     designs' flights around it), the last over the answer's own 2; a composite design's reach (above 3 gains) wins;
     0 is the answer's own and leaves the fingerprint as before session 26."""
     from mavtune.config import Tuning
-    from mavtune.errors import MavtuneError
     from mavtune.search.surface import REACH
     from mavtune.tuner import answer_options
 
@@ -1208,7 +1227,6 @@ def test_the_hold_on_the_bound_is_the_last_designs_fingerprinted_and_checked():
     """`design_hold` (0.05) reaches the last design's answer with the design before's answer, no other; 0 leaves
     the fingerprint as before session 28; the report says a held answer in words."""
     from mavtune.config import Tuning
-    from mavtune.errors import MavtuneError
     from mavtune.tuner import answer_options
 
     s = Tuning().settings(space=SPACE)

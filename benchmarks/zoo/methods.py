@@ -176,7 +176,8 @@ def candidates() -> list[Method]:
     half-parabolas (`answer = "valley"`) and with each design 0.3 or 0.5 as wide as the one before
     (`design_shrink`; session 27's screens), and without the last design's gains held on their range's bound
     (`design_hold`, before session 28), and with a design beside a failed flight narrowing more, to 0.15 or 0.25 of
-    its half-width (`design_shrink_wall`; session 29's screen). The paper's setting
+    its half-width (`design_shrink_wall`; session 29's screen), and without it (before session 30) and with it only
+    where the cost rises into the failed flight (`design_wall_rise`, session 30). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -190,13 +191,15 @@ def candidates() -> list[Method]:
             Method("default, the vehicles of a round on distinct points (strategy split)", {"strategy": "split"}),
             Method("default without the outlier rule (design_outliers = 0: before session 20)",
                    {"design_outliers": 0.0}),
-            Method(BEFORE_BOUND, {"design_widen_bound": 0.0, "design_log": 0.0} | NO_TWO_SIDED | NO_REACH | NO_HOLD),
-            Method(BEFORE_LOG, {"design_log": 0.0} | NO_TWO_SIDED | NO_REACH | NO_HOLD),
-            Method(BEFORE_LAYOUT, {"design_log_layout": False} | NO_TWO_SIDED | NO_REACH | NO_HOLD),
-            Method(BEFORE_TWO_SIDED, NO_TWO_SIDED | NO_REACH | NO_HOLD),
+            Method(BEFORE_BOUND,
+                   {"design_widen_bound": 0.0, "design_log": 0.0} | NO_TWO_SIDED | NO_REACH | NO_HOLD | NO_WALL),
+            Method(BEFORE_LOG, {"design_log": 0.0} | NO_TWO_SIDED | NO_REACH | NO_HOLD | NO_WALL),
+            Method(BEFORE_LAYOUT,
+                   {"design_log_layout": False} | NO_TWO_SIDED | NO_REACH | NO_HOLD | NO_WALL),
+            Method(BEFORE_TWO_SIDED, NO_TWO_SIDED | NO_REACH | NO_HOLD | NO_WALL),
             Method("default, the two-sided quadratic at the 1 % level",
-                   {"design_two_sided": 0.01} | NO_REACH | NO_HOLD),
-            Method(BEFORE_REACH, NO_REACH | NO_HOLD),
+                   {"design_two_sided": 0.01} | NO_REACH | NO_HOLD | NO_WALL),
+            Method(BEFORE_REACH, NO_REACH | NO_HOLD | NO_WALL),
             Method("default, each answer but the last fitted over 4 half-widths (design_reach = 4)",
                    {"design_reach": 4.0}),
             Method(VALLEY_PASS, {"answer": "valley"}),
@@ -205,9 +208,13 @@ def candidates() -> list[Method]:
             *(Method(f"default, each design {s:g} as wide as the one before, less where its answer moved far "
                      f"(design_shrink = {s:g}, design_trust)", {"design_shrink": s, "design_trust": True})
               for s in (0.3, 0.4)),
-            Method(BEFORE_HOLD, NO_HOLD),
+            Method(BEFORE_HOLD, NO_HOLD | NO_WALL),
             *(Method(f"default, a design beside a failed flight narrowing to {w:g} of it (design_shrink_wall = {w:g})",
-                     {"design_shrink_wall": w}) for w in (0.15, 0.25))]
+                     {"design_shrink_wall": w, "design_wall_rise": 0.0}) for w in (0.15, 0.25)),
+            Method(BEFORE_WALL, NO_WALL),
+            *(Method(f"default, a design beside a failed flight into which the cost rises 1.4-fold narrowing to {w:g} "
+                     f"of it (design_shrink_wall = {w:g}, design_wall_rise = 1.4)",
+                     {"design_shrink_wall": w, "design_wall_rise": 1.4}) for w in (0.15, 0.25))]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
@@ -220,6 +227,8 @@ NO_TWO_SIDED = {"design_two_sided": 0.0}  # (each default before session 25 answ
 NO_REACH = {"design_reach": 0.0}  # (each default before session 26 fitted its answers over 2 half-widths)
 BEFORE_HOLD = "default before session 28 (no gain held on its range's bound: design_hold = 0)"
 NO_HOLD = {"design_hold": 0.0}  # (each default before session 28 let the last design move a gain off its bound)
+BEFORE_WALL = "default before session 30 (every design narrowing alike: design_shrink_wall = 0)"
+NO_WALL = {"design_shrink_wall": 0.0}  # (each default before session 30 narrowed beside a failed flight by 0.4 too)
 
 
 def split_designs() -> list[Method]:

@@ -286,6 +286,30 @@ def beside_wall(points: Mapping[tuple[float, ...], Sequence[float]], x: Sequence
     return wall if gap <= reach or not any(math.dist(k, wall) < gap for k in safe) else None
 
 
+def wall_rise(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+              x: Sequence[float], half: float) -> float | None:
+    """How steeply the cost rises into the failed flights within `half` of a design's answer `x` (each gain's
+    distance, in shares of its range): the median mean cost of the safe points flown nearest them over the lowest
+    mean inside the design's `box` (0 where nothing safe was flown in it); None where no flight that near failed.
+    A sharp optimum before a wall of oscillating gains (the zoo's 60 ms of latency: 1.8 to 4) rises into it; a cliff
+    whose safe side costs about what the optimum does (the zoo's cliff: at most 1.14) does not."""
+    import numpy as np
+
+    def failed(c: Sequence[float]) -> bool:
+        return not all(map(math.isfinite, c))
+
+    near = [k for k, c in points.items() if c and failed(c) and max(abs(v - b) for v, b in zip(k, x)) <= half + 1e-9]
+    if not near:
+        return None
+    safe = {k: math.fsum(c) / len(c) for k, c in points.items() if c and not failed(c)}
+    inside = [m for k, m in safe.items() if all(lo - 1e-9 <= v <= hi + 1e-9 for v, (lo, hi) in zip(k, box))]
+    if not inside or not min(inside) > 0:
+        return 0.0
+    keys, means = np.array(list(safe), float), np.array(list(safe.values()))
+    nearest = [means[int(np.argmin(np.max(np.abs(keys - np.array(f)), axis=1)))] for f in near]
+    return float(np.median(nearest)) / min(inside)
+
+
 def at_wall(points: Mapping[tuple[float, ...], Sequence[float]]) -> set[tuple[float, ...]]:
     """The points flown without failure next to a failed point: no other flown point lies in the ball whose
     diameter joins them, its sphere included (Gabriel neighbours: nothing flown between them). Their flights
