@@ -177,7 +177,8 @@ def candidates() -> list[Method]:
     (`design_shrink`; session 27's screens), and without the last design's gains held on their range's bound
     (`design_hold`, before session 28), and with a design beside a failed flight narrowing more, to 0.15 or 0.25 of
     its half-width (`design_shrink_wall`; session 29's screen), and without it (before session 30) and with it only
-    where the cost rises into the failed flight (`design_wall_rise`, session 30). The paper's setting
+    where the cost rises into the failed flight 1.4-fold (`design_wall_rise`, session 30; 0.25 that way is the
+    default since), or narrowing to 0.25 where it rises 1.2-fold or twofold. The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -212,9 +213,10 @@ def candidates() -> list[Method]:
             *(Method(f"default, a design beside a failed flight narrowing to {w:g} of it (design_shrink_wall = {w:g})",
                      {"design_shrink_wall": w, "design_wall_rise": 0.0}) for w in (0.15, 0.25)),
             Method(BEFORE_WALL, NO_WALL),
-            *(Method(f"default, a design beside a failed flight into which the cost rises 1.4-fold narrowing to {w:g} "
-                     f"of it (design_shrink_wall = {w:g}, design_wall_rise = 1.4)",
-                     {"design_shrink_wall": w, "design_wall_rise": 1.4}) for w in (0.15, 0.25))]
+            *(Method(f"default, a design beside a failed flight into which the cost rises {r:g}-fold narrowing to {w:g} "
+                     f"of it (design_shrink_wall = {w:g}, design_wall_rise = {r:g})",
+                     {"design_shrink_wall": w, "design_wall_rise": r})
+              for w, r in ((0.15, 1.4), (0.25, 1.2), (0.25, 2.0)))]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
