@@ -275,10 +275,10 @@ class Tuning(_Section):
                                       "design's fit away from it, is found by a much narrower design")
     design_wall_rise: float = Field(1.4, ge=0.0, le=100.0, description="design: narrow by `design_shrink_wall` only "
                                     "where the safe flights nearest the failed ones cost at least this many times "
-                                    "the lowest mean inside the design (a sharp optimum before a rising wall: the "
-                                    "zoo's 60 ms of latency, 1.8 to 4), not where they cost about as little (a "
-                                    "cliff, whose optimum lies on the wall: at most 1.14); 0: beside every failed "
-                                    "flight")
+                                    "the lowest mean inside the design (a sharp optimum before a rising wall: on "
+                                    "the zoo's 60 ms more latency 1.8 to 31, median 5.3), not where they cost about "
+                                    "as little (its cliff, whose optimum lies on the wall: at most 1.37, median "
+                                    "1.07; benchmarks/results/wall_rise.md); 0: beside every failed flight")
     design_shrink_fit: StrictBool = Field(True, description="design: narrow by `design_shrink` to the power of the "
                                           "next design's own flights per three coefficients of its quadratic, at "
                                           "most 1 (4 gains' designs, each point flown once, narrow less: their "
