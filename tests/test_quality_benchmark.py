@@ -135,3 +135,23 @@ def test_the_choice_leaves_out_more_fly_away_answers_than_luck_explains(monkeypa
     for more, chosen in ((13, "safer"), (4, "sharper")):
         table = {"p": {"sharper": score(0.61, more), "safer": score(0.60, 3)}}
         assert stats.choose(table, ["sharper", "safer"])[0] == chosen
+
+
+def test_cached_runs_carry_over_only_where_the_source_flies_alike(monkeypatch, quality):
+    """benchmarks/cache_rekey.py: a docstring, a comment, the layout or a setting's help text moves the engine hash
+    but not a flight, so those runs carry over; a changed number, a new module or a lost one does not; and the hash
+    of a source given as bytes is the one quality.py computes from the working tree."""
+    monkeypatch.syspath_prepend(str(BENCH.parent))
+    import cache_rekey
+
+    old = {"m/a.py": b'"""Doc."""\nX = Field(1.0, description="old help")\n\n\ndef f(x):\n    """One."""\n'
+                     b'    return x + 1  # one\n'}
+    same = {"m/a.py": b'"""Doc, longer."""\nX = Field(1.0,\n          description="new " "help")\n\n\n'
+                      b'def f(x):\n    """Two."""\n    return (x\n            + 1)\n'}
+    assert cache_rekey.differences(old, same) == []
+    assert cache_rekey.source_hash(old) != cache_rekey.source_hash(same)
+    moved = {"m/a.py": old["m/a.py"].replace(b"Field(1.0", b"Field(2.0")}
+    assert cache_rekey.differences(old, moved) == ["m/a.py"]
+    assert cache_rekey.differences(old, {**same, "m/b.py": b""}) == ["m/b.py"]
+    assert cache_rekey.differences({**old, "m/b.py": b""}, same) == ["m/b.py"]
+    assert cache_rekey.source_hash(cache_rekey.today()) == quality.engine_hash()
