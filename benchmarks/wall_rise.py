@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import write_results  # noqa: E402
 from quality import study_line, study_meta  # noqa: E402
 from zoo.methods import candidates, tune_run  # noqa: E402
-from zoo.plants import PLANTS  # noqa: E402
+from zoo.plants import ALL_PLANTS, PLANTS  # noqa: E402
 
 
 def rises(plant: str, run: int) -> list[float]:
@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     with ProcessPoolExecutor(args.workers) as ex:
         found = list(ex.map(rises, *zip(*jobs)))
     per = {p: {r: v for (q, r), v in zip(jobs, found) if q == p} for p in plants}
-    threshold = float(candidates()[0].settings(PLANTS[plants[0]], 0).design_wall_rise)
+    threshold = float(candidates()[0].settings(ALL_PLANTS[plants[0]], 0).design_wall_rise)
     meta = study_meta("wall_rise.py", argv, started, load, t0, half=args.half, threshold=threshold)
     lines = ["# How steeply the cost rises into the failed flights beside the default's designs (session 30)", "",
              study_line(meta), "",
