@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import argparse
 import ast
-import hashlib
 import json
 import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from quality import CACHE, REPO, engine_hash  # noqa: E402
+from quality import CACHE, REPO, source_files, source_hash  # noqa: E402
 
 
 def flight_tree(source: str) -> str:
@@ -41,25 +40,12 @@ def differences(old: dict[str, bytes], new: dict[str, bytes]) -> list[str]:
                   if p not in old or p not in new or flight_tree(old[p].decode()) != flight_tree(new[p].decode()))
 
 
-def source_hash(files: dict[str, bytes]) -> str:
-    """`quality.engine_hash` of a source given as its modules' bytes (the same order: by path parts)."""
-    h = hashlib.sha256()
-    for path in sorted(files, key=lambda p: Path(p).parts):
-        h.update(files[path])
-    return h.hexdigest()[:12]
-
-
 def committed(rev: str) -> dict[str, bytes]:
     """mavtune's modules at git revision `rev`, by path relative to the repository."""
     names = subprocess.run(["git", "ls-tree", "-r", "--name-only", rev, "mavtune"], cwd=REPO, check=True,
                            capture_output=True).stdout.decode().split()
     return {n: subprocess.run(["git", "show", f"{rev}:{n}"], cwd=REPO, check=True, capture_output=True).stdout
             for n in names if n.endswith(".py")}
-
-
-def today() -> dict[str, bytes]:
-    """mavtune's modules in the working tree, by path relative to the repository."""
-    return {str(p.relative_to(REPO)): p.read_bytes() for p in (REPO / "mavtune").rglob("*.py")}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -70,8 +56,8 @@ def main(argv: list[str] | None = None) -> int:
         old = committed(args.rev)
     except subprocess.CalledProcessError as exc:
         ap.error(f"git cannot read mavtune at {args.rev!r}: {exc.stderr.decode().strip() or exc}")
-    new, old_hash = today(), source_hash(old)
-    assert source_hash(new) == engine_hash()
+    new = source_files()
+    old_hash, new_hash = source_hash(old), source_hash(new)
     if moved := differences(old, new):
         print(f"refused: {', '.join(moved)} fly differently from {args.rev} (not only docstrings or help texts)",
               file=sys.stderr)
@@ -81,12 +67,13 @@ def main(argv: list[str] | None = None) -> int:
     have, copied = {r["key"] for r in rows}, []
     for row in rows:
         key = json.loads(row["key"])
-        if key[-1] == old_hash and json.dumps([*key[:-1], engine_hash()]) not in have:
-            copied.append({**row, "key": json.dumps([*key[:-1], engine_hash()])})
-            have.add(copied[-1]["key"])
+        moved = json.dumps([*key[:-1], new_hash])
+        if key[-1] == old_hash and moved not in have:
+            copied.append({**row, "key": moved})
+            have.add(moved)
     with path.open("a") as f:
         f.writelines(json.dumps(r) + "\n" for r in copied)
-    print(f"copied {len(copied)} runs from engine {old_hash} ({args.rev}) to {engine_hash()}")
+    print(f"copied {len(copied)} runs from engine {old_hash} ({args.rev}) to {new_hash}")
     return 0
 
 

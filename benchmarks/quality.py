@@ -69,12 +69,23 @@ def _init_worker() -> None:
     numba.set_num_threads(1)
 
 
+def source_files() -> dict[str, bytes]:
+    """mavtune's modules in the working tree, by path relative to the repository."""
+    return {str(f.relative_to(REPO)): f.read_bytes() for f in (REPO / "mavtune").rglob("*.py")}
+
+
+def source_hash(files: dict[str, bytes]) -> str:
+    """A hash of mavtune's source given as its modules' bytes by path, in path order (benchmarks/cache_rekey.py
+    hashes a committed revision's with it)."""
+    h = hashlib.sha256()
+    for path in sorted(files, key=lambda p: Path(p).parts):
+        h.update(files[path])
+    return h.hexdigest()[:12]
+
+
 def engine_hash() -> str:
     """A hash of mavtune's source: cached runs of another engine are flown again."""
-    h = hashlib.sha256()
-    for f in sorted((REPO / "mavtune").rglob("*.py")):
-        h.update(f.read_bytes())
-    return h.hexdigest()[:12]
+    return source_hash(source_files())
 
 
 class Runs:
