@@ -182,7 +182,7 @@ class RoundView:
         self.progress.update(self.task, completed=rnd.index + 1, total=total,
                              description=f"bootstrap {rnd.bootstrap} · {rnd.gain} in [{lo:.4g}, {hi:.4g}]")
         if not self.quiet:
-            self.progress.console.print(round_line(rnd), highlight=False)
+            self.progress.console.print(round_line(rnd), highlight=False, soft_wrap=True)  # one line a round
 
 
 def round_line(rnd: Round) -> str:

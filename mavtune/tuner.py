@@ -158,8 +158,9 @@ class DesignRecord:
     "best flown" (no usable fit: the best point flown in the box) or "kept" (beside a failed flight, the design
     before's answer, `wall_keep`); whether the box surrounded that answer (inside it or on a range's bound) or
     answered on its face inside the range (`open_face`, the gains there), whether the next design moved past
-    that face (`design_move`), and whether it was laid out in the logarithm of the gains (`design_log_layout`: its
-    half-width a share of that)."""
+    that face (`design_move`), whether it was laid out in the logarithm of the gains (`design_log_layout`: its
+    half-width a share of that), and where the cost rises into failed flights near its answer steeply enough that
+    the next design narrows by `design_shrink_wall`, how steeply (`design_wall_rise`)."""
 
     step: int  # 0-based, in the order flown
     before_passes: bool  # flown before the passes over the gains (`design_first`: the first a map of the box)
@@ -174,12 +175,14 @@ class DesignRecord:
     open_face: list[str] = field(default_factory=list)
     moves: bool = False
     logged: bool = False
+    wall_rise: float | None = None  # where the next design narrows by `design_shrink_wall`: how many times the box's
+    # lowest mean the safe flights beside the failed ones near its answer cost (`surface.wall_rise`)
 
     def to_dict(self) -> dict[str, Any]:
         return {"step": self.step, "before_passes": self.before_passes, "half": self.half,
                 "box": {n: list(b) for n, b in self.box.items()}, "points": self.points, "flights": self.flights,
                 "rounds": list(self.rounds), "answer": self.answer, "how": self.how, "surrounded": self.surrounded,
-                "open_face": self.open_face, "moves": self.moves, "logged": self.logged}
+                "open_face": self.open_face, "moves": self.moves, "logged": self.logged, "wall_rise": self.wall_rise}
 
 
 @dataclass
@@ -796,7 +799,8 @@ class Tuner:
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self._step: tuple[list[tuple[float, float]], tuple[float, ...], float | None] | None = None  # last
         # design's box, its answer, and how steeply the cost rises into the flights failed within its half-width of
-        # the answer (`surface.wall_rise`; None: none failed that near) (`_shrink`)
+        # the answer where that narrows the next design by `design_shrink_wall` (`surface.wall_rise` at least
+        # `design_wall_rise`; else None) (`_shrink`)
         self._log_layout: LogGains | None = None  # the designs' layout from the first after the passes, where the
         # flights fit a quadratic in the logarithm of the gains better (`design_log_layout`); None: in the gains
         self.directions: list[LineSearch] = []  # the line searches along a pass's net move (`directions`)
@@ -963,7 +967,7 @@ class Tuner:
         if self._step is None:
             return shrink
         box, best, rise = self._step
-        if rise is not None and s.design_shrink_wall and rise >= float(s.design_wall_rise):
+        if rise is not None:
             shrink = float(s.design_shrink_wall)
         if s.design_shrink_fit:
             flights = s.design_flights(len(self._design_answers))
@@ -1055,7 +1059,9 @@ class Tuner:
             if names[i] in last:
                 last[names[i]].beside_failure = lo[i] + width[i] * wall[i]
         self._design_answers.append(dict(self.gains))
-        self._step = (box, tuple(best), wall_rise(flown, box, best, half))
+        rise = wall_rise(flown, box, best, half) if s.design_shrink_wall else None
+        rise = rise if rise is not None and rise >= float(s.design_wall_rise) else None
+        self._step = (box, tuple(best), rise)
         self._centre, moved = None, False
         if s.design_move and step + 1 < s.design_count():  # the design's own fit says the minimum lies beyond a face
             self._centre, moved = surface_next_centre(flown, box, half, self.pool, s.design_move, best,
@@ -1067,7 +1073,7 @@ class Tuner:
                                 for n, a, w, (b0, b1) in zip(names, lo, width, box)},
             len(points), sum(len(r.flights) for r in self.rounds[first_round:]), (first_round, len(self.rounds) - 1),
             dict(self.gains), fitted or ("kept" if kept else "best flown"), surrounded,
-            list(self.open_face), moved, logged))
+            list(self.open_face), moved, logged, rise))
         return surrounded and not moved
 
     def _designs_first(self) -> float:

@@ -111,3 +111,13 @@ def test_the_round_line_labels_each_vehicle_and_gives_the_mean():
     many = Round(3, 1, "kp", (0.0, 1.0), [{"kp": 0.5}] * 20, [Flight(f"v{i}", {"kp": 0.5}, 2.0) for i in range(20)],
                  0.0, 9.0)
     assert "1 point of kp in [0.5, 0.5] on 20 vehicles" in round_line(many) and round_line(many).endswith("mean 2")
+
+
+def test_each_round_is_one_line_in_a_log(tmp_path):
+    """Output to a file or pipe (80 columns) keeps a design's round on one line, however long, so a log greps."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        assert run_app(["tune", "--out", str(tmp_path / "run")]) == 0
+    rounds = [line for line in out.getvalue().splitlines() if line.startswith("round ")]
+    assert len(rounds) == 42 and max(map(len, rounds)) > 80
+    assert all(" mean " in line for line in rounds)

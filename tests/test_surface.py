@@ -16,6 +16,7 @@ import mavtune
 from mavtune.config import preset_fields
 from mavtune.errors import MavtuneError
 from mavtune.plan import make_plan
+from mavtune.report.designs import how_line
 from mavtune.search import surface
 from mavtune.search.evidence import NoisePool
 from mavtune.search.surface import answer, design, open_faces
@@ -210,8 +211,8 @@ def test_a_trusted_design_narrows_no_more_than_its_answer_moved(trust, halves):
 @pytest.mark.parametrize("scale, wall, rise, halves", [
     (3.0, 0.0, 1.4, [0.15, 0.075, 0.0375]),  # design_shrink, failure or not
     (3.0, 0.8, 0.0, [0.15, 0.12, 0.096]),  # a failed flight near the answer: 0.8 (no rise asked)
-    (3.0, 0.8, 1.4, [0.15, 0.075, 0.0375]),  # the cost beside it 1.07 times the lowest: design_shrink
-    (40.0, 0.25, 1.4, [0.15, 0.0375, 0.01875])])  # 1.9 times: 0.25, then no failed flight that near
+    (3.0, 0.8, 1.4, [0.15, 0.075, 0.0375]),  # the cost beside it 1.03 times the lowest: design_shrink
+    (40.0, 0.25, 1.4, [0.15, 0.0375, 0.01875])])  # 1.45 times: 0.25, then no failed flight that near
 def test_a_design_beside_a_failed_flight_narrows_by_its_own_shrink(scale, wall, rise, halves):
     """`design_shrink_wall`: a design with a failed flight within its half-width of its answer (kp + kd above 1.2:
     each design's far corner, the answer at the bowl's minimum (0.5, 0.5)) narrows the next one by that shrink
@@ -227,6 +228,13 @@ def test_a_design_beside_a_failed_flight_narrows_by_its_own_shrink(scale, wall, 
     assert any(not math.isfinite(f.cost) for r in result.rounds[:9] for f in r.flights)
     assert [r.bracket[1] for r in result.rounds[::9]] == pytest.approx(halves)
     assert (result.gains["kp"], result.gains["kd"]) == pytest.approx((0.5, 0.5), abs=1e-6)
+    first, second = result.designs[:2]  # the record and the report say why the design narrowed that much
+    ratio = halves[1] / halves[0]
+    assert (first.wall_rise is not None) == (ratio != 0.5) == (f"next design is {ratio:.2g} as wide"
+                                                               in how_line(first, second))
+    assert first.to_dict()["wall_rise"] == first.wall_rise
+    if first.wall_rise is not None:
+        assert first.wall_rise == pytest.approx(1.0 + scale * 2 * 0.075 ** 2)  # (0.575, 0.575) over (0.5, 0.5)
 
 
 def test_the_wall_rise_is_the_cost_beside_the_failed_flights_over_the_box_best():

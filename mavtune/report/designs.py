@@ -53,8 +53,9 @@ def how_text(how: str) -> str:
         "it better: design_hold)" if held else "")
 
 
-def how_line(d: Any) -> str:
-    """How design `d` reached its answer, and where that lies against its box, in words."""
+def how_line(d: Any, after: Any = None) -> str:
+    """How design `d` reached its answer, and where that lies against its box, in words; with the design `after` it,
+    why that one is as narrow as it is where a rising wall of failed flights made it narrower."""
     how = how_text(d.how)
     if any(not lo - 1e-12 <= d.answer[n] <= hi + 1e-12 for n, (lo, hi) in d.box.items()):
         how = how.replace(" in its box", "", 1) + ("; answered beyond its box, on the range's bound that face lay "
@@ -65,6 +66,12 @@ def how_line(d: Any) -> str:
         how += "; the next design moved past that face"
     if d.logged:
         how += "; laid out in the logarithm of the gains (its half-width a share of that)"
+    rise = getattr(d, "wall_rise", None)
+    if rise is not None:
+        how += (f"; the flights beside the failed ones near its answer cost {rise:.3g} times its lowest mean (a sharp "
+                "optimum before a rising wall: design_wall_rise)")
+        if after is not None and after.half < d.half:
+            how += f", so the next design is {after.half / d.half:.2g} as wide (design_shrink_wall)"
     return how
 
 
@@ -77,7 +84,7 @@ def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mappin
         return []
     units = units or {}
     rows = []
-    for d in designs:
+    for d, after in zip(designs, [*designs[1:], None]):
         first, last = d.rounds
         box = ", ".join(f"{U.label(n, units)} {U.num(n, lo, units)}–{U.num(n, hi, units)}"
                         for n, (lo, hi) in d.box.items())
@@ -85,7 +92,7 @@ def designs_section(designs: Sequence[Any], rounds: Sequence[Any], final: Mappin
         name = f"{d.step + 1}" + (" (map, before the passes)" if d.before_passes and d.step == 0 else
                                   " (before the passes)" if d.before_passes else "")
         rows.append([name, f"{first}–{last}" if last > first else str(first), box, f"{d.half:.3g}",
-                     f"{d.points} ({d.flights})", answer, how_line(d)])
+                     f"{d.points} ({d.flights})", answer, how_line(d, after)])
     last = designs[-1]
     same = all(abs(as_float(final.get(n, math.nan)) - v) <= 1e-12 * max(1.0, abs(v)) for n, v in last.answer.items())
     lead = (f"The run's answer is design {last.step + 1}'s: {how_line(last)}"
