@@ -5,7 +5,9 @@ mavtune's source that quality.py keys its cache on, so its results no longer nam
 benchmarks/cache_rekey.py refuses any change beyond docstrings. This flies every run of a result's method again at
 today's source, as quality.py flies it, and compares each with the result's row: the answer (every gain to 1e-9 of
 its range), the flights, the cautions and the 90 % intervals. Each run flown lands in quality.py's cache under
-today's hash, so quality.py then flies only the truth and the peers.
+today's hash, so quality.py then flies only the truth and the peers. A run that differs is flown once more by the
+engine that flew the result (its commit, in a git worktree) on this machine: where that one answers as today's, the
+difference is the machine's (another CPU's floating point: Crazyflow's XLA kernels), not the engine's.
 
     python benchmarks/same_answers.py benchmarks/results/quality.json [more.json ...] [--method LABEL]
         [--workers 2] [--name same_answers]
@@ -19,7 +21,9 @@ os.environ.setdefault("SCIPY_ARRAY_API", "1")  # Crazyflow needs it before scipy
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from datetime import datetime, timezone  # noqa: E402
@@ -29,10 +33,20 @@ from typing import Any  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model, write_results  # noqa: E402
-from quality import CACHE, Runs, _git_commit, _init_worker, engine_hash, fly_runs  # noqa: E402
+from cache_rekey import committed  # noqa: E402
+from quality import (CACHE, REPO, Runs, _git_commit, _init_worker, _progress, engine_hash, fly_runs,  # noqa: E402
+                     source_hash)
 from zoo.methods import candidates  # noqa: E402
 
 SAME = 1e-9  # a gain's largest difference, in shares of its range, still the same answer
+CONTROL = """import json, os, sys
+os.environ.setdefault("SCIPY_ARRAY_API", "1")
+sys.path[:0] = [sys.argv[1], os.path.join(sys.argv[1], "benchmarks")]
+from zoo.methods import candidates, tune_run
+method = next(m for m in candidates() if m.label == sys.argv[2])
+for plant, run in json.loads(sys.argv[3]):
+    print(json.dumps(tune_run(plant, method, run)), flush=True)
+"""  # (run in a subprocess whose imports find the worktree's mavtune and zoo first)
 
 
 def intervals(row: dict[str, Any]) -> dict[str, tuple[Any, Any]]:
@@ -44,12 +58,28 @@ def compare(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
     """One run, as the result recorded it and as today's engine flies it: what is the same and how far the answer
     moved (the largest gain's difference, a share of its range)."""
     moved = max(abs(a - b) for a, b in zip(old["x"], new["x"]))
-    close = lambda a, b: a == b or (a is not None and b is not None and abs(a - b) <= SAME)  # noqa: E731
-    same_intervals = intervals(old).keys() == intervals(new).keys() and all(
-        close(a, b) for g in intervals(old) for a, b in zip(intervals(old)[g], intervals(new)[g]))
+    a, b = intervals(old), intervals(new)
+    bounds = [(u, v) for g in a.keys() & b.keys() for u, v in zip(a[g], b[g])]
+    widened = max([abs(u - v) if None not in (u, v) else (0.0 if u == v else 1.0) for u, v in bounds], default=0.0)
     return {"run": old["run"], "moved": moved, "answer": moved <= SAME, "flights": old["flights"] == new["flights"],
             "cautions": sorted(old.get("cautions", [])) == sorted(new.get("cautions", [])),
-            "intervals": same_intervals}
+            "intervals": a.keys() == b.keys() and widened <= SAME, "interval_moved": widened}
+
+
+def control(rev: str, label: str, jobs: list[tuple[str, int]]) -> dict[tuple[str, int], dict[str, Any]]:
+    """The runs `jobs` (plant, run) of method `label` flown by revision `rev`'s engine on this machine (in a git
+    worktree of it, in a subprocess), by (plant, run)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "tree"
+        subprocess.run(["git", "worktree", "add", "--detach", "-q", str(tree), rev], cwd=REPO, check=True,
+                       capture_output=True)
+        try:
+            out = subprocess.run([sys.executable, "-c", CONTROL, str(tree), label, json.dumps(jobs)], cwd=tmp,
+                                 check=True, capture_output=True, text=True).stdout
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=REPO, capture_output=True)
+    rows = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    return {(r["plant"], r["run"]): r for r in rows}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -88,6 +118,24 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if ex is not None:
             ex.shutdown()
+    controls, unchecked = {}, []
+    for path, doc, method in docs:
+        differing = [(p, c["run"]) for p, cs in table[path.name].items() for c in cs if not differ_not(c)]
+        rev, flown_by = doc.get("meta", {}).get("commit"), doc.get("meta", {}).get("engine")
+        if not differing:
+            continue
+        if not rev or source_hash(committed(rev)) != flown_by:
+            unchecked.append(f"{path.name}'s runs that differ were not flown again: its commit {rev} is not its "
+                             f"engine {flown_by}")
+            continue
+        _progress(f"{path.name}: {len(differing)} runs that differ flown again at {rev} (engine {flown_by})")
+        again = control(rev, method.label, differing)
+        for p, cs in table[path.name].items():
+            for c in cs:
+                if (p, c["run"]) in again:
+                    c["machine"] = differ_not(compare(again[(p, c["run"])],
+                                                      runs.rows[Runs.key(p, method, c["run"], None, engine)]))
+        controls[path.name] = rev
     wall = time.perf_counter() - wall0
     lines = ["# Today's engine against the engine that flew a result, run by run", "",
              f"Command: `python benchmarks/same_answers.py {' '.join(str(p) for p in args.results)}"
@@ -95,31 +143,42 @@ def main(argv: list[str] | None = None) -> int:
              f"`{commit}` (mavtune source hash `{engine}`), {started.isoformat(timespec='seconds')}, wall {wall:.0f} s; "
              f"machine: {cpu_model()}, {os.cpu_count()} CPUs, {args.workers} workers; load average {load0:.2f} at "
              "the start.", "",
-             f"Every run of each result's method flown again at today's source on the same vehicles, wind and noise. "
+             "Every run of each result's method flown again at today's source on the same vehicles, wind and noise. "
              f"*Same answer*: every gain within {SAME:g} of its range of the result's; *intervals*: every gain's 90 % "
-             "interval's bounds so.", "",
-             "| result (engine that flew it) | plant | runs | same answer | same flights | same cautions | same "
-             "intervals | largest move (share of range) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
-    total = {"runs": 0, "answer": 0, "flights": 0, "cautions": 0, "intervals": 0}
-    for (path, doc, _), (name, per) in zip(docs, table.items()):
-        for p, cs in per.items():
-            n = {k: sum(c[k] for c in cs) for k in ("answer", "flights", "cautions", "intervals")}
-            total = {"runs": total["runs"] + len(cs), **{k: total[k] + n[k] for k in n}}
-            lines.append(f"| {name} ({doc.get('meta', {}).get('engine', '?')}) | {p} | {len(cs)} | {n['answer']} | "
-                         f"{n['flights']} | {n['cautions']} | {n['intervals']} | {max(c['moved'] for c in cs):.2g} |")
+             "interval's bounds so. *Differ on this machine alone*: of the runs that differ, those that the engine "
+             "that flew the result (its commit) answers here exactly as today's does.", "",
+             "| result (engine, machine that flew it) | plant | runs | same answer | same flights | same cautions | "
+             "same intervals | largest move of an answer / an interval bound (share of range) | differ on this "
+             "machine alone |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    keys = ("answer", "flights", "cautions", "intervals")
+    total = dict.fromkeys(("runs", *keys, "differ", "machine"), 0)
+    for path, doc, _ in docs:
+        meta = doc.get("meta", {})
+        for p, cs in table[path.name].items():
+            n = {k: sum(c[k] for c in cs) for k in keys}
+            differ = [c for c in cs if not differ_not(c)]
+            machine = sum(c.get("machine", False) for c in differ)
+            total = {"runs": total["runs"] + len(cs), **{k: total[k] + n[k] for k in keys},
+                     "differ": total["differ"] + len(differ), "machine": total["machine"] + machine}
+            lines.append(f"| {path.name} ({meta.get('engine', '?')}, {meta.get('cpu_model', '?')}) | {p} | "
+                         f"{len(cs)} | {n['answer']} | {n['flights']} | {n['cautions']} | {n['intervals']} | "
+                         f"{max(c['moved'] for c in cs):.2g} / {max(c['interval_moved'] for c in cs):.2g} | "
+                         + (f"{machine} of {len(differ)}" if differ else "—") + " |")
     lines += ["", f"In all: {total['runs']} runs; the same answer in {total['answer']}, the same flights in "
               f"{total['flights']}, the same cautions in {total['cautions']}, the same intervals in "
-              f"{total['intervals']}.", ""]
-    differing = [(name, p, c) for name, per in table.items() for p, cs in per.items() for c in cs
-                 if not all(c[k] for k in ("answer", "flights", "cautions", "intervals"))]
-    if differing:
-        lines += ["Runs that differ:", ""] + [f"- {name}, {p}, run {c['run']}: answer moved {c['moved']:.3g}"
-                                              + "".join(f", {k} differ" for k in ("flights", "cautions", "intervals")
-                                                        if not c[k]) for name, p, c in differing[:40]] + [""]
+              f"{total['intervals']}; of the {total['differ']} that differ, {total['machine']} differ on this "
+              "machine alone (the result's engine answers them here as today's does)."
+              + "".join(f" {u}." for u in unchecked), ""]
     write_results(args.name, lines, {"engine": engine, "commit": commit, "started_utc": started.isoformat(),
-                                     "wall_s": wall, "total": total, "runs": table,
+                                     "wall_s": wall, "cpu_model": cpu_model(), "total": total, "controls": controls,
+                                     "runs": table,
                                      "command": " ".join(["python", "benchmarks/same_answers.py", *sys.argv[1:]])})
-    return 0 if total["answer"] == total["runs"] else 1
+    return 0 if total["differ"] == total["machine"] else 1
+
+
+def differ_not(c: dict[str, Any]) -> bool:
+    """A run compared alike in answer, flights, cautions and intervals."""
+    return all(c[k] for k in ("answer", "flights", "cautions", "intervals"))
 
 
 if __name__ == "__main__":

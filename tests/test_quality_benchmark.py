@@ -156,3 +156,29 @@ def test_cached_runs_carry_over_only_where_the_source_flies_alike(monkeypatch, q
     assert cache_rekey.differences({**old, "m/b.py": b""}, same) == ["m/b.py"]
     today = quality.source_files()
     assert quality.source_hash(dict(reversed(today.items()))) == quality.engine_hash()  # (in path order)
+
+
+def test_a_result_run_is_compared_with_today_and_the_engine_that_flew_it(monkeypatch):
+    """benchmarks/same_answers.py: a run as recorded against the same run flown today (answer, flights, cautions,
+    intervals, each to 1e-9 of the range), and a run flown again by a committed engine in a worktree of it, which
+    answers as the working tree's engine where mavtune is unchanged since that commit."""
+    monkeypatch.syspath_prepend(str(BENCH.parent))
+    import same_answers
+    from zoo.methods import candidates, tune_run
+
+    row = {"run": 3, "x": [0.5, 0.25], "flights": 84, "cautions": ["wide"],
+           "uncertainty": {"kp": {"lo": 0.4, "hi": 0.6}, "kd": {"lo": None, "hi": 0.5}}}
+    assert same_answers.differ_not(same_answers.compare(row, json.loads(json.dumps(row))))
+    moved = same_answers.compare(row, {**row, "x": [0.5, 0.26], "uncertainty": {**row["uncertainty"],
+                                                                                 "kp": {"lo": 0.3, "hi": 0.6}}})
+    assert moved["moved"] == pytest.approx(0.01) and not moved["answer"] and moved["flights"] and moved["cautions"]
+    assert not moved["intervals"] and moved["interval_moved"] == pytest.approx(0.1)
+    assert not same_answers.compare(row, {**row, "flights": 82, "cautions": []})["flights"]
+    import subprocess
+
+    if subprocess.run(["git", "diff", "--quiet", "HEAD", "--", "mavtune"], cwd=BENCH.parents[1]).returncode:
+        pytest.skip("mavtune differs from HEAD here: the worktree's engine is another")
+    method = candidates()[0]
+    again = same_answers.control("HEAD", method.label, [("analytic valley", 1)])
+    assert same_answers.differ_not(same_answers.compare(tune_run("analytic valley", method, 1),
+                                                        again[("analytic valley", 1)]))
