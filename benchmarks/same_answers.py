@@ -39,6 +39,7 @@ from quality import (CACHE, REPO, Runs, _git_commit, _init_worker, _progress, en
 from zoo.methods import candidates  # noqa: E402
 
 SAME = 1e-9  # a gain's largest difference, in shares of its range, still the same answer
+ALIKE = ("answer", "flights", "cautions", "intervals")  # what a run must keep to count as the same run
 CONTROL = """import json, os, sys
 os.environ.setdefault("SCIPY_ARRAY_API", "1")
 sys.path[:0] = [sys.argv[1], os.path.join(sys.argv[1], "benchmarks")]
@@ -55,8 +56,8 @@ def intervals(row: dict[str, Any]) -> dict[str, tuple[Any, Any]]:
 
 
 def compare(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
-    """One run, as the result recorded it and as today's engine flies it: what is the same and how far the answer
-    moved (the largest gain's difference, a share of its range)."""
+    """One run, as the result recorded it and as today's engine flies it: what is the same, and how far the answer
+    and an interval's bound moved (the largest gain's difference, a share of its range)."""
     moved = max(abs(a - b) for a, b in zip(old["x"], new["x"]))
     a, b = intervals(old), intervals(new)
     bounds = [(u, v) for g in a.keys() & b.keys() for u, v in zip(a[g], b[g])]
@@ -64,6 +65,11 @@ def compare(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
     return {"run": old["run"], "moved": moved, "answer": moved <= SAME, "flights": old["flights"] == new["flights"],
             "cautions": sorted(old.get("cautions", [])) == sorted(new.get("cautions", [])),
             "intervals": a.keys() == b.keys() and widened <= SAME, "interval_moved": widened}
+
+
+def alike(c: dict[str, Any]) -> bool:
+    """Whether a run's comparison (`compare`) found the same answer, flights, cautions and intervals."""
+    return all(c[k] for k in ALIKE)
 
 
 def control(rev: str, label: str, jobs: list[tuple[str, int]]) -> dict[tuple[str, int], dict[str, Any]]:
@@ -120,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
             ex.shutdown()
     controls, unchecked = {}, []
     for path, doc, method in docs:
-        differing = [(p, c["run"]) for p, cs in table[path.name].items() for c in cs if not differ_not(c)]
+        differing = [(p, c["run"]) for p, cs in table[path.name].items() for c in cs if not alike(c)]
         rev, flown_by = doc.get("meta", {}).get("commit"), doc.get("meta", {}).get("engine")
         if not differing:
             continue
@@ -133,8 +139,8 @@ def main(argv: list[str] | None = None) -> int:
         for p, cs in table[path.name].items():
             for c in cs:
                 if (p, c["run"]) in again:
-                    c["machine"] = differ_not(compare(again[(p, c["run"])],
-                                                      runs.rows[Runs.key(p, method, c["run"], None, engine)]))
+                    today = runs.rows[Runs.key(p, method, c["run"], None, engine)]
+                    c["machine"] = alike(compare(again[(p, c["run"])], today))
         controls[path.name] = rev
     wall = time.perf_counter() - wall0
     lines = ["# Today's engine against the engine that flew a result, run by run", "",
@@ -150,15 +156,14 @@ def main(argv: list[str] | None = None) -> int:
              "| result (engine, machine that flew it) | plant | runs | same answer | same flights | same cautions | "
              "same intervals | largest move of an answer / an interval bound (share of range) | differ on this "
              "machine alone |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
-    keys = ("answer", "flights", "cautions", "intervals")
-    total = dict.fromkeys(("runs", *keys, "differ", "machine"), 0)
+    total = dict.fromkeys(("runs", *ALIKE, "differ", "machine"), 0)
     for path, doc, _ in docs:
         meta = doc.get("meta", {})
         for p, cs in table[path.name].items():
-            n = {k: sum(c[k] for c in cs) for k in keys}
-            differ = [c for c in cs if not differ_not(c)]
+            n = {k: sum(c[k] for c in cs) for k in ALIKE}
+            differ = [c for c in cs if not alike(c)]
             machine = sum(c.get("machine", False) for c in differ)
-            total = {"runs": total["runs"] + len(cs), **{k: total[k] + n[k] for k in keys},
+            total = {"runs": total["runs"] + len(cs), **{k: total[k] + n[k] for k in ALIKE},
                      "differ": total["differ"] + len(differ), "machine": total["machine"] + machine}
             lines.append(f"| {path.name} ({meta.get('engine', '?')}, {meta.get('cpu_model', '?')}) | {p} | "
                          f"{len(cs)} | {n['answer']} | {n['flights']} | {n['cautions']} | {n['intervals']} | "
@@ -174,11 +179,6 @@ def main(argv: list[str] | None = None) -> int:
                                      "runs": table,
                                      "command": " ".join(["python", "benchmarks/same_answers.py", *sys.argv[1:]])})
     return 0 if total["differ"] == total["machine"] else 1
-
-
-def differ_not(c: dict[str, Any]) -> bool:
-    """A run compared alike in answer, flights, cautions and intervals."""
-    return all(c[k] for k in ("answer", "flights", "cautions", "intervals"))
 
 
 if __name__ == "__main__":
