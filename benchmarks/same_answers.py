@@ -130,9 +130,13 @@ def main(argv: list[str] | None = None) -> int:
         rev, flown_by = doc.get("meta", {}).get("commit"), doc.get("meta", {}).get("engine")
         if not differing:
             continue
-        if not rev or source_hash(committed(rev)) != flown_by:
-            unchecked.append(f"{path.name}'s runs that differ were not flown again: its commit {rev} is not its "
-                             f"engine {flown_by}")
+        try:
+            theirs = source_hash(committed(rev)) if rev else None
+        except subprocess.CalledProcessError:  # (a commit this clone does not hold)
+            theirs = None
+        if theirs != flown_by:
+            unchecked.append(f"{path.name}'s runs that differ were not flown again: its commit {rev} is not here or "
+                             f"is not its engine {flown_by}")
             continue
         _progress(f"{path.name}: {len(differing)} runs that differ flown again at {rev} (engine {flown_by})")
         again = control(rev, method.label, differing)
