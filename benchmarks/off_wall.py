@@ -40,8 +40,8 @@ FLAT_PCT = 1.0  # the named gains' flights within this much (%) of the answer's:
 
 def flown_near(rounds, gains: tuple[str, ...], x: tuple[float, ...]) -> tuple[float, int]:
     """The mean cost of the safe flights within FLOWN_NEAR of `x`, and how many there are (NaN, 0: none)."""
-    costs = [f.cost for r in rounds for f in r.flights if f.status.name == "OK" and math.isfinite(f.cost)
-             and max(abs(f.gains[g] - v) for g, v in zip(gains, x)) <= FLOWN_NEAR]
+    costs = [f.cost for r in rounds for f in r.flights
+             if f.usable and max(abs(f.gains[g] - v) for g, v in zip(gains, x)) <= FLOWN_NEAR]
     return (float(np.mean(costs)) if costs else math.nan), len(costs)
 
 
