@@ -106,6 +106,12 @@ VARIANTS.update({f"today's answer with a two-sided quadratic {name} (session 25)
 VARIANTS["today's answer with a kept answer above the divergence bound moved to the nearest point under it (session 27)"] = {
     **VARIANTS["today's answer with a two-sided quadratic reaching 3 half-widths at the 5 % level (session 25)"],
     "keep_bound": True}
+VARIANTS.update({  # a fly-away weighed as a crash: the divergence bounds lowered (session 32)
+    "today's answer with the divergence chance <= 0.01 % and a kept answer's <= 0.1 % (session 32)": {
+        "risk": 1e-4, "keep_risk": 1e-3},
+    "today's answer with the divergence chance <= 0.01 % and a kept answer's <= 0.01 % (session 32)": {
+        "risk": 1e-4, "keep_risk": 1e-4},
+    "today's answer never keeping the answer before beside a wall (session 32)": {"keep": None}})
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
 

@@ -181,6 +181,7 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
     keep the gains by total mass in `out/bank.json`, saved after each payload. With `scheduler` the payloads
     are tuned at once on that Dask cluster, each run folder shipped to its worker and back (same gains)."""
     from rich.console import Console
+    from rich.markup import escape
 
     from mavtune.campaign import run_chunks
     from mavtune.run import run
@@ -208,7 +209,8 @@ def build(payloads_kg: Sequence[float], out: Path, config_for: Callable[[float],
         files, result = done
         write_files(folders[i], files)
         keep(i, result)
-        console.print(f"payload {payloads_kg[i]:g} kg tuned: {folders[i]}")
+        console.print(f"payload {payloads_kg[i]:g} kg tuned: {escape(str(folders[i]))}", highlight=False,
+                      soft_wrap=True)
 
     chunks = [(c, folder_files(f)) for c, f in zip(configs, folders)]
     run_chunks(run_in_folder, chunks, scheduler, landed, name="bank")

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 
 from mavtune import interrupts
 from mavtune.config import load_config
@@ -111,8 +112,8 @@ def _redraw(out_dir: Path, surface: Path | None, console: Console) -> Path:
     summary |= {"report": REPORT, "report_figures": True}
     with interrupts.deferred():
         write_json(out_dir / "result.json", summary)
-    console.print(f"{path}: the {status} run, {counted(len(result.rounds), 'round')} (from the journal; nothing "
-                  "flown)", highlight=False)
+    console.print(f"{escape(str(path))}: the {status} run, {counted(len(result.rounds), 'round')} (from the journal; "
+                  "nothing flown)", highlight=False, soft_wrap=True)
     return path
 
 

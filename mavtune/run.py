@@ -236,8 +236,8 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
         book.check_writable()
         if recorded := len(book):
             book.rounds()  # every recorded round read and its checksum checked before a file here is written
-            console.print(f"resuming {out_dir / JOURNAL}: {counted(recorded, 'round')} recorded will not be flown "
-                          "again")
+            console.print(f"resuming {escape(str(out_dir / JOURNAL))}: {counted(recorded, 'round')} recorded will "
+                          "not be flown again", highlight=False, soft_wrap=True)  # (a path is never broken)
         ignored = warn(console, config)
         console.print(plan_panel(config, plan))
         write_json(out_dir / "config.json", config.model_dump(mode="json"))
@@ -312,7 +312,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     for line in result.cautions():
         console.print(f"[yellow]caution:[/] {escape(line)}", highlight=False)
     print_outcome(console, outcome)
-    console.print(f"run folder: {out_dir}")
+    console.print(f"run folder: {escape(str(out_dir))}", highlight=False, soft_wrap=True)  # one line: copied whole
     return result
 
 
@@ -499,7 +499,7 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
         console.print(f"{vehicle}: {values} (the search tolerance)", highlight=False)
     if outcome.get("param_files"):
         console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
-                      f"{', '.join(outcome['param_files'])}", highlight=False)
+                      f"{escape(', '.join(outcome['param_files']))}", highlight=False, soft_wrap=True)
     for edge in outcome.get("range_edges", []):
         console.print(f"[yellow]range edge:[/] {escape(edge['message'])}", highlight=False)
     if answer := outcome.get("answer"):

@@ -113,11 +113,15 @@ def test_the_round_line_labels_each_vehicle_and_gives_the_mean():
     assert "1 point of kp in [0.5, 0.5] on 20 vehicles" in round_line(many) and round_line(many).endswith("mean 2")
 
 
-def test_each_round_is_one_line_in_a_log(tmp_path):
-    """Output to a file or pipe (80 columns) keeps a design's round on one line, however long, so a log greps."""
+def test_each_round_and_the_run_folder_are_one_line_in_a_log(tmp_path):
+    """Output to a file or pipe (80 columns) keeps a design's round on one line, however long, so a log greps; and the
+    run folder's path whole and as it is (markup-like brackets too), so it can be copied."""
+    folder = tmp_path / ("a-run-folder-whose-path-is-longer-than-a-log-line-of-eighty-columns-" * 2 + "[v2]")
     out = io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        assert run_app(["tune", "--out", str(tmp_path / "run")]) == 0
-    rounds = [line for line in out.getvalue().splitlines() if line.startswith("round ")]
+        assert run_app(["tune", "--out", str(folder)]) == 0
+    lines = out.getvalue().splitlines()
+    rounds = [line for line in lines if line.startswith("round ")]
     assert len(rounds) == 42 and max(map(len, rounds)) > 80
     assert all(" mean " in line for line in rounds)
+    assert f"run folder: {folder}" in lines
