@@ -67,8 +67,8 @@ def how_line(d: Any, after: Any = None) -> str:
     if d.logged:
         how += "; laid out in the logarithm of the gains (its half-width a share of that)"
     if d.wall_rise is not None:
-        how += (f"; the flights beside the failed ones near its answer cost {d.wall_rise:.3g} times its lowest mean (a sharp "
-                "optimum before a rising wall: design_wall_rise)")
+        how += (f"; the flights beside the failed ones near its answer cost {d.wall_rise:.3g} times its lowest mean "
+                "(a sharp optimum before a rising wall: design_wall_rise)")
         if after is not None and after.half < d.half:
             how += f", so the next design is {after.half / d.half:.2g} as wide (design_shrink_wall)"
     return how

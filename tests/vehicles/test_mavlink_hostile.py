@@ -53,7 +53,7 @@ def test_only_the_autopilot_is_listened_to_and_only_a_downward_rangefinder(tmp_p
                 relay.inject(1, 1, forward_rangefinder, hz=20):
             time.sleep(0.5)  # the hostile components speak first
             summary = tune_mavlink([url], tmp_path, fast_config(altitude_source="distance_sensor"), bootstraps=1,
-                                   epsilon=0.25, design=False)  # the passes alone: 31 flights amid the hostile talk
+                                   epsilon=0.25, design=False)  # the passes alone: some 30 flights amid the talk
         assert read_params(url, list(PX4_ORIGINALS)) == PX4_ORIGINALS
     flights = [f for r in summary["rounds_log"] for f in r["flights"]]
     lost = [f["info"].get("reason") for f in flights if f["status"] != "ok"]
