@@ -181,4 +181,4 @@ def test_a_result_run_is_compared_with_today_and_the_engine_that_flew_it(monkeyp
     method = candidates()[0]
     again = same_answers.control("HEAD", method.label, [("analytic valley", 1)])
     assert same_answers.alike(same_answers.compare(tune_run("analytic valley", method, 1),
-                                                        again[("analytic valley", 1)]))
+                                                   again[("analytic valley", 1)]))
