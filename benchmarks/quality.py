@@ -13,6 +13,7 @@ reports config.Tuning() (what ships) unless --default names another, and says wh
     python benchmarks/quality.py --half report --runs 40 [--workers 2]
     python benchmarks/quality.py --quick            # a smoke run: 2 plants, tiny truth, 2 runs
     python benchmarks/quality.py --zoo unseen --half report --runs 40   # plants never chosen on: quality_unseen.*
+    python benchmarks/quality.py --zoo fresh --half report --runs 40    # plants written blind, measured once: quality_fresh.*
 
 Everything flown is cached (benchmarks/.cache/zoo: truth flights per plant, every run keyed by plant,
 configuration, run and a hash of mavtune's source), so an interrupted run resumes and a rerun re-scores.
@@ -45,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model  # noqa: E402
 from zoo import stats  # noqa: E402
 from zoo.methods import PEERS, Method, candidates, peer_run, tune_run  # noqa: E402
-from zoo.plants import ALL_PLANTS, PLANTS, UNSEEN  # noqa: E402
+from zoo.plants import ALL_PLANTS, FRESH, PLANTS, UNSEEN  # noqa: E402
 from zoo.truth import Truth  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -256,10 +257,14 @@ def _width(s: dict[str, Any]) -> str:
     return f" ({w:.0%})" if w is not None and s.get("coverage") is not None else ""
 
 
+ZOOS = {"zoo": PLANTS, "unseen": UNSEEN, "fresh": FRESH}
+ZOO_TITLES = {"zoo": "plant zoo", "unseen": "unseen plants (never chosen on)",
+              "fresh": "fresh plants (written blind in session 33, measured once)"}
+
+
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["meta"]
-    lines = [f"# Quality of the tuned gains on the {'unseen plants (never chosen on)' if m.get('zoo') == 'unseen' else 'plant zoo'}"
-             f" (issue 20) — {m['half']} half", "",
+    lines = [f"# Quality of the tuned gains on the {ZOO_TITLES[m.get('zoo', 'zoo')]} (issue 20) — {m['half']} half", "",
              f"Command: `{m['command']}` at commit `{m['commit']}` (mavtune source hash `{m['engine']}`), "
              f"{m['started_utc']} to {m['finished_utc']}; machine: {m['cpu_model']}, {m['cpus']} cores shared with "
              f"other jobs, {m['workers']} worker processes; load average {m['load_start'][0]:.2f} at the start, "
@@ -352,12 +357,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                     "configurations only)")
     ap.add_argument("--quick", action="store_true", help="a smoke run: 2 plants, tiny truth, 2 runs, no cache")
     ap.add_argument("--out", type=Path, default=RESULTS)
-    ap.add_argument("--zoo", choices=("zoo", "unseen"), default="zoo", help="the plants: the zoo the defaults are "
-                    "chosen on, or the unseen set they never were (report only; writes quality_unseen.*)")
+    ap.add_argument("--zoo", choices=tuple(ZOOS), default="zoo", help="the plants: the zoo the defaults are "
+                    "chosen on, the unseen set they never were, or the fresh set written blind (report only; writes "
+                    "quality_unseen.* / quality_fresh.*)")
     args = ap.parse_args(argv)
-    if args.zoo == "unseen" and args.half == "select":
-        ap.error("--zoo unseen: nothing is chosen on the unseen plants; use --half report")
-    zoo = PLANTS if args.zoo == "zoo" else UNSEEN
+    if args.zoo != "zoo" and args.half == "select":
+        ap.error(f"--zoo {args.zoo}: nothing is chosen on the {args.zoo} plants; use --half report")
+    zoo = ZOOS[args.zoo]
     runs_n = args.runs if args.runs is not None else (2 if args.quick else 40)
     sizes = QUICK if args.quick else FULL
     plants = [p.strip() for p in args.plants.split(",") if p.strip()] or (
@@ -411,7 +417,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                    "python": platform.python_version()}
     doc |= {"truth": res["truth"], "table": res["table"], "runs": res["rows"]}
     args.out.mkdir(parents=True, exist_ok=True)
-    name = ("selection" if args.half == "select" else "quality") + ("" if args.zoo == "zoo" else "_unseen")
+    name = ("selection" if args.half == "select" else "quality") + ("" if args.zoo == "zoo" else "_" + args.zoo)
     text = json.dumps(_clean(doc), indent=1)
     (args.out / f"{name}.json").write_text(text)
     (args.out / f"{name}.md").write_text(markdown(json.loads(text)))

@@ -16,7 +16,8 @@ vehicle, wind and noise at every gain vector (common random numbers for the trut
 
 PLANTS is the zoo the defaults are chosen on; UNSEEN are plants of other kinds that nothing is chosen on (other
 airframes and primitives, PX4's cascade with 3 gains and a payload picked up in flight, a Crazyflie with a payload, a
-banana valley, a curved damping wall: `quality.py --zoo unseen`); ALL_PLANTS finds either by name. The divergence
+banana valley, a curved damping wall: `quality.py --zoo unseen`); FRESH are kinds neither has, written in session 33
+before any method flew them and measured once (`--zoo fresh`); ALL_PLANTS finds any by name. The divergence
 cliff was unseen until it showed every method answering gains beside it; it is a zoo plant since (2026-11-25), and
 the damping wall, written before any change was tried on it, took its place.
 """
@@ -543,5 +544,89 @@ def _unseen() -> dict[str, Plant]:
 
 
 UNSEEN = _unseen()
-ALL_PLANTS = {**PLANTS, **UNSEEN}
-"""Every plant by name (the zoo's and the unseen set's): what the truth and the runs look a plant up in."""
+
+
+# ----- the fresh set: written in session 33 before any method flew them, measured once ----------------------------
+
+
+def twin_basins_fly(x, seeds, rounds):
+    """Two basins: the optimum (0.7, 0.25) at cost 1 in a narrow one, a broad second basin (0.2, 0.75) at 1.12 that
+    a search started mid-box may settle in; multiplicative lognormal noise of 8 %."""
+    a = 1.0 + 9.0 * (x[:, 0] - 0.7) ** 2 + 14.0 * (x[:, 1] - 0.25) ** 2
+    b = 1.12 + 3.0 * (x[:, 0] - 0.2) ** 2 + 4.0 * (x[:, 1] - 0.75) ** 2
+    c = np.minimum(a, b)
+    z = _normals(seeds, rounds, 1)
+    return c * np.exp(0.08 * z[:, 0] - 0.0032), np.zeros(len(c), dtype=bool)
+
+
+def weak_gain_fly(x, seeds, rounds):
+    """3 gains (kp, kd, ki), the third one weak (the cost barely moves along it, its best at 0.6); kp and kd
+    coupled in a tilted bowl about (0.35, 0.65); noise 6 % plus a share growing with the cost."""
+    u, v, w = x[:, 0] - 0.35, x[:, 1] - 0.65, x[:, 2] - 0.6
+    c = 1.0 + 5.0 * u * u + 7.0 * v * v - 4.0 * u * v + 0.15 * w * w
+    z = _normals(seeds, rounds, 2)
+    return c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
+
+
+def low_corner_fly(x, seeds, rounds):
+    """The unconstrained minimum lies below both lower bounds (−0.15, −0.1): the optimum is the corner (0, 0),
+    approached by a shallow slope; noise 6 % plus a share growing with the cost."""
+    c = 1.0 + 2.0 * (x[:, 0] + 0.15) ** 2 + 3.0 * (x[:, 1] + 0.1) ** 2 + 1.5 * x[:, 0] * x[:, 1] - 0.075
+    z = _normals(seeds, rounds, 2)
+    return c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 0.9) * z[:, 1], np.zeros(len(c), dtype=bool)
+
+
+def v_valley_fly(x, seeds, rounds):
+    """A cost with a kink at its minimum (0.45, 0.3) — it grows with the distance, not its square, as an error
+    dominated by a dead band or a saturation does; a quadratic fits it worst near the optimum; noise 5 %."""
+    u, v = x[:, 0] - 0.45, x[:, 1] - 0.3
+    c = 1.0 + 0.8 * np.abs(u + 0.3 * v) + 0.5 * np.abs(v) + 2.0 * u * u
+    z = _normals(seeds, rounds, 1)
+    return c * (1.0 + 0.05 * z[:, 0]), np.zeros(len(c), dtype=bool)
+
+
+def heavy_tails_fly(x, seeds, rounds):
+    """A rotated bowl about (0.3, 0.6) with heavy-tailed noise: a Student-t of 3 degrees of freedom scaled to 5 %
+    (one flight in a hundred 29 % off or more), as a rare gust or a bad estimator reset gives, never below half the
+    cost."""
+    u, v = x[:, 0] - 0.3, x[:, 1] - 0.6
+    c = 1.0 + 6.0 * u * u + 3.0 * v * v + 3.0 * u * v
+    z = _normals(seeds, rounds, 4)
+    t = z[:, 0] / np.sqrt((z[:, 1] ** 2 + z[:, 2] ** 2 + z[:, 3] ** 2) / 3.0)
+    return c * np.maximum(0.5, 1.0 + 0.05 * t), np.zeros(len(c), dtype=bool)
+
+
+NOISY_SENSORS = {"altitude_m": 0.03, "vertical_velocity_mps": 0.06}  # three times the lidar's and the estimate's
+
+
+def _fresh() -> dict[str, Plant]:
+    """Kinds neither the zoo nor the unseen set has, written before any method flew them (`quality.py --zoo
+    fresh`): measured once, to say how the default does on plants nobody chose anything on, or looked at."""
+    out = [
+        Plant("fresh sim balanced step", "mavtune's simulator flying a 1 m step with the MAVLink vehicles' balanced "
+              "cost (tracking, motor activity, oscillation) and sensors three times as noisy: the noise a high kd "
+              "feeds the motors costs", ("kp", "kd"),
+              sim_fly({"primitive": "step", "cost": "balanced", "noise": NOISY_SENSORS}, FULL), _sim_units(FULL)),
+        Plant("fresh sim calm figure-8 ITAE", "the simulator flying the figure-8 in calm air (mean wind 0.5 m/s, "
+              "gusts 0.3 / 0.15 m/s), cost ITAE (late errors weigh most): little noise to hide a small excess",
+              ("kp", "kd"), sim_fly({"primitive": "figure8", "cost": "itae",
+                                     "wind": {"mean_mps": 0.5, "gust_xy_mps": 0.3, "gust_z_mps": 0.15}}, FULL),
+              _sim_units(FULL)),
+        Plant("fresh analytic twin basins", "two basins: the optimum in a narrow one, a broad one 12 % above it, "
+              "lognormal noise 8 %", ("kp", "kd"), twin_basins_fly),
+        Plant("fresh analytic weak third gain", "3 gains, coupled kp and kd, a third the cost barely depends on, "
+              "heteroscedastic noise", ("kp", "kd", "ki"), weak_gain_fly),
+        Plant("fresh analytic low corner", "the optimum in the lower corner (0, 0) of the box, approached by a shallow "
+              "slope", ("kp", "kd"), low_corner_fly),
+        Plant("fresh analytic kinked valley", "a cost growing with the distance from its minimum (a kink, as a dead "
+              "band gives), tilted, noise 5 %", ("kp", "kd"), v_valley_fly),
+        Plant("fresh analytic heavy tails", "a rotated bowl with Student-t (3 degrees of freedom) noise of 5 %",
+              ("kp", "kd"), heavy_tails_fly),
+    ]
+    return {p.name: p for p in out}
+
+
+FRESH = _fresh()
+ALL_PLANTS = {**PLANTS, **UNSEEN, **FRESH}
+"""Every plant by name (the zoo's, the unseen set's and the fresh set's): what the truth and the runs look a plant up
+in."""
