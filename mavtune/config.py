@@ -66,7 +66,8 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
     "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0,
     "tuning.design_log_layout": False, "tuning.design_two_sided": 0.0,
-    "tuning.design_reach": 0.0, "tuning.design_hold": 0.0, "tuning.design_shrink_wall": 0.0}
+    "tuning.design_reach": 0.0, "tuning.design_hold": 0.0, "tuning.design_shrink_wall": 0.0,
+    "tuning.design_map_far": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal
@@ -148,7 +149,8 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_wall_rise", "design_shrink_fit", "design_pass_box",
                    "wall_span", "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers",
-                   "design_log", "design_log_layout", "design_two_sided", "design_reach", "design_hold", "budget")
+                   "design_log", "design_log_layout", "design_two_sided", "design_reach", "design_hold",
+                   "design_map_far", "budget")
 
 
 
@@ -173,7 +175,9 @@ class Tuning(_Section):
     half-widths of its design, not two: `design_reach`, since session 26; a gain the design before answered on
     a range's bound kept there unless the last design's flights tell a move off it better at the 5 % level:
     `design_hold`, since session 28; each design after one with a failed flight near its answer, into which the
-    cost rises, a quarter as wide, not 0.4: `design_shrink_wall`, since session 30; without
+    cost rises, a quarter as wide, not 0.4: `design_shrink_wall`, since session 30; the passes starting at the
+    map's lowest flown point where it lies far from the map's fitted minimum and flew lower than the flights there:
+    `design_map_far`, since session 33; without
     the flights that their replicates and their neighbours both put far off, spoiled by something other than the
     gains: `design_outliers`, since session 20), inside
     the flown design, never beside a fly-away (`wall_span`; `wall_keep`: beside a failed flight the previous design's
@@ -357,6 +361,13 @@ class Tuning(_Section):
                                "variance; never where a flight the design's divergence fit reaches failed): an "
                                "optimum on a range's bound, where the narrow last design's curvature is the noise's "
                                "(0: never; 0.05 chosen on the zoo's select half, selection_hold.md)")
+    design_map_far: float = Field(0.35, ge=0.0, lt=1.0, description="design: the passes start at the map's lowest "
+                                  "flown point (none of its flights failed) instead of its fit's minimum where that "
+                                  "point lies more than this share of a range from the minimum on some gain and flew "
+                                  "at least 5 % below the flown point nearest the minimum: a cost with two low "
+                                  "regions, which one quadratic over the box averages into the broad one, the "
+                                  "passes (local searches) then settling there (0: never; 0.35 chosen on the zoo's "
+                                  "select half and the fresh plants, selection_map_far.md)")
     budget: StrictInt | Literal["auto", "none"] = Field("auto", description="the run's flights, all vehicles "
                                      "together, known before take-off and flown exactly: the passes' line searches "
                                      "share what the designs do not need (each the passes' share left over the "

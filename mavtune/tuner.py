@@ -29,8 +29,9 @@ from mavtune.search.interval import (
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
-    LAYOUT_SHARE as SURFACE_LAYOUT_SHARE, LOGGED as SURFACE_LOGGED, REACH, LogGains, answer as surface_answer,
-    beside_wall, coefficients as surface_coefficients, design as surface_design, fly_away as surface_fly_away,
+    FAR as SURFACE_FAR, LAYOUT_SHARE as SURFACE_LAYOUT_SHARE, LOGGED as SURFACE_LOGGED, REACH, LogGains,
+    answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
+    far_lowest, fly_away as surface_fly_away,
     inliers as surface_inliers, log_offsets as surface_log_offsets, next_centre as surface_next_centre,
     open_faces as surface_open_faces, ruled_out as surface_ruled_out, wall_rise,
 )
@@ -414,6 +415,7 @@ class Settings:
     design_two_sided: float = 0.0
     design_reach: float = 0.0
     design_hold: float = 0.0
+    design_map_far: float = 0.0
     budget: int | None = None
     strategy_rule: Strategy = field(init=False)
     adaptive_rule: Adaptive | None = field(init=False)
@@ -519,6 +521,10 @@ class Settings:
             raise MavtuneError(f"design_hold {self.design_hold} is outside [0, 1): the level at which the last "
                                "design's flights must tell a move off a range's bound better than the bound the "
                                "design before answered (0: never held)")
+        if not 0.0 <= float(self.design_map_far) < 1.0:
+            raise MavtuneError(f"design_map_far {self.design_map_far} is outside [0, 1): the share of a range "
+                               "beyond which the map's lowest flown point, far from its fit's minimum, starts the "
+                               "passes (0: never)")
         if not 0.0 <= float(self.design_outliers) <= 100.0:
             raise MavtuneError(f"design_outliers {self.design_outliers} is outside [0, 100]: robust noise sds off the "
                                "local fit and off its point's other flights that make a flight an outlier (0: none)")
@@ -541,7 +547,7 @@ class Settings:
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
                   "design_wall_rise", "wall_span", "composite_reach", "design_widen", "design_widen_bound",
-                  "design_outliers", "design_log", "design_two_sided", "design_reach", "design_hold")
+                  "design_outliers", "design_log", "design_two_sided", "design_reach", "design_hold", "design_map_far")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -717,7 +723,9 @@ class Settings:
                         | ({"hold": float(self.design_hold)} if self.design_hold else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
-                        | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})}
+                        | ({"pass_box": True} if self.design_pass_box and self.designs_before_passes() else {})
+                        | ({"map_far": float(self.design_map_far)}
+                           if self.design_map_far and self.designs_before_passes() else {})}
             if self.design else {}) | ({"budget": int(self.budget)} if self.budget is not None else {})
 
 
@@ -1045,6 +1053,9 @@ class Tuner:
         # the design before's, not the passes' answer)
         options = answer_options(self.settings, half, keep, final, logged, hold) | ({"risk": None} if start else {})
         best, fitted = surface_answer(flown, box, ruled, self.pool, **options)
+        low = far_lowest(flown, box, best, float(s.design_map_far)) if start and s.design_map_far else None
+        if low is not None:  # (`design_map_far`: the passes start in the low region the fit averaged away)
+            best, fitted = low, SURFACE_FAR
         self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
         self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None, final,
                                            logged)

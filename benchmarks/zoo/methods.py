@@ -178,7 +178,8 @@ def candidates() -> list[Method]:
     (`design_hold`, before session 28), and with a design beside a failed flight narrowing more, to 0.15 or 0.25 of
     its half-width (`design_shrink_wall`; session 29's screen), and without it (before session 30) and with it only
     where the cost rises into the failed flight 1.4-fold (`design_wall_rise`, session 30; 0.25 that way is the
-    default since), or narrowing to 0.25 where it rises 1.2-fold or twofold. The paper's setting
+    default since), or narrowing to 0.25 where it rises 1.2-fold or twofold, and with the passes starting at the
+    map's fitted minimum however far from it the map flew lower (`design_map_far`, before session 33). The paper's setting
     (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -211,11 +212,12 @@ def candidates() -> list[Method]:
               for s in (0.3, 0.4)),
             Method(BEFORE_HOLD, NO_HOLD | NO_WALL),
             *(Method(f"default, a design beside a failed flight narrowing to {w:g} of it (design_shrink_wall = {w:g})",
-                     {"design_shrink_wall": w, "design_wall_rise": 0.0}) for w in (0.15, 0.25)),
+                     {"design_shrink_wall": w, "design_wall_rise": 0.0} | NO_MAP_FAR) for w in (0.15, 0.25)),
             Method(BEFORE_WALL, NO_WALL),
+            Method(BEFORE_MAP_FAR, NO_MAP_FAR),
             *(Method(f"default, a design beside a failed flight into which the cost rises {r:g}-fold narrowing to {w:g} "
                      f"of it (design_shrink_wall = {w:g}, design_wall_rise = {r:g})",
-                     {"design_shrink_wall": w, "design_wall_rise": r})
+                     {"design_shrink_wall": w, "design_wall_rise": r} | NO_MAP_FAR)
               for w, r in ((0.15, 1.4), (0.25, 1.2), (0.25, 2.0)))]
 
 
@@ -230,7 +232,10 @@ NO_REACH = {"design_reach": 0.0}  # (each default before session 26 fitted its a
 BEFORE_HOLD = "default before session 28 (no gain held on its range's bound: design_hold = 0)"
 NO_HOLD = {"design_hold": 0.0}  # (each default before session 28 let the last design move a gain off its bound)
 BEFORE_WALL = "default before session 30 (every design narrowing alike: design_shrink_wall = 0)"
-NO_WALL = {"design_shrink_wall": 0.0}  # (each default before session 30 narrowed beside a failed flight by 0.4 too)
+NO_WALL = {"design_shrink_wall": 0.0, "design_map_far": 0.0}  # (each default before session 30 narrowed beside a
+# failed flight by 0.4 too, and started the passes at the map's fit)
+BEFORE_MAP_FAR = "default before session 33 (the passes start at the map's fitted minimum: design_map_far = 0)"
+NO_MAP_FAR = {"design_map_far": 0.0}  # (each default before session 33 started the passes at the map's fit)
 
 
 def split_designs() -> list[Method]:

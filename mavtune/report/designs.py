@@ -33,6 +33,9 @@ HOW = {"quadratic": "the minimum in its box of the quadratic fitted to the fligh
                               "fitted to the flights near it (they fit it better than the quadratic)",
        "plane": "the minimum of a plane fitted to the flights near it (they need no curvature), on a range's bound",
        "best flown": "the best point flown in its box (no usable fit)",
+       "lowest flown, far from the fit": "the lowest point flown in its box, far from the fit's minimum and lower "
+                                         "than the flights there: the passes start in that low region "
+                                         "(design_map_far)",
        "kept": "the design before's answer, kept beside a failed flight"}
 WIDER = ", refitted wider"  # (`surface.answer`: refitted over the wider designs' flights too)
 

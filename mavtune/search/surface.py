@@ -80,6 +80,8 @@ LAYOUT_SHARE = 0.25  # the designs are laid out in the logarithm of the gains on
 LOGGED = ", in the logarithm of the gains"  # (`answer`'s fit name: the fit in the logarithm of the gains answered)
 TWO_SIDED = "two-sided quadratic"  # (`answer`'s fit name: `two_sided_minimum` answered)
 HELD = ", held on the bound"  # (`answer`'s fit name: `held_on_bound` put a gain back on its range's bound)
+FAR = "lowest flown, far from the fit"  # (a map's answer: `far_lowest` replaced the fit's minimum)
+FAR_GAP = 0.05  # `far_lowest`: the lowest point's mean below that of the point nearest the fit by this share of it
 TWO_SIDED_REACH = 3.0  # the two-sided quadratic is fitted to the flights within this many half-widths of the design
 TWO_SIDED_STEEP = 4.0  # its curvature on one side of the minimum is at most e^this times the other side's
 OUTLIER_SDS = 6.0  # an outlier flight lies this many robust noise sds off the local fit and (times √2) its replicates
@@ -558,6 +560,29 @@ def held_on_bound(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequ
     step = (_columns((np.array([held]) - centre) / half, square) - _columns((np.array([x]) - centre) / half, square))[0]
     better = float(step @ beta) > norm.isf(level) * cv * math.sqrt(max(float(step @ covariance @ step), 0.0))
     return tuple(float(v) for v in x) if better else held
+
+
+def far_lowest(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+               fitted: Sequence[float], far: float, gap: float = FAR_GAP) -> tuple[float, ...] | None:
+    """The flown point of `box` with the lowest mean cost among those none of whose flights failed, where it lies
+    more than `far` of a range (on some gain) from the fit's minimum `fitted` and its mean is at least `gap` of
+    itself below that of the flown point nearest `fitted` (that point's failed flights: infinitely above); else
+    None. A quadratic over a whole box whose cost has two low regions puts its minimum in the broad one or between
+    them, and the passes, local searches, settle there: session 33's fresh twin basins (a broad basin 12 % above a
+    narrow one) answered the broad one in 17 runs of 40 from the fit's minimum, 7 from this point."""
+    def mean(costs: Sequence[float]) -> float:
+        return sum(costs) / len(costs) if all(map(math.isfinite, costs)) else math.inf
+
+    inside = {k: mean(c) for k, c in points.items() if c and all(a - 1e-9 <= v <= b + 1e-9 for v, (a, b) in
+                                                                  zip(k, box))}
+    safe = {k: m for k, m in inside.items() if math.isfinite(m)}
+    if not safe:
+        return None
+    low = min(safe, key=safe.__getitem__)
+    near = min(inside, key=lambda k: math.dist(k, fitted))
+    if max(abs(a - b) for a, b in zip(low, fitted)) <= far or inside[near] - safe[low] < gap * safe[low]:
+        return None
+    return low
 
 
 def _box_grid(d: int) -> np.ndarray:
