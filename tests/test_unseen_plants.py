@@ -1,6 +1,8 @@
-"""The unseen plants of benchmarks/zoo/plants.py (never chosen on, `quality.py --zoo unseen`): none is a zoo plant,
-each is deterministic for a (seed, round) and shares that draw across gain vectors (common random numbers, which
-the truth's paired excess needs), and each states why it is there and its box."""
+"""The unseen plants of benchmarks/zoo/plants.py (never chosen on, `quality.py --zoo unseen`) and the fresh ones
+(written blind in session 33, `--zoo fresh`): none is a zoo plant nor in the other set, each is deterministic for a
+(seed, round) and shares that draw across gain vectors (common random numbers, which the truth's paired excess
+needs), and each states why it is there and its box; each fresh analytic plant's mean cost is lowest where its
+docstring puts the optimum."""
 
 import sys
 from pathlib import Path
@@ -10,20 +12,23 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from zoo.plants import ALL_PLANTS, PLANTS, UNSEEN  # noqa: E402
+from zoo.plants import ALL_PLANTS, FRESH, PLANTS, UNSEEN  # noqa: E402
+
+APART = {**UNSEEN, **FRESH}  # the plants nothing was chosen on before they were measured
 
 
-def test_the_unseen_set_is_apart_from_the_zoo():
-    assert len(UNSEEN) >= 5 and not set(UNSEEN) & set(PLANTS)
-    assert ALL_PLANTS == {**PLANTS, **UNSEEN}
-    for name, plant in UNSEEN.items():
+def test_the_unseen_and_fresh_sets_are_apart_from_the_zoo():
+    assert len(UNSEEN) >= 5 and len(FRESH) >= 5 and not set(UNSEEN) & set(PLANTS)
+    assert not set(FRESH) & (set(PLANTS) | set(UNSEEN))
+    assert ALL_PLANTS == {**PLANTS, **UNSEEN, **FRESH}
+    for name, plant in APART.items():
         assert plant.name == name and len(plant.description) > 40
         assert set(plant.units) <= set(plant.gains)
 
 
 # Crazyflow compiles its JAX program first (~15 s): slow; and it needs SCIPY_ARRAY_API set before scipy is first
 # imported, which other tests of the session may have done: its check runs in a fresh interpreter
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if "crazyflow" in n else n for n in UNSEEN])
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if "crazyflow" in n else n for n in APART])
 def test_an_unseen_plant_is_deterministic_per_seed_and_round(name):
     if "crazyflow" not in name:
         check_deterministic(name)
@@ -40,7 +45,7 @@ def test_an_unseen_plant_is_deterministic_per_seed_and_round(name):
 
 def check_deterministic(name: str) -> None:
     """The plant flies the same flights in any order, another vehicle (seed) or round draws another flight."""
-    plant = UNSEEN[name]
+    plant = APART[name]
     d = len(plant.gains)
     x = np.array([[0.3] * d, [0.6] * d, [0.3] * d])
     seeds, rounds = np.array([7, 7, 8]), np.array([2, 2, 2])
@@ -51,3 +56,23 @@ def check_deterministic(name: str) -> None:
     assert c1[0] != c1[2]  # another vehicle (seed) draws other wind and noise
     c3, _ = plant.fly(x[:1], seeds[:1], np.array([3]))
     assert c3[0] != c1[0]  # another round too
+
+
+@pytest.mark.parametrize("name, optimum", [("fresh analytic twin basins", (0.7, 0.25)),
+                                           ("fresh analytic weak third gain", (0.35, 0.65, 0.6)),
+                                           ("fresh analytic low corner", (0.0, 0.0)),
+                                           ("fresh analytic kinked valley", (0.45, 0.3)),
+                                           ("fresh analytic heavy tails", (0.3, 0.6))])
+def test_a_fresh_analytic_plant_is_lowest_where_its_docstring_says(name, optimum):
+    """On 400 paired repeats the optimum's mean cost lies below that of each neighbour 0.05 along a gain (inside
+    the box), and near 1 (each is written with its minimum cost 1)."""
+    plant, d, reps = FRESH[name], len(optimum), np.arange(400)
+    mean = lambda p: float(plant.fly(np.tile(p, (reps.size, 1)), 5000 + reps, reps)[0].mean())  # noqa: E731
+    best = mean(np.array(optimum))
+    assert abs(best - 1.0) < 0.02
+    for i in range(d):
+        for step in (-0.05, 0.05):
+            p = np.array(optimum, float)
+            p[i] += step
+            if 0.0 <= p[i] <= 1.0:
+                assert mean(p) > best, (name, p)

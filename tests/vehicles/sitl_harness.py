@@ -245,7 +245,8 @@ def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: st
     """`mavtune coordinator` with one `mavtune agent --vehicle mavlink` per URL (each its own key file and state
     folder, all on 127.0.0.1), ε 0.25 and one bootstrap, run to the end in `folder / "run"`; the coordinator's
     output. The agents stay for the next run after Finish: they are stopped with SIGINT; every process is killed
-    on the way out whatever happens."""
+    on the way out whatever happens. Each agent's output goes to `folder / "agentN.log"`, whose end a coordinator
+    that does not finish in time is reported with (an agent that never joined says why there)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
@@ -264,8 +265,15 @@ def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: st
             procs.append(subprocess.Popen(
                 [*mavtune, "agent", "--id", name, "--connect", endpoint, "--vehicle", "mavlink", "--mavlink", url,
                  "--config", str(folder / "agent.toml"), "--state-dir", str(folder / f"state{i}")],
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        log, _ = procs[0].communicate(timeout=timeout_s)
+                stdout=(folder / f"agent{i}.log").open("w"), stderr=subprocess.STDOUT))
+        try:
+            log, _ = procs[0].communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired as late:
+            agents = "\n".join(f"--- agent{i}.log: {(folder / f'agent{i}.log').read_text()[-1500:]}"
+                                for i in range(len(urls)))
+            said = late.output.decode(errors="replace") if isinstance(late.output, bytes) else late.output or ""
+            raise AssertionError(f"the coordinator did not finish in {timeout_s:g} s; its output ends "
+                                 f"{said[-1500:]}\n{agents}") from None
         assert procs[0].returncode == 0, log[-3000:]
         for agent in procs[1:]:
             agent.send_signal(signal.SIGINT)
