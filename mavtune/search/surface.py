@@ -569,7 +569,7 @@ def far_lowest(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequenc
     itself below that of the flown point nearest `fitted` (that point's failed flights: infinitely above); else
     None. A quadratic over a whole box whose cost has two low regions puts its minimum in the broad one or between
     them, and the passes, local searches, settle there: session 33's fresh twin basins (a broad basin 12 % above a
-    narrow one) answered the broad one in 17 runs of 40 from the fit's minimum, 7 from this point."""
+    narrow one) answered the broad one in 18 runs of 40 from the fit's minimum, 8 from this point (twin_basins.md)."""
     def mean(costs: Sequence[float]) -> float:
         return sum(costs) / len(costs) if all(map(math.isfinite, costs)) else math.inf
 
