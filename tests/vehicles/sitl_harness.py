@@ -241,12 +241,13 @@ def read_params_on(master: mavutil.mavfile, names: list[str], timeout_s: float) 
 
 
 def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: str, ids: list[str],
-                   result_timeout_s: float, timeout_s: float) -> str:
+                   result_timeout_s: float, timeout_s: float, tuning_toml: str = "") -> str:
     """`mavtune coordinator` with one `mavtune agent --vehicle mavlink` per URL (each its own key file and state
-    folder, all on 127.0.0.1), ε 0.25 and one bootstrap, run to the end in `folder / "run"`; the coordinator's
-    output. The agents stay for the next run after Finish: they are stopped with SIGINT; every process is killed
-    on the way out whatever happens. Each agent's output goes to `folder / "agentN.log"`, whose end a coordinator
-    that does not finish in time is reported with (an agent that never joined says why there)."""
+    folder, all on 127.0.0.1), ε 0.25 and one bootstrap (and `tuning_toml`'s [tuning] fields), run to the end in
+    `folder / "run"`; the coordinator's output. The agents stay for the next run after Finish: they are stopped with
+    SIGINT; every process is killed on the way out whatever happens. Each agent's output goes to
+    `folder / "agentN.log"`, whose end a coordinator that does not finish in time is reported with (an agent that
+    never joined says why there)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
@@ -255,10 +256,14 @@ def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: st
     (folder / "agent.toml").write_text(f"[swarm]\nsession = \"{session}\"\nkey_file = \"{key}\"\n"
                                        f"result_timeout_s = {result_timeout_s}\n[mavlink]\n{mavlink_toml}")
     mavtune = [sys.executable, "-c", "from mavtune.__main__ import main; main()"]
+    config = []
+    if tuning_toml:
+        (folder / "coordinator.toml").write_text(f"[tuning]\n{tuning_toml}")
+        config = ["--config", str(folder / "coordinator.toml")]
     procs = [subprocess.Popen(
         [*mavtune, "coordinator", "--listen", endpoint, "--vehicles", str(len(urls)), "--out", str(folder / "run"),
          "--session", session, "--key-file", str(key), "--settle-s", "0", "--result-timeout-s",
-         str(result_timeout_s), "--bootstraps", "1", "--epsilon", "0.25", "--budget", "none"],
+         str(result_timeout_s), "--bootstraps", "1", "--epsilon", "0.25", "--budget", "none", *config],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
     try:
         for i, (name, url) in enumerate(zip(ids, urls)):

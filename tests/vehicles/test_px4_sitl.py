@@ -83,7 +83,7 @@ def test_two_agents_under_the_zenoh_coordinator_give_each_vehicles_parameters(tm
         urls = [v.tuner_url for v in vehicles]
         tune_by_agents(urls, tmp_path, "px4", "autopilot = \"px4\"\nheartbeat_wait_s = 30.0\n"
                        "[mavlink.safety]\nposition_timeout_s = 2.5\n", ["p0", "p1"],
-                       result_timeout_s=90.0, timeout_s=540)
+                       result_timeout_s=90.0, timeout_s=540, tuning_toml="design = false\n")
         assert_restored(urls)
     result = json.loads((out / "result.json").read_text())
     assert result["status"] == "finished" and result["flights_by_status"]["ok"] > 0
