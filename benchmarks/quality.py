@@ -13,7 +13,7 @@ reports config.Tuning() (what ships) unless --default names another, and says wh
     python benchmarks/quality.py --half report --runs 40 [--workers 2]
     python benchmarks/quality.py --quick            # a smoke run: 2 plants, tiny truth, 2 runs
     python benchmarks/quality.py --zoo unseen --half report --runs 40   # plants never chosen on: quality_unseen.*
-    python benchmarks/quality.py --zoo fresh --half report --runs 40    # plants written blind, measured once: quality_fresh.*
+    python benchmarks/quality.py --zoo fresh --half report --runs 40    # plants written blind: quality_fresh.*
 
 Everything flown is cached (benchmarks/.cache/zoo: truth flights per plant, every run keyed by plant,
 configuration, run and a hash of mavtune's source), so an interrupted run resumes and a rerun re-scores.
@@ -264,7 +264,8 @@ ZOO_TITLES = {"zoo": "plant zoo", "unseen": "unseen plants (never chosen on)",
 
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["meta"]
-    lines = [f"# Quality of the tuned gains on the {ZOO_TITLES[m.get('zoo', 'zoo')]} (issue 20) — {m['half']} half", "",
+    title = ZOO_TITLES[m.get("zoo", "zoo")]
+    lines = [f"# Quality of the tuned gains on the {title} (issue 20) — {m['half']} half", "",
              f"Command: `{m['command']}` at commit `{m['commit']}` (mavtune source hash `{m['engine']}`), "
              f"{m['started_utc']} to {m['finished_utc']}; machine: {m['cpu_model']}, {m['cpus']} cores shared with "
              f"other jobs, {m['workers']} worker processes; load average {m['load_start'][0]:.2f} at the start, "
