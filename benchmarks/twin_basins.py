@@ -24,6 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import pooled, write_results  # noqa: E402
 from quality import study_line, study_meta  # noqa: E402
+from zoo.plants import twin_basins_cost  # noqa: E402
 
 from mavtune.search.surface import FAR  # noqa: E402
 
@@ -33,13 +34,6 @@ METHODS = ("default (config.Tuning())",
 WITHIN = 1.02  # the noise-free cost within 2 % of the minimum (1)
 NARROW_KP = 0.45  # the narrow basin's side of the box
 ORIENTATIONS = {False: "as written (narrow basin at kd 0.25)", True: "mirrored (narrow basin at kd 0.75)"}
-
-
-def twin_cost(x: np.ndarray) -> np.ndarray:
-    """The fresh twin basins' noise-free cost (`zoo.plants.twin_basins_fly` without its noise)."""
-    a = 1.0 + 9.0 * (x[:, 0] - 0.7) ** 2 + 14.0 * (x[:, 1] - 0.25) ** 2
-    b = 1.12 + 3.0 * (x[:, 0] - 0.2) ** 2 + 4.0 * (x[:, 1] - 0.75) ** 2
-    return np.minimum(a, b)
 
 
 def _mirror(x: np.ndarray) -> np.ndarray:
@@ -67,7 +61,7 @@ def one(task: tuple[str, bool, int]) -> dict:
     settings = method.settings(plant, run)
     result = run_tuning(settings, ZooFleet(plant, settings.vehicles, tune_seed(run)))
     x = np.array([[result.gains["kp"], result.gains["kd"]]])
-    cost = float(twin_cost(_mirror(x) if mirrored else x)[0])
+    cost = float(twin_basins_cost(_mirror(x) if mirrored else x)[0])
     return {"method": label, "mirrored": mirrored, "run": run, "x": x[0].tolist(), "cost": cost,
             "map": result.designs[0].how if result.designs and result.designs[0].before_passes else None}
 

@@ -265,12 +265,13 @@ def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: st
          "--session", session, "--key-file", str(key), "--settle-s", "0", "--result-timeout-s",
          str(result_timeout_s), "--bootstraps", "1", "--epsilon", "0.25", "--budget", "none", *config],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
+    logs = [(folder / f"agent{i}.log").open("w") for i in range(len(urls))]
     try:
-        for i, (name, url) in enumerate(zip(ids, urls)):
+        for i, (name, url, log_file) in enumerate(zip(ids, urls, logs)):
             procs.append(subprocess.Popen(
                 [*mavtune, "agent", "--id", name, "--connect", endpoint, "--vehicle", "mavlink", "--mavlink", url,
                  "--config", str(folder / "agent.toml"), "--state-dir", str(folder / f"state{i}")],
-                stdout=(folder / f"agent{i}.log").open("w"), stderr=subprocess.STDOUT))
+                stdout=log_file, stderr=subprocess.STDOUT))
         try:
             log, _ = procs[0].communicate(timeout=timeout_s)
         except subprocess.TimeoutExpired as late:
@@ -289,6 +290,8 @@ def tune_by_agents(urls: list[str], folder: Path, session: str, mavlink_toml: st
             if p.poll() is None:
                 p.kill()
             p.wait(timeout=10)
+        for log_file in logs:
+            log_file.close()
 
 
 def recorded_rounds(folder: Path) -> int:
