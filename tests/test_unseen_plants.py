@@ -1,7 +1,8 @@
-"""The unseen plants of benchmarks/zoo/plants.py (never chosen on, `quality.py --zoo unseen`) and the fresh ones
-(written blind in session 33, `--zoo fresh`): none is a zoo plant nor in the other set, each is deterministic for a
+"""The unseen plants of benchmarks/zoo/plants.py (never chosen on, `quality.py --zoo unseen`), the fresh ones
+(written blind in session 33, `--zoo fresh`) and the blind ones (session 34, `--zoo blind`): none is a zoo plant nor
+in another set, each is deterministic for a
 (seed, round) and shares that draw across gain vectors (common random numbers, which the truth's paired excess
-needs), and each states why it is there and its box; each fresh analytic plant's mean cost is lowest where its
+needs), and each states why it is there and its box; each fresh or blind analytic plant's mean cost is lowest where its
 docstring puts the optimum."""
 
 import sys
@@ -12,15 +13,16 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from zoo.plants import ALL_PLANTS, FRESH, PLANTS, UNSEEN  # noqa: E402
+from zoo.plants import ALL_PLANTS, BLIND, FRESH, PLANTS, UNSEEN  # noqa: E402
 
-APART = {**UNSEEN, **FRESH}  # the plants nothing was chosen on before they were measured
+APART = {**UNSEEN, **FRESH, **BLIND}  # the plants nothing was chosen on before they were measured
 
 
-def test_the_unseen_and_fresh_sets_are_apart_from_the_zoo():
-    assert len(UNSEEN) >= 5 and len(FRESH) >= 5 and not set(UNSEEN) & set(PLANTS)
+def test_the_sets_apart_are_apart_from_the_zoo_and_each_other():
+    assert len(UNSEEN) >= 5 and len(FRESH) >= 5 and len(BLIND) >= 5 and not set(UNSEEN) & set(PLANTS)
     assert not set(FRESH) & (set(PLANTS) | set(UNSEEN))
-    assert ALL_PLANTS == {**PLANTS, **UNSEEN, **FRESH}
+    assert not set(BLIND) & (set(PLANTS) | set(UNSEEN) | set(FRESH))
+    assert ALL_PLANTS == {**PLANTS, **UNSEEN, **FRESH, **BLIND}
     for name, plant in APART.items():
         assert plant.name == name and len(plant.description) > 40
         assert set(plant.units) <= set(plant.gains)
@@ -58,18 +60,22 @@ def check_deterministic(name: str) -> None:
     assert c3[0] != c1[0]  # another round too
 
 
-@pytest.mark.parametrize("name, optimum", [("fresh analytic twin basins", (0.7, 0.25)),
-                                           ("fresh analytic weak third gain", (0.35, 0.65, 0.6)),
-                                           ("fresh analytic low corner", (0.0, 0.0)),
-                                           ("fresh analytic kinked valley", (0.45, 0.3)),
-                                           ("fresh analytic heavy tails", (0.3, 0.6))])
-def test_a_fresh_analytic_plant_is_lowest_where_its_docstring_says(name, optimum):
+@pytest.mark.parametrize("name, optimum, lowest", [("fresh analytic twin basins", (0.7, 0.25), 1.0),
+                                                   ("fresh analytic weak third gain", (0.35, 0.65, 0.6), 1.0),
+                                                   ("fresh analytic low corner", (0.0, 0.0), 1.0),
+                                                   ("fresh analytic kinked valley", (0.45, 0.3), 1.0),
+                                                   ("fresh analytic heavy tails", (0.3, 0.6), 1.0),
+                                                   ("blind analytic drifting conditions", (0.6, 0.35), 1.28),
+                                                   ("blind analytic unequal vehicles", (0.4, 0.55), 1.03),
+                                                   ("blind analytic plateau", (0.25, 0.8), 1.0)])
+def test_an_analytic_plant_apart_is_lowest_where_its_docstring_says(name, optimum, lowest):
     """On 400 paired repeats the optimum's mean cost lies below that of each neighbour 0.05 along a gain (inside
-    the box), and near 1 (each is written with its minimum cost 1)."""
-    plant, d, reps = FRESH[name], len(optimum), np.arange(400)
+    the box), and near `lowest` (each is written with its minimum cost 1; the drift's rounds raise it by 28 % on
+    average over rounds 0–399, the vehicles' own optima by 3 %)."""
+    plant, d, reps = APART[name], len(optimum), np.arange(400)
     mean = lambda p: float(plant.fly(np.tile(p, (reps.size, 1)), 5000 + reps, reps)[0].mean())  # noqa: E731
     best = mean(np.array(optimum))
-    assert abs(best - 1.0) < 0.02
+    assert abs(best - lowest) < 0.02 * lowest
     for i in range(d):
         for step in (-0.05, 0.05):
             p = np.array(optimum, float)

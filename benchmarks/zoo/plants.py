@@ -17,7 +17,8 @@ vehicle, wind and noise at every gain vector (common random numbers for the trut
 PLANTS is the zoo the defaults are chosen on; UNSEEN are plants of other kinds that nothing is chosen on (other
 airframes and primitives, PX4's cascade with 3 gains and a payload picked up in flight, a Crazyflie with a payload, a
 banana valley, a curved damping wall: `quality.py --zoo unseen`); FRESH are kinds neither has, written in session 33
-before any method flew them and measured once (`--zoo fresh`); ALL_PLANTS finds any by name. The divergence
+before any method flew them and measured once (`--zoo fresh`); BLIND are kinds none of those has, written the same
+way in session 34 (`--zoo blind`); ALL_PLANTS finds any by name. The divergence
 cliff was unseen until it showed every method answering gains beside it; it is a zoo plant since (2026-11-25), and
 the damping wall, written before any change was tried on it, took its place.
 """
@@ -100,17 +101,22 @@ def _airframe_constants(cp: np.ndarray, airframe: dict[str, float]) -> np.ndarra
     return cp
 
 
-def ardupilot_fly(x, seeds, rounds):
+def ardupilot_cascade_fly(changes: dict[str, Any], cost: str = "iae"):
     """mavsim's ArduPilot flavour: ArduCopterAltitude (PSC_POSZ_P, PSC_VELZ_P over DEFAULT_GAINS' ArduPilot
     ranges, the rest at mavsim's defaults) commanding the vertical acceleration of mavtune.sim.Plant, whose own
-    altitude PD is off, as mavsim's server steps them; cost: IAE of the fed-back altitude against the reference
-    over the primitive (after the settle hover), a diverged flight's remaining time at FAIL_PENALTY_M."""
-    from mavtune.vehicles.mavlink.config import DEFAULT_GAINS
-    from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude
-    from mavtune.vehicles.mavlink.profiles import Autopilot
+    altitude PD is off, under Scenario(**changes), as mavsim's server steps them; cost "iae": IAE of the fed-back
+    altitude against the reference over the primitive (after the settle hover), a diverged flight's remaining time
+    at FAIL_PENALTY_M; "balanced" as the MAVLink fleet scores a flight by default (`_cascade_batch`)."""
 
-    params = _params(DEFAULT_GAINS[Autopilot.ARDUPILOT], x)
-    return _cascade_batch(ArduCopterAltitude, params, _scenario({}), seeds, rounds)
+    def fly(x, seeds, rounds):
+        from mavtune.vehicles.mavlink.config import DEFAULT_GAINS
+        from mavtune.vehicles.mavlink.mavsim.cascade import ArduCopterAltitude
+        from mavtune.vehicles.mavlink.profiles import Autopilot
+
+        params = _params(DEFAULT_GAINS[Autopilot.ARDUPILOT], x)
+        return _cascade_batch(ArduCopterAltitude, params, _scenario(changes), seeds, rounds, cost)
+
+    return fly
 
 
 def _params(gain_map, x) -> dict[str, np.ndarray]:
@@ -455,6 +461,9 @@ MPC_Z_VEL_P_ACC, k_v = MPC_Z_VEL_P_ACC, on 2026-11-25; another name, so no cache
 taken for it)."""
 
 
+ARDUPILOT_UNITS = {"kp": ("PSC_POSZ_P", 1.0, 3.0), "kd": ("PSC_VELZ_P", 1.0, 8.0)}
+
+
 def _plants() -> dict[str, Plant]:
     edge_box = ((0.0, 0.3), (0.0, 1.0))  # the nominal optimum's kp (0.42) lies beyond the top of kp
     corner_box = ((0.0, 0.3), (0.0, 0.4))  # and its kd (0.55) beyond the top of kd
@@ -479,7 +488,7 @@ def _plants() -> dict[str, Plant]:
         Plant("analytic 4 gains", "4 coupled gains, one optimum on an edge, heteroscedastic noise",
               ("kp", "kd", "ki", "kf"), four_fly),
         Plant("mavsim ArduPilot", "ArduCopter AC_PosControl z cascade, PSC_POSZ_P [1, 3] x PSC_VELZ_P [1, 8]",
-              ("kp", "kd"), ardupilot_fly, {"kp": ("PSC_POSZ_P", 1.0, 3.0), "kd": ("PSC_VELZ_P", 1.0, 8.0)},
+              ("kp", "kd"), ardupilot_cascade_fly({}), ARDUPILOT_UNITS,
               judge_cap=128, chunk=256),
         Plant("crazyflow", "Crazyflow Crazyflie, Mellinger z gains, climbing circle, OU gust forces", ("kp", "kd"),
               crazyflow_fly, {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()},
@@ -633,6 +642,85 @@ def _fresh() -> dict[str, Plant]:
 
 
 FRESH = _fresh()
-ALL_PLANTS = {**PLANTS, **UNSEEN, **FRESH}
-"""Every plant by name (the zoo's, the unseen set's and the fresh set's): what the truth and the runs look a plant up
+
+
+# ----- the blind set: written in session 34 before any method flew them, measured once -----------------------------
+
+DRIFT_SHARE, DRIFT_ROUNDS = 0.3, 25.0  # the drifting plant's costs rise by up to 30 %, two thirds of it by round 25
+
+
+def drift_fly(x, seeds, rounds):
+    """A tilted bowl about (0.6, 0.35) flown while the conditions worsen through the session (wind rising, a
+    battery sagging): every cost is multiplied by 1 + DRIFT_SHARE (1 − e^(−round/DRIFT_ROUNDS)), the same at
+    every gain vector, so points flown in different rounds compare unfairly; noise 6 % plus a share growing with
+    the cost."""
+    u, v = x[:, 0] - 0.6, x[:, 1] - 0.35
+    c = 1.0 + 4.0 * u * u + 5.0 * v * v + 2.0 * u * v
+    z = _normals(seeds, rounds, 2)
+    drift = 1.0 + DRIFT_SHARE * (1.0 - np.exp(-np.asarray(rounds, float) / DRIFT_ROUNDS))
+    return drift * (c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 1.0) * z[:, 1]), np.zeros(len(c), dtype=bool)
+
+
+def _vehicle_draws(seeds) -> np.ndarray:
+    """(n, 3) standard normals of each vehicle (seed) alone, the same in every round: what sets it apart."""
+    return np.array([np.random.default_rng([int(s), 13]).standard_normal(3) for s in seeds])
+
+
+def unequal_vehicles_fly(x, seeds, rounds):
+    """A swarm of unequal airframes: each vehicle's own optimum lies off the fleet's (0.4, 0.55) by 0.06 sd per gain
+    and its costs run 10 % sd higher or lower, for every flight it flies; the fleet's optimum (the mean over
+    vehicles, which the truth's repeats draw) stays at (0.4, 0.55); flight noise 5 %."""
+    b = _vehicle_draws(seeds)
+    u, v = x[:, 0] - 0.4 - 0.06 * b[:, 0], x[:, 1] - 0.55 - 0.06 * b[:, 1]
+    c = (1.0 + 5.0 * u * u + 4.0 * v * v + 1.5 * u * v) * np.exp(0.1 * b[:, 2] - 0.005)
+    z = _normals(seeds, rounds, 1)
+    return c * (1.0 + 0.05 * z[:, 0]), np.zeros(len(c), dtype=bool)
+
+
+def plateau_fly(x, seeds, rounds):
+    """A bowl about (0.25, 0.8) that saturates: beyond a short way from its minimum the cost levels off at 2.2 (as
+    an error capped by an actuator limit), so most of the box is flat and says nothing of where the minimum lies;
+    lognormal noise 6 %."""
+    u, v = x[:, 0] - 0.25, x[:, 1] - 0.8
+    q = 6.0 * u * u + 4.0 * v * v + 2.0 * u * v
+    c = 1.0 + 1.2 * np.tanh(q / 1.2)
+    z = _normals(seeds, rounds, 1)
+    return c * np.exp(0.06 * z[:, 0] - 0.0018), np.zeros(len(c), dtype=bool)
+
+
+def _blind() -> dict[str, Plant]:
+    """Kinds none of the zoo, the unseen and the fresh sets has, written in session 34 before any method flew them
+    (`quality.py --zoo blind`): measured once, as the fresh set was."""
+    out = [
+        Plant("blind sim ISE step, payload known", "the simulator flying a 1 m step with a 0.5 kg payload the "
+              "controller knows, cost ISE (squared errors: the step's large early error weighs most)", ("kp", "kd"),
+              sim_fly({"primitive": "step", "cost": "ise", "payload_kg": 0.5, "payload_known": True}, FULL),
+              _sim_units(FULL)),
+        Plant("blind sim strong wind effort", "the paper's circle in a 5 m/s wind gusting 1.5 / 0.75 m/s, cost "
+              "effort (IAE plus the thrust a high gain spends)", ("kp", "kd"),
+              sim_fly({"cost": "effort", "wind": {"mean_mps": 5.0, "gust_xy_mps": 1.5, "gust_z_mps": 0.75}}, FULL),
+              _sim_units(FULL)),
+        Plant("blind sim no mass estimator", "the figure-8 with a 0.4 kg payload and the mass estimator off: no "
+              "integral action, so the payload sags the vehicle by its weight over k_x and a stiff kp pays",
+              ("kp", "kd"), sim_fly({"primitive": "figure8", "payload_kg": 0.4, "mass_estimator_km": 0.0}, FULL),
+              _sim_units(FULL)),
+        Plant("blind mavsim ArduPilot balanced gusts", "ArduCopter's z cascade (PSC_POSZ_P x PSC_VELZ_P) in gusts "
+              "x2 (2 / 1 m/s), scored as the MAVLink fleet scores a flight by default (IAE + motor activity + "
+              "oscillation)", ("kp", "kd"),
+              ardupilot_cascade_fly({"wind": {"gust_xy_mps": 2.0, "gust_z_mps": 1.0}}, "balanced"), ARDUPILOT_UNITS,
+              judge_cap=128, chunk=256),
+        Plant("blind analytic drifting conditions", "a tilted bowl whose every cost rises through the session (up to "
+              "30 %): points flown in different rounds compare unfairly", ("kp", "kd"), drift_fly),
+        Plant("blind analytic unequal vehicles", "each vehicle its own optimum (0.06 sd off the fleet's) and its own "
+              "cost level (10 % sd): the fleet's optimum from vehicles that disagree", ("kp", "kd"),
+              unequal_vehicles_fly),
+        Plant("blind analytic plateau", "a bowl that levels off a short way from its minimum: most of the box flat",
+              ("kp", "kd"), plateau_fly),
+    ]
+    return {p.name: p for p in out}
+
+
+BLIND = _blind()
+ALL_PLANTS = {**PLANTS, **UNSEEN, **FRESH, **BLIND}
+"""Every plant by name (the zoo's and the unseen, fresh and blind sets'): what the truth and the runs look a plant up
 in."""
