@@ -46,7 +46,7 @@ from quality import (  # noqa: E402
     CACHE as ZOO_CACHE, FULL, Runs, _clean, _git_commit, _init_worker, _labels, _progress, engine_hash,
 )
 from zoo.methods import Method, ZooFleet, candidates, tune_seed  # noqa: E402
-from zoo.plants import PLANTS  # noqa: E402
+from zoo.plants import ALL_PLANTS as PLANTS  # noqa: E402  (any set's plant: the zoo's, unseen, fresh, blind)
 from zoo.truth import WITHIN_PCT, Truth, key  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -448,7 +448,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     plants = [p.strip() for p in args.plants.split(",") if p.strip()]
     unknown = [p for p in plants if p not in PLANTS]
     if unknown:
-        ap.error(f"unknown plant(s) {unknown}; the zoo: {', '.join(PLANTS)}")
+        ap.error(f"unknown plant(s) {unknown}; known: {', '.join(PLANTS)}")
     want = _labels(args.methods, [m.label for m in candidates()])
     if isinstance(want, str):
         ap.error(f"--methods: no method labelled {want!r}; known: {'; '.join(m.label for m in candidates())}")

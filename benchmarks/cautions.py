@@ -32,7 +32,7 @@ from zoo.methods import Method, tune_run  # noqa: E402
 from zoo.truth import WITHIN_PCT  # noqa: E402
 
 KINDS = ("moving", "wide", "stale", "beside failure", "open face", "log scale", "divergence",
-         "cost at zero", "outliers")  # TuningResult.caution_kinds
+         "cost at zero", "outliers", "vehicles differ")  # TuningResult.caution_kinds
 
 
 def kinds_of_run(plant_name: str, tuning: dict[str, Any], run: int, x: list[float]) -> list[str]:

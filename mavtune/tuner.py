@@ -37,6 +37,7 @@ from mavtune.search.surface import (
 )
 from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
+from mavtune.vehicle_offsets import vehicle_offsets
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
                  "value the run's flights cannot rule out with all gains free (a gain vector is ruled out only when "
@@ -216,7 +217,9 @@ class TuningResult:
         failed ("beside failure"), a last design that answered on its box's face inside the range ("open face") or in
         the logarithm of the gains ("log scale"),
         the answer's fitted divergence chance where flights near it diverged ("divergence"), flights that measured
-        a cost at or below zero ("cost at zero"), flights the last design's fit left out as spoiled ("outliers")."""
+        a cost at or below zero ("cost at zero"), flights the last design's fit left out as spoiled ("outliers"), a
+        vehicle whose flights cost more or less than the others' at the same gains in the same rounds ("vehicles
+        differ": `vehicle_offsets`)."""
         out: list[tuple[str, str]] = []
 
         def say(kind: str, text: str) -> None:
@@ -309,6 +312,12 @@ class TuningResult:
                 gains = ", ".join(f"{n} {v:.4g}" for n, v in free.items())
                 say("divergence", f"{said}: the bound of {bound:.1%} on that chance moved the answer off the fit's "
                     f"minimum ({gains}), where it is {risk['unbounded_chance']:.1%}")
+        for o in vehicle_offsets(self.rounds):
+            say("vehicles differ", f"{o.vehicle}'s flights cost {abs(o.ratio):.0%} {'more' if o.ratio > 0 else 'less'} "
+                f"than the other vehicles' at the same gains in the same rounds ({o.pairs} rounds; {o.level:.0%} "
+                f"interval {o.lo:+.0%} to {o.hi:+.0%}): the vehicles fly unlike each other (a worn propeller, a "
+                f"weaker battery, a payload, another airframe) and the gains answer their average; look at "
+                f"{o.vehicle} before loading them onto it, or tune it alone")
         return out
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:

@@ -23,6 +23,7 @@ def test_the_sets_apart_are_apart_from_the_zoo_and_each_other():
     assert not set(FRESH) & (set(PLANTS) | set(UNSEEN))
     assert not set(BLIND) & (set(PLANTS) | set(UNSEEN) | set(FRESH))
     assert ALL_PLANTS == {**PLANTS, **UNSEEN, **FRESH, **BLIND}
+    assert not [n for n in ALL_PLANTS if "," in n]  # quality.py's --plants is a comma-separated list of them
     for name, plant in APART.items():
         assert plant.name == name and len(plant.description) > 40
         assert set(plant.units) <= set(plant.gains)

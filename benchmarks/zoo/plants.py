@@ -692,7 +692,7 @@ def _blind() -> dict[str, Plant]:
     """Kinds none of the zoo, the unseen and the fresh sets has, written in session 34 before any method flew them
     (`quality.py --zoo blind`): measured once, as the fresh set was."""
     out = [
-        Plant("blind sim ISE step, payload known", "the simulator flying a 1 m step with a 0.5 kg payload the "
+        Plant("blind sim ISE step with known payload", "the simulator flying a 1 m step with a 0.5 kg payload the "
               "controller knows, cost ISE (squared errors: the step's large early error weighs most)", ("kp", "kd"),
               sim_fly({"primitive": "step", "cost": "ise", "payload_kg": 0.5, "payload_known": True}, FULL),
               _sim_units(FULL)),

@@ -1,0 +1,82 @@
+"""A vehicle that flies costlier than the others at the same gains is named, with its offset and interval; vehicles
+alike are not; flights that compare nothing (alone at their gains, failed, lost, at or below zero) are left out."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import mavtune
+from mavtune.fleet import Flight, Status
+from mavtune.vehicle_offsets import MIN_OFFSET, vehicle_offsets
+
+
+class _Round:
+    def __init__(self, flights):
+        self.flights = flights
+
+
+def _rounds(levels, n_rounds=40, noise=0.08, seed=0, same_gains=True):
+    """Rounds in which each vehicle (its cost level in `levels`) flies the round's gains (or its own, apart)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n_rounds):
+        kp = float(rng.uniform(0.2, 0.8))
+        out.append(_Round([Flight(f"v{j}", {"kp": kp if same_gains else kp + 0.01 * j, "kd": 0.5},
+                                  (1.0 + (kp - 0.5) ** 2) * level * math.exp(noise * rng.standard_normal()))
+                           for j, level in enumerate(levels)]))
+    return out
+
+
+def test_a_costlier_vehicle_is_named_with_its_offset_and_an_interval_that_holds_it():
+    """Over 200 fleets whose second vehicle costs 25 % more: named each time (the costlier of two, not its mirror),
+    from every round, and the 90 % interval holds the 25 % in 80 to 97 % of them."""
+    named = [vehicle_offsets(_rounds([1.0, 1.25], seed=s)) for s in range(200)]
+    assert all([o.vehicle for o in n] == ["v1"] and n[0].pairs == 40 for n in named)
+    held = sum(n[0].lo < 0.25 < n[0].hi for n in named) / len(named)
+    assert 0.8 <= held <= 0.97, held
+
+
+def test_of_three_vehicles_only_the_one_apart_is_named_and_a_cheaper_one_too():
+    named = vehicle_offsets(_rounds([1.0, 1.0, 0.75], seed=3))
+    assert [o.vehicle for o in named] == ["v2"] and named[0].ratio < -0.15
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), spread=st.floats(0.0, 0.05))
+def test_vehicles_within_a_few_percent_of_each_other_are_not_named(seed, spread):
+    """Vehicles apart by less than half of MIN_OFFSET, with noise twice that, are never said to differ."""
+    assert spread < 0.5 * MIN_OFFSET
+    assert vehicle_offsets(_rounds([1.0, 1.0 + spread, 1.0 - spread], noise=0.1, seed=seed)) == []
+
+
+def test_flights_that_compare_nothing_are_left_out():
+    assert vehicle_offsets(_rounds([1.0])) == []  # one vehicle
+    assert vehicle_offsets(_rounds([1.0, 1.5], same_gains=False)) == []  # each at its own gains ("split")
+    assert vehicle_offsets(_rounds([1.0, 1.5], n_rounds=7)) == []  # too few rounds to tell
+    spoiled = _rounds([1.0, 1.5])
+    bad = [(math.inf, Status.FAILED), (math.nan, Status.LOST), (-1.0, Status.OK)]
+    for i, r in enumerate(spoiled[:33]):  # 33 of 40 rounds: v1's flight failed, was lost, or cost nothing above zero
+        cost, status = bad[i % 3]
+        r.flights[1] = Flight(r.flights[1].vehicle, r.flights[1].gains, cost, status)
+    assert vehicle_offsets(spoiled) == []  # 7 comparable rounds left: too few
+
+
+@pytest.mark.parametrize("level, says", [(1.0, False), (1.3, True)])
+def test_a_run_whose_second_vehicle_flies_costlier_says_so(level, says):
+    """Through the tuner: a cost function whose vehicle 1 costs `level` times vehicle 0's at the same gains (the
+    vehicle index of each flight's context) ends with the caution "vehicles differ" naming it, or without it."""
+    rng = np.random.default_rng(7)
+
+    def evaluate(gains, context):
+        return [((g["kp"] - 0.4) ** 2 + (g["kd"] - 0.6) ** 2 + 0.5) * (level if c.vehicle == 1 else 1.0)
+                * math.exp(0.05 * rng.standard_normal()) for g, c in zip(gains, context)]
+
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1, draws=0)
+    said = dict(result.caution_kinds()).get("vehicles differ")
+    assert (said is not None) == says
+    if says:
+        assert said.startswith("v1's flights cost 3") and "% more than the other vehicles' at the same gains" in said
+        assert "vehicles differ" in result.to_dict()["caution_kinds"]
