@@ -314,7 +314,7 @@ class TuningResult:
                     f"minimum ({gains}), where it is {risk['unbounded_chance']:.1%}")
         for o in vehicle_offsets(self.rounds):
             say("vehicles differ", f"{o.vehicle}'s flights cost {abs(o.ratio):.0%} {'more' if o.ratio > 0 else 'less'} "
-                f"than the other vehicles' at the same gains in the same rounds ({o.pairs} rounds; {o.level:.0%} "
+                f"than the other vehicles' at the same gains in the same rounds ({o.pairs} comparisons; {o.level:.0%} "
                 f"interval {o.lo:+.0%} to {o.hi:+.0%}): the vehicles fly unlike each other (a worn propeller, a "
                 f"weaker battery, a payload, another airframe) and the gains answer their average; look at "
                 f"{o.vehicle} before loading them onto it, or tune it alone")

@@ -19,7 +19,7 @@ from typing import Iterable, Protocol, Sequence
 
 LEVEL = 0.01  # two-sided chance that a vehicle no different from the others is named (over all vehicles)
 MIN_OFFSET = 0.1  # a vehicle is named only where its costs run at least 10 % above or below the others'
-MIN_PAIRS = 8  # rounds in which a vehicle shared gains with another, fewer tell nothing
+MIN_PAIRS = 8  # comparisons (a round's gains a vehicle shared with another): fewer tell nothing
 
 
 class _Flight(Protocol):
@@ -54,9 +54,9 @@ def vehicle_offsets(rounds: Iterable[_Round], level: float = LEVEL, min_offset: 
     each usable flight (flown, finite cost above zero) that shares its round and gains with another vehicle's, the
     logarithm of its cost less the other's there, or, three vehicles or more, less the median of all of theirs (a
     vehicle apart is measured against the others, not they against it); a vehicle is named where the mean of those
-    over at least `min_pairs` rounds lies beyond zero at `level` (two-sided, divided among the vehicles compared) and
-    beyond log(1 ± `min_offset`). Two vehicles alike in all but one: the costlier is named (the other's offset is its
-    mirror)."""
+    comparisons, at least `min_pairs` of them, lies beyond zero at `level` (two-sided, divided among the vehicles
+    compared) and beyond log(1 ± `min_offset`). Of two vehicles only the costlier is named: the other's offset is
+    its mirror."""
     per: dict[str, list[float]] = {}
     for r in rounds:
         groups: dict[tuple, dict[str, list[float]]] = {}

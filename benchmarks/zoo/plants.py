@@ -661,8 +661,13 @@ def drift_fly(x, seeds, rounds):
     return drift * (c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 1.0) * z[:, 1]), np.zeros(len(c), dtype=bool)
 
 
-def _vehicle_draws(seeds) -> np.ndarray:
-    """(n, 3) standard normals of each vehicle (seed) alone, the same in every round: what sets it apart."""
+UNEQUAL_OPTIMUM = (0.4, 0.55)  # the unequal vehicles' fleet optimum
+UNEQUAL_SHIFT, UNEQUAL_LEVEL = 0.06, 0.1  # sd of a vehicle's own optimum's offset per gain, and of its log cost level
+
+
+def vehicle_draws(seeds) -> np.ndarray:
+    """(n, 3) standard normals of each vehicle (seed) alone, the same in every round: what sets it apart (the unequal
+    vehicles' offsets of its optimum in kp and kd, and of its cost level)."""
     return np.array([np.random.default_rng([int(s), 13]).standard_normal(3) for s in seeds])
 
 
@@ -670,9 +675,10 @@ def unequal_vehicles_fly(x, seeds, rounds):
     """A swarm of unequal airframes: each vehicle's own optimum lies off the fleet's (0.4, 0.55) by 0.06 sd per gain
     and its costs run 10 % sd higher or lower, for every flight it flies; the fleet's optimum (the mean over
     vehicles, which the truth's repeats draw) stays at (0.4, 0.55); flight noise 5 %."""
-    b = _vehicle_draws(seeds)
-    u, v = x[:, 0] - 0.4 - 0.06 * b[:, 0], x[:, 1] - 0.55 - 0.06 * b[:, 1]
-    c = (1.0 + 5.0 * u * u + 4.0 * v * v + 1.5 * u * v) * np.exp(0.1 * b[:, 2] - 0.005)
+    b = vehicle_draws(seeds)
+    u = x[:, 0] - UNEQUAL_OPTIMUM[0] - UNEQUAL_SHIFT * b[:, 0]
+    v = x[:, 1] - UNEQUAL_OPTIMUM[1] - UNEQUAL_SHIFT * b[:, 1]
+    c = (1.0 + 5.0 * u * u + 4.0 * v * v + 1.5 * u * v) * np.exp(UNEQUAL_LEVEL * b[:, 2] - 0.005)
     z = _normals(seeds, rounds, 1)
     return c * (1.0 + 0.05 * z[:, 0]), np.zeros(len(c), dtype=bool)
 
