@@ -218,6 +218,14 @@ def study_args(doc: str, plants: Sequence[str], repeats: int, name: str,
     return args, [p.strip() for p in args.plants.split(",") if p.strip()]
 
 
+def runs_args(doc: str, argv: list[str] | None, runs: int = 40) -> argparse.Namespace:
+    """A study of the report half's runs' command line: --runs (how many) and --workers (processes)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=runs)
+    ap.add_argument("--workers", type=int, default=2)
+    return ap.parse_args(argv)
+
+
 def study_meta(script: str, argv: list[str] | None, started: datetime, load: tuple[float, ...], t0: float,
                **extra: Any) -> dict[str, Any]:
     """A zoo study's run facts (benchmarks/asymmetry.py, noise_skew.py): its command, commit, engine hash, start, wall

@@ -12,7 +12,6 @@ both orientations with the plant's own noise; an answer is judged on the noise-f
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -23,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import pooled, write_results  # noqa: E402
-from quality import study_line, study_meta  # noqa: E402
+from quality import runs_args, study_line, study_meta  # noqa: E402
 from zoo.plants import twin_basins_cost  # noqa: E402
 
 from mavtune.search.surface import FAR  # noqa: E402
@@ -67,10 +66,7 @@ def one(task: tuple[str, bool, int]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=40)
-    ap.add_argument("--workers", type=int, default=2)
-    args = ap.parse_args(argv)
+    args = runs_args(__doc__, argv)
     started, load, t0 = datetime.now(timezone.utc), os.getloadavg(), time.time()
     tasks = [(m, mirrored, 2 * i + 1) for mirrored in (False, True) for m in METHODS for i in range(args.runs)]
     rows, facts = pooled(one, tasks, args.workers)

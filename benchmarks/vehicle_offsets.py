@@ -13,7 +13,6 @@ the fleet's optimum and from the optimum of the two vehicles flown (each gain's 
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -25,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import pooled, write_results  # noqa: E402
-from quality import study_line, study_meta  # noqa: E402
+from quality import runs_args, study_line, study_meta  # noqa: E402
 
 UNEQUAL = "blind analytic unequal vehicles"
 ALIKE = ("sim nominal", "sim gusts x2.5", "sim spoiled flights", "mavsim PX4 cascade", "analytic cliff",
@@ -73,10 +72,7 @@ def scored(row: dict) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=40)
-    ap.add_argument("--workers", type=int, default=2)
-    args = ap.parse_args(argv)
+    args = runs_args(__doc__, argv)
     started, load, t0 = datetime.now(timezone.utc), os.getloadavg(), time.time()
     runs = [2 * i + 1 for i in range(args.runs)]
     rows, facts = pooled(one, [(p, r) for p in (UNEQUAL, *ALIKE) for r in runs], args.workers)
