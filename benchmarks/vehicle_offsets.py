@@ -44,7 +44,7 @@ def one(task: tuple[str, int]) -> dict:
     settings = Method("default (config.Tuning())").settings(plant, run)
     result = run_tuning(settings, ZooFleet(plant, settings.vehicles, tune_seed(run)))
     named = [{"vehicle": o.vehicle, "ratio": o.ratio, "lo": o.lo, "hi": o.hi, "pairs": o.pairs}
-             for o in vehicle_offsets(result.rounds)]
+             for o in vehicle_offsets(r.flights for r in result.rounds)]
     return {"plant": plant_name, "run": run, "x": [result.gains[g] for g in plant.gains], "named": named,
             "said": "vehicles differ" in dict(result.caution_kinds())}
 

@@ -312,7 +312,7 @@ class TuningResult:
                 gains = ", ".join(f"{n} {v:.4g}" for n, v in free.items())
                 say("divergence", f"{said}: the bound of {bound:.1%} on that chance moved the answer off the fit's "
                     f"minimum ({gains}), where it is {risk['unbounded_chance']:.1%}")
-        for o in vehicle_offsets(self.rounds):
+        for o in vehicle_offsets(r.flights for r in self.rounds):
             say("vehicles differ", f"{o.vehicle}'s flights cost {abs(o.ratio):.0%} {'more' if o.ratio > 0 else 'less'} "
                 f"than the other vehicles' at the same gains in the same rounds ({o.pairs} comparisons; {o.level:.0%} "
                 f"interval {o.lo:+.0%} to {o.hi:+.0%}): the vehicles fly unlike each other (a worn propeller, a "

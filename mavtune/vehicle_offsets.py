@@ -15,24 +15,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from statistics import NormalDist, median
-from typing import Iterable, Protocol, Sequence
+from typing import Iterable, Sequence
+
+from mavtune.fleet import Flight
 
 LEVEL = 0.01  # two-sided chance that a vehicle no different from the others is named (over all vehicles)
 MIN_OFFSET = 0.1  # a vehicle is named only where its costs run at least 10 % above or below the others'
 MIN_PAIRS = 8  # comparisons (a round's gains a vehicle shared with another): fewer tell nothing
-
-
-class _Flight(Protocol):
-    vehicle: str
-    gains: dict[str, float]
-    cost: float
-
-    @property
-    def usable(self) -> bool: ...
-
-
-class _Round(Protocol):
-    flights: Sequence[_Flight]
+INTERVAL = 0.9  # the level of a named vehicle's interval
 
 
 @dataclass(frozen=True)
@@ -45,10 +35,10 @@ class VehicleOffset:
     lo: float
     hi: float
     pairs: int
-    level: float = 0.9
+    level: float = INTERVAL
 
 
-def vehicle_offsets(rounds: Iterable[_Round], level: float = LEVEL, min_offset: float = MIN_OFFSET,
+def vehicle_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, min_offset: float = MIN_OFFSET,
                     min_pairs: int = MIN_PAIRS) -> list[VehicleOffset]:
     """The vehicles whose costs run apart from the others' at the same gains in the same round, largest first: for
     each usable flight (flown, finite cost above zero) that shares its round and gains with another vehicle's, the
@@ -58,9 +48,9 @@ def vehicle_offsets(rounds: Iterable[_Round], level: float = LEVEL, min_offset: 
     compared) and beyond log(1 ± `min_offset`). Of two vehicles only the costlier is named: the other's offset is
     its mirror."""
     per: dict[str, list[float]] = {}
-    for r in rounds:
+    for flights in rounds:
         groups: dict[tuple, dict[str, list[float]]] = {}
-        for f in r.flights:
+        for f in flights:
             if f.usable and f.cost > 0.0:
                 key = tuple(sorted((n, round(float(v), 12)) for n, v in f.gains.items()))
                 groups.setdefault(key, {}).setdefault(f.vehicle, []).append(math.log(f.cost))
@@ -76,7 +66,7 @@ def vehicle_offsets(rounds: Iterable[_Round], level: float = LEVEL, min_offset: 
     if len(compared) < 2:
         return []
     z = NormalDist().inv_cdf(1.0 - 0.5 * level / len(compared))
-    z90 = NormalDist().inv_cdf(0.95)
+    z_interval = NormalDist().inv_cdf(0.5 + 0.5 * INTERVAL)
     out = []
     for v, d in compared.items():
         n = len(d)
@@ -84,8 +74,8 @@ def vehicle_offsets(rounds: Iterable[_Round], level: float = LEVEL, min_offset: 
         sd = math.sqrt(math.fsum((x - mean) ** 2 for x in d) / (n - 1))
         se = sd / math.sqrt(n)
         if abs(mean) > z * se and abs(mean) >= math.log(1.0 + min_offset):
-            out.append(VehicleOffset(v, math.exp(mean) - 1.0, math.exp(mean - z90 * se) - 1.0,
-                                     math.exp(mean + z90 * se) - 1.0, n))
+            out.append(VehicleOffset(v, math.exp(mean) - 1.0, math.exp(mean - z_interval * se) - 1.0,
+                                     math.exp(mean + z_interval * se) - 1.0, n))
     out.sort(key=lambda o: -abs(math.log1p(o.ratio)))
     if len(compared) == 2 and len(out) == 2:  # two vehicles: one offset and its mirror, the costlier one says it
         out = [o for o in out if o.ratio > 0.0]

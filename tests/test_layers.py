@@ -5,7 +5,8 @@ given to importlib as strings (the lazy exports of `mavtune` and `mavtune.sim`, 
     base         errors, edges, interrupts, campaign (the chunk runner: in-process or Dask, runs what it is given),
                  near_stock (the answer nearest the stock gains within noise), flown (flights grouped by gain vector,
                  and the points not told apart from the best)
-    engine       fleet (the Fleet protocol), journal, search/, strategy, tuner, plan: no simulator, no vehicle
+    engine       fleet (the Fleet protocol), journal, search/, strategy, tuner, plan, vehicle_offsets (the vehicles that
+                 fly apart): no simulator, no vehicle
     sim          the simulated quadrotor and its fleet (SimFleet implements the engine's Fleet), cost surfaces
     config       the validated configuration (it names the simulator's Scenario) and the flags that make one
     vehicles     MAVLink vehicles (ArduPilot, PX4, mavsim) as a Fleet, their parameters and tuned files
@@ -31,7 +32,7 @@ LAYERS = (  # bottom first; a module's layer is that of its longest listed prefi
     ("base", ("mavtune.errors", "mavtune.edges", "mavtune.interrupts", "mavtune.campaign", "mavtune.near_stock",
               "mavtune.flown")),
     ("engine", ("mavtune.fleet", "mavtune.journal", "mavtune.search", "mavtune.strategy", "mavtune.tuner",
-                "mavtune.plan")),
+                "mavtune.plan", "mavtune.vehicle_offsets")),
     ("sim", ("mavtune.sim",)),
     ("config", ("mavtune.config", "mavtune.options")),
     ("vehicles", ("mavtune.vehicles",)),
