@@ -17,7 +17,7 @@ def _rounds(levels, n_rounds=40, noise=0.08, seed=0, same_gains=True):
     """Each round's flights: each vehicle (its cost level in `levels`) flies the round's gains (or its own, apart)."""
     rng = np.random.default_rng(seed)
     out = []
-    for k in range(n_rounds):
+    for _ in range(n_rounds):
         kp = float(rng.uniform(0.2, 0.8))
         out.append([Flight(f"v{j}", {"kp": kp if same_gains else kp + 0.01 * j, "kd": 0.5},
                            (1.0 + (kp - 0.5) ** 2) * level * math.exp(noise * rng.standard_normal()))
