@@ -75,3 +75,21 @@ def test_a_run_whose_second_vehicle_flies_costlier_says_so(level, says):
     if says:
         assert said.startswith("v1's flights cost 3") and "% more than the other vehicles' at the same gains" in said
         assert "vehicles differ" in result.to_dict()["caution_kinds"]
+
+
+def test_a_resumed_run_says_the_same(tmp_path):
+    """The caution reads the rounds' flights, which the journal keeps: a run resumed from it (every round replayed)
+    names the same vehicle with the same numbers."""
+
+    def costs():
+        rng = np.random.default_rng(7)
+        return lambda gains, context: [((g["kp"] - 0.4) ** 2 + (g["kd"] - 0.6) ** 2 + 0.5)
+                                       * (1.3 if c.vehicle == 1 else 1.0) * math.exp(0.05 * rng.standard_normal())
+                                       for g, c in zip(gains, context)]
+
+    space, journal = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, tmp_path / "journal.sqlite"
+    flown = mavtune.tune(costs(), space=space, seed=1, draws=0, journal=journal)
+    resumed = mavtune.tune(costs(), space=space, seed=1, draws=0, journal=journal)
+    assert all(r.replayed for r in resumed.rounds)
+    said = dict(flown.caution_kinds())["vehicles differ"]
+    assert dict(resumed.caution_kinds())["vehicles differ"] == said
