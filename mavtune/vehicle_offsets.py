@@ -18,6 +18,7 @@ from statistics import NormalDist, median
 from typing import Iterable, Sequence
 
 from mavtune.fleet import Flight
+from mavtune.flown import by_gains
 
 LEVEL = 0.01  # two-sided chance that a vehicle no different from the others is named (over all vehicles)
 MIN_OFFSET = 0.1  # a vehicle is named only where its costs run at least 10 % above or below the others'
@@ -49,12 +50,11 @@ def vehicle_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, mi
     its mirror."""
     per: dict[str, list[float]] = {}
     for flights in rounds:
-        groups: dict[tuple, dict[str, list[float]]] = {}
-        for f in flights:
-            if f.usable and f.cost > 0.0:
-                key = tuple(sorted((n, round(float(v), 12)) for n, v in f.gains.items()))
-                groups.setdefault(key, {}).setdefault(f.vehicle, []).append(math.log(f.cost))
-        for by_vehicle in groups.values():
+        for _, shared in by_gains((f.gains, (f.vehicle, math.log(f.cost))) for f in flights
+                                  if f.usable and f.cost > 0.0).values():
+            by_vehicle: dict[str, list[float]] = {}
+            for vehicle, cost in shared:
+                by_vehicle.setdefault(vehicle, []).append(cost)
             if len(by_vehicle) < 2:
                 continue
             means = {v: math.fsum(c) / len(c) for v, c in by_vehicle.items()}
