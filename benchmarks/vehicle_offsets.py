@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import asdict
 import sys
 import time
 from datetime import datetime, timezone
@@ -33,7 +34,7 @@ BANDS = ((0.0, 0.05), (0.05, 0.1), (0.1, 0.2), (0.2, math.inf))  # the true offs
 
 
 def one(task: tuple[str, int]) -> dict:
-    """One default run: the vehicles it names (offset, interval, rounds) and its answer."""
+    """One default run: the vehicles it names (`VehicleOffset`: offset, interval, comparisons) and its answer."""
     from mavtune.tuner import run_tuning
     from mavtune.vehicle_offsets import vehicle_offsets
     from zoo.methods import Method, ZooFleet, tune_seed
@@ -43,8 +44,7 @@ def one(task: tuple[str, int]) -> dict:
     plant = ALL_PLANTS[plant_name]
     settings = Method("default (config.Tuning())").settings(plant, run)
     result = run_tuning(settings, ZooFleet(plant, settings.vehicles, tune_seed(run)))
-    named = [{"vehicle": o.vehicle, "ratio": o.ratio, "lo": o.lo, "hi": o.hi, "pairs": o.pairs}
-             for o in vehicle_offsets(r.flights for r in result.rounds)]
+    named = [asdict(o) for o in vehicle_offsets(r.flights for r in result.rounds)]
     return {"plant": plant_name, "run": run, "x": [result.gains[g] for g in plant.gains], "named": named,
             "said": "vehicles differ" in dict(result.caution_kinds())}
 
