@@ -46,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model  # noqa: E402
 from zoo import stats  # noqa: E402
 from zoo.methods import PEERS, Method, candidates, peer_run, tune_run  # noqa: E402
-from zoo.plants import ALL_PLANTS, BLIND, FRESH, PLANTS, UNSEEN  # noqa: E402
+from zoo.plants import ALL_PLANTS, BLIND, FRESH, HELDOUT, PLANTS, UNSEEN  # noqa: E402
 from zoo.truth import Truth  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -265,7 +265,7 @@ def _width(s: dict[str, Any]) -> str:
     return f" ({w:.0%})" if w is not None and s.get("coverage") is not None else ""
 
 
-ZOOS = {"zoo": PLANTS, "unseen": UNSEEN, "fresh": FRESH, "blind": BLIND}
+ZOOS = {"zoo": PLANTS, "unseen": UNSEEN, "fresh": FRESH, "blind": BLIND, "heldout": HELDOUT}
 ZOO_TITLES = {"zoo": "plant zoo", "unseen": "unseen plants (never chosen on)",
               "fresh": "fresh plants (written blind in session 33, measured once)",
               "blind": "blind plants (written blind in session 34, measured once)"}
@@ -368,8 +368,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--quick", action="store_true", help="a smoke run: 2 plants, tiny truth, 2 runs, no cache")
     ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--zoo", choices=tuple(ZOOS), default="zoo", help="the plants: the zoo the defaults are "
-                    "chosen on, the unseen set they never were, or the fresh and blind sets written before any method "
-                    "flew them (report only; writes quality_unseen.* / quality_fresh.* / quality_blind.*)")
+                    "chosen on, the unseen set they never were, or the fresh, blind and held-out sets written before "
+                    "any method flew them (report only; writes quality_<set>.*)")
     args = ap.parse_args(argv)
     if args.zoo != "zoo" and args.half == "select":
         ap.error(f"--zoo {args.zoo}: nothing is chosen on the {args.zoo} plants; use --half report")

@@ -727,6 +727,79 @@ def _blind() -> dict[str, Plant]:
 
 
 BLIND = _blind()
-ALL_PLANTS = {**PLANTS, **UNSEEN, **FRESH, **BLIND}
-"""Every plant by name (the zoo's and the unseen, fresh and blind sets'): what the truth and the runs look a plant up
-in."""
+
+
+# ----- the held-out set: written in session 35 before any method flew them, to score the answer change measured -----
+# on the zoo's select half (and nothing else) ------------------------------------------------------------------------
+
+STEEP_OPTIMUM = (0.62, 0.4)  # the steep-sided bowl's minimum
+
+
+def steep_side_fly(x, seeds, rounds):
+    """A bowl about (0.62, 0.4) that rises gently below its minimum in kp and exponentially above it (as the
+    oscillation of a stiff loop grows): a fit pulled by the steep side answers short of the minimum; kd a plain
+    quadratic; noise 8 % plus a share growing with the cost."""
+    u, v = x[:, 0] - STEEP_OPTIMUM[0], x[:, 1] - STEEP_OPTIMUM[1]
+    c = 1.0 + 3.0 * u * u + 0.25 * np.expm1(np.maximum(u, 0.0) * 14.0) - 14.0 * 0.25 * np.maximum(u, 0.0) \
+        + 4.0 * v * v
+    z = _normals(seeds, rounds, 2)
+    return c * (1.0 + 0.08 * z[:, 0]) + 0.1 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
+
+
+RIDGE_ANGLE = math.radians(35.0)  # the narrow valley's floor runs at this angle to the kp axis
+
+
+def narrow_valley_fly(x, seeds, rounds):
+    """A straight valley 30 times steeper across than along, its floor at 35° through the box (kp and kd trade
+    against each other), minimum at (0.45, 0.5); lognormal noise 7 %."""
+    u, v = x[:, 0] - 0.45, x[:, 1] - 0.5
+    along = u * math.cos(RIDGE_ANGLE) + v * math.sin(RIDGE_ANGLE)
+    across = -u * math.sin(RIDGE_ANGLE) + v * math.cos(RIDGE_ANGLE)
+    c = 1.0 + 1.5 * along * along + 45.0 * across * across
+    z = _normals(seeds, rounds, 1)
+    return c * np.exp(0.07 * z[:, 0] - 0.00245), np.zeros(len(c), dtype=bool)
+
+
+def noisy_bowl_fly(x, seeds, rounds):
+    """A shallow tilted bowl about (0.3, 0.7) measured through 25 % lognormal noise (a gusty day on a small
+    airframe): the flights barely tell its minimum."""
+    u, v = x[:, 0] - 0.3, x[:, 1] - 0.7
+    c = 1.0 + 2.0 * u * u + 1.5 * v * v - 1.0 * u * v
+    z = _normals(seeds, rounds, 1)
+    return c * np.exp(0.25 * z[:, 0] - 0.03125), np.zeros(len(c), dtype=bool)
+
+
+def _heldout() -> dict[str, Plant]:
+    """Kinds none of the other sets has, written in session 35 before any method flew them (`quality.py --zoo
+    heldout`): measured once, to score the answer rule chosen on the zoo's select half."""
+    out = [
+        Plant("heldout sim noisy sensors step", "the simulator flying a 1 m step with 5 times the altitude (0.05 m) "
+              "and vertical velocity (0.1 m/s) noise: the derivative gain amplifies the noise", ("kp", "kd"),
+              sim_fly({"primitive": "step", "noise": {"altitude_m": 0.05, "vertical_velocity_mps": 0.1}}, FULL),
+              _sim_units(FULL)),
+        Plant("heldout sim unlike airframes balanced", "the paper's circle, the balanced cost, the vehicles 10 % "
+              "apart in take-off mass and rotor constant (sd; 3 % nominal)", ("kp", "kd"),
+              sim_fly({"cost": "balanced", "spread": {"mass": 0.1, "motor_constant": 0.1}}, FULL),
+              _sim_units(FULL)),
+        Plant("heldout sim battery figure-8 slow loop", "the figure-8 with the paper's 0.9 kg battery known to the "
+              "controller, 60 ms latency and a 2 Hz error filter", ("kp", "kd"),
+              sim_fly({"primitive": "figure8", "payload_kg": 0.9, "payload_known": True, "latency_s": 0.06,
+                       "filter_hz": 2.0}, FULL), _sim_units(FULL)),
+        Plant("heldout mavsim PX4 balanced gusts", "PX4's cascade (MPC_Z_P x MPC_Z_VEL_P_ACC) in gusts x2 (2 / 1 m/s), "
+              "scored as the MAVLink fleet scores a flight by default", ("kp", "kd"),
+              px4_cascade_fly(("kp", "kd"), {"wind": {"gust_xy_mps": 2.0, "gust_z_mps": 1.0}}, "balanced"),
+              px4_units(("kp", "kd")), judge_cap=128, chunk=256),
+        Plant("heldout analytic steep side", "a bowl gentle below its minimum in kp and exponentially steep above "
+              "it, noise 8 % growing with the cost", ("kp", "kd"), steep_side_fly),
+        Plant("heldout analytic narrow valley", "a straight valley 30 times steeper across than along, at 35° to kp: "
+              "the gains trade against each other", ("kp", "kd"), narrow_valley_fly),
+        Plant("heldout analytic noisy bowl", "a shallow tilted bowl through 25 % lognormal noise", ("kp", "kd"),
+              noisy_bowl_fly),
+    ]
+    return {p.name: p for p in out}
+
+
+HELDOUT = _heldout()
+ALL_PLANTS = {**PLANTS, **UNSEEN, **FRESH, **BLIND, **HELDOUT}
+"""Every plant by name (the zoo's and the unseen, fresh, blind and held-out sets'): what the truth and the runs look a
+plant up in."""
