@@ -268,7 +268,8 @@ def _width(s: dict[str, Any]) -> str:
 ZOOS = {"zoo": PLANTS, "unseen": UNSEEN, "fresh": FRESH, "blind": BLIND, "heldout": HELDOUT}
 ZOO_TITLES = {"zoo": "plant zoo", "unseen": "unseen plants (never chosen on)",
               "fresh": "fresh plants (written blind in session 33, measured once)",
-              "blind": "blind plants (written blind in session 34, measured once)"}
+              "blind": "blind plants (written blind in session 34, measured once)",
+              "heldout": "held-out plants (written blind in session 35, measured once)"}
 
 
 def markdown(doc: dict[str, Any]) -> str:
