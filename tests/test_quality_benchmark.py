@@ -67,6 +67,11 @@ def test_method_labels_holding_commas_are_taken_whole_and_an_unknown_one_is_name
         quality.main(["--quick", "--methods", "no such method"])
 
 
+def test_every_plant_set_has_a_title_for_its_results(quality):
+    """A set `--zoo` offers writes its results under a title (the held-out set's first run failed there)."""
+    assert set(quality.ZOO_TITLES) == set(quality.ZOOS)
+
+
 def test_two_engines_results_are_paired_run_by_run(tmp_path):
     """benchmarks/paired_engines.py: the same plant and run of two engines' default, compared by true excess (ties
     left out), per plant and over the zoo; a run only one result holds is not paired."""
