@@ -179,15 +179,16 @@ def candidates() -> list[Method]:
     its half-width (`design_shrink_wall`; session 29's screen), and without it (before session 30) and with it only
     where the cost rises into the failed flight 1.4-fold (`design_wall_rise`, session 30; 0.25 that way is the
     default since), or narrowing to 0.25 where it rises 1.2-fold or twofold, and with the passes starting at the
-    map's fitted minimum however far from it the map flew lower (`design_map_far`, before session 33). The paper's setting
-    (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
+    map's fitted minimum however far from it the map flew lower (`design_map_far`, before session 33), and today's
+    default on 1 and 4 vehicles (`swarms`, session 35: not a choice of the default, the swarm a user has). The
+    paper's setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
     return [today, Method("previous default (2 passes, then ±0.15; session 12)", base),
             *(Method(m.label, {**base, **m.tuning}, m.peer, m.per_gain) for m in older),
             Method("default at 26 flights a gain (the flight goals: 52 for 2 gains, 104 for 4)", per_gain=26),
             Method("default without the pass over the gains at 26 flights a gain", {"bootstraps": 0}, per_gain=26),
-            *capped(), *split_designs(),
+            *capped(), *split_designs(), *swarms(),
             Method("default without the wider refit of a face answer (design_widen = 0: before session 19)",
                    {"design_widen": 0.0, "design_outliers": 0.0}),  # (nor session 20's outlier rule)
             Method("default, the vehicles of a round on distinct points (strategy split)", {"strategy": "split"}),
@@ -236,6 +237,16 @@ NO_WALL = {"design_shrink_wall": 0.0, "design_map_far": 0.0}  # (each default be
 # failed flight by 0.4 too, and started the passes at the map's fit)
 BEFORE_MAP_FAR = "default before session 33 (the passes start at the map's fitted minimum: design_map_far = 0)"
 NO_MAP_FAR = {"design_map_far": 0.0}  # (each default before session 33 started the passes at the map's fit)
+
+
+def swarms() -> list[Method]:
+    """Today's default on another swarm (session 35): one vehicle flying every round's flights in turn (its budget is
+    2 vehicles' flights, so twice the rounds), and four vehicles in 2 vehicles' rounds (twice the flights, the same
+    time), each round's gains flown by all of them (avg) or each vehicle on its own point (split). Vehicles 0 and 1
+    of a run are those the 2-vehicle runs fly."""
+    return [Method("default on 1 vehicle", {"vehicles": 1}),
+            Method("default on 4 vehicles, each round's gains flown by all (avg)", {"vehicles": 4}),
+            Method("default on 4 vehicles, each on its own point (split)", {"vehicles": 4, "strategy": "split"})]
 
 
 def split_designs() -> list[Method]:
