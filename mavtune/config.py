@@ -237,7 +237,9 @@ class Tuning(_Section):
     design_width: float = Field(0.5, gt=0.0, le=0.5, description="design: the design's half-width, a share of "
                                  "each gain's range (the design is shifted inside the ranges, not shrunk)")
     design_repeats: StrictInt = Field(1, ge=1, le=MAX_DESIGN_REPEATS, description="design: times each design point is flown "
-                                       "(by as many vehicles as the strategy puts on a point)")
+                                       "(by as many vehicles as the strategy puts on a point); with design_split "
+                                       "\"auto\" at least as often as two vehicles would fly it (one vehicle, or "
+                                       "split: each point twice in turn on 2 gains)")
     design_steps: StrictInt = Field(3, ge=1, le=MAX_DESIGN_REPEATS, description="design: designs flown in turn, "
                                      "each around the answer of the one before (a valley or a far optimum is followed "
                                      "one design's width at a time)")

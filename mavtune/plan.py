@@ -268,7 +268,8 @@ def make_plan(settings: Settings, primitive_s: float = 8.0, settle_s: float = 1.
     evaluations = settings.search(lo, hi).budget() * searches
     surface = settings.design_rounds()  # the design's rounds: the same whatever the costs
     if surface:
-        evaluations += sum(settings.design_points(k) for k in range(settings.design_count())) * settings.design_repeats
+        evaluations += sum(settings.design_points(k) * settings.design_repeats_at(k)
+                           for k in range(settings.design_count()))
         rounds, clear = rounds + surface, None if clear is None else clear + surface
     return Plan(rounds, per_search_max * searches + surface, settings.vehicles, evaluations,
                 bootstraps, primitive_s, settle_s, battery_s, stop_rule=settings.bootstraps is None,

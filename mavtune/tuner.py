@@ -50,6 +50,7 @@ INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, 
 DIRECTION = "direction"  # the `gain` of a round of a line search across the gains (all gains at once)
 SURFACE = "design"  # the `gain` of a round of the response surface's design (all gains at once)
 MAX_DESIGN_REPEATS = 100
+PAIR = 2  # the vehicles the defaults were chosen with (the zoo's): a design point gets at least their flights
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 MAX_ROUNDS_WITHOUT_A_COST = 10  # rounds a run flies, none of whose flights measured a usable cost (every one failed or
 # was lost: a cost function that answers NaN, vehicles that cannot fly any gain), before it gives up: no gains to give
@@ -646,10 +647,10 @@ class Settings:
         return rounds * len(self.space) * passes + self.design_rounds()  # (a line search across the gains may be skipped)
 
     def design_flights(self, step: int = 0) -> int:
-        """Flights of design `step` (0: the first): its points, each flown `design_repeats` times by as many vehicles
-        as the strategy puts on a point (by one vehicle each with `design_split`: the vehicles fly distinct
+        """Flights of design `step` (0: the first): its points, each flown `design_repeats_at` times by as many
+        vehicles as the strategy puts on a point (by one vehicle each with `design_split`: the vehicles fly distinct
         points)."""
-        return self.design_points(step) * self.design_per_point(step) * int(self.design_repeats)
+        return self.design_points(step) * self.design_per_point(step) * self.design_repeats_at(step)
 
     def design_inner_at(self, step: int) -> bool:
         """Whether design `step` adds the inner corners (`design_inner`: the first design only)."""
@@ -669,8 +670,25 @@ class Settings:
         if self.design_inner_at(step):
             return 1
         if self.design_split == "auto":
-            return max(1, min(rule, 3 * surface_coefficients(len(self.space)) // self.design_points(step)))
+            return min(rule, self._design_point_flights(step))
         return 1 if self.design_split else rule
+
+    def design_repeats_at(self, step: int = 0) -> int:
+        """Times the vehicles on each point of design `step` (`design_per_point`) fly it: `design_repeats`, and with
+        `design_split` "auto" at least as many as give the point the flights that PAIR vehicles would: one vehicle,
+        or one vehicle a point (split), flies each point in turn as often as two vehicles fly it at once (on one
+        vehicle the zoo's plants lost 209 runs to 91 to two vehicles' same flights when it flew each point once:
+        benchmarks/results/quality_swarms_before.md). The map (`design_inner`) flies each point once."""
+        repeats = int(self.design_repeats)
+        if self.design_split != "auto" or self.design_inner_at(step):
+            return repeats
+        pair = min(PAIR, self._design_point_flights(step))
+        return max(repeats, math.ceil(pair / self.design_per_point(step)))
+
+    def _design_point_flights(self, step: int) -> int:
+        """The most flights a point of design `step` gets from its vehicles under `design_split` "auto": about three
+        per coefficient of the quadratic over the design's points (1 gain: 3; 2 gains: 2; 3 or more: 1)."""
+        return max(1, 3 * surface_coefficients(len(self.space)) // self.design_points(step))
 
     def design_count(self) -> int:
         """Designs flown in turn (`design_steps`; 0 without a design)."""
@@ -1024,7 +1042,7 @@ class Tuner:
             points = [layout.back(p) for p in surface_design(layout.to(centre), half, s.design_inner_at(step))]
         per_point = s.design_per_point(step)
         queue = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, p)}
-                 for _ in range(int(s.design_repeats)) for p in points for _ in range(per_point)]
+                 for _ in range(s.design_repeats_at(step)) for p in points for _ in range(per_point)]
         box = _span(points)
         reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
         todo, limit = self._design_budget(queue, points, names, lo, width, step)

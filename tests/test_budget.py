@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import random
+from collections import Counter
 
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -350,3 +351,28 @@ def test_a_budget_that_starves_the_line_searches_still_states_every_interval(ext
         u = result.uncertainty[name]
         assert math.isfinite(u["lo"]) and math.isfinite(u["hi"]), (name, u)
         assert u["lo"] <= value <= u["hi"]
+
+
+@pytest.mark.parametrize("vehicles, strategy", [(1, "avg"), (2, "split"), (4, "split")])
+def test_one_vehicle_a_point_flies_each_design_point_as_often_as_two_vehicles_do(vehicles, strategy):
+    """The default's designs after the map fly each point twice on 2 gains, whatever the swarm: two vehicles fly it
+    at once, one vehicle (or one vehicle a point, split) twice in turn; the map flies each point once. (A design of
+    single flights answered far worse: quality_swarms_before.md.) The run flies what the plan says."""
+    pair = Tuning().settings()
+    s = Tuning(vehicles=vehicles, strategy=strategy).settings()
+    for k in range(1, s.design_count()):
+        assert s.design_per_point(k) * s.design_repeats_at(k) == pair.design_per_point(k) * pair.design_repeats_at(k) == 2
+    assert s.design_repeats_at(0) == pair.design_repeats_at(0) == 1 and s.design_per_point(0) == 1
+    result = run_tuning(s, mavtune.fleet.CallableFleet(noisy_bowl(7), vehicles), draws=0)
+    last = [a for r in result.rounds if r.gain == "design" for a in r.assignments][-s.design_flights(2):]
+    assert all(n == 2 for n in Counter(tuple(sorted(a.items())) for a in last).values())
+    assert result.flights == make_plan(s).flights == s.budget
+
+
+def test_three_gains_and_two_vehicles_keep_their_design_flights():
+    """Where the vehicles already give a point its flights (two on 2 gains) or a point asks for one (3 gains and
+    more), nothing is repeated."""
+    assert Tuning().settings().design_repeats_at(1) == 1
+    three = Tuning(space={n: (0.0, 1.0) for n in GAINS[:3]}, vehicles=1).settings()
+    assert three.design_repeats_at(1) == 1 and three.design_per_point(1) == 1
+    assert Tuning(vehicles=4).settings().design_repeats_at(1) == 1

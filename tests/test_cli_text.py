@@ -92,8 +92,8 @@ def test_ignored_settings_are_warned_and_recorded(tmp_path):
 
 def test_one_vehicle_is_one_vehicle():
     code, out, _ = cli("plan", "-n", "1", "--epsilon", "0.125", "--no-adaptive", "--budget", "none")
-    assert code == 0 and "1 sim vehicle ·" in out and "(1 vehicle × 51 rounds" in out  # 18 + 2 at the edges
-    # (1 pass) + 31 of the designs (13 + 9 + 9 points)
+    assert code == 0 and "1 sim vehicle ·" in out and "(1 vehicle × 69 rounds" in out  # 18 + 2 at the edges
+    # (1 pass) + 49 of the designs (the map's 13 points once, then 9 points flown twice each, as two vehicles fly them)
 
 
 def test_the_round_line_labels_each_vehicle_and_gives_the_mean():

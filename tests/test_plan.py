@@ -69,9 +69,10 @@ def test_plan_command_prints_the_numbers():
                                    "--no-adaptive", "--budget", "none"])
     assert out.exit_code == 0, out.output
     text = " ".join(out.output.split())
-    assert "rounds 10 (guaranteed at most 22" in text  # 14 of the method's comparisons (1 pass), 2 at a range's
-    # edge, and the designs' 13, 9 and 9 points on 8 vehicles: 2 rounds each
-    assert "flights 80" in text and "1 min 30 s" in text and "batteries 2 per vehicle" in text
+    assert "rounds 12 (guaranteed at most 24" in text  # 14 of the method's comparisons (1 pass), 2 at a range's
+    # edge, and the designs on 8 vehicles: the map's 13 points once (2 rounds), then 9 points each flown twice in turn
+    # (split: one vehicle a point; 3 rounds each)
+    assert "flights 96" in text and "1 min 48 s" in text and "batteries 2 per vehicle" in text
 
 def test_the_plan_says_the_first_rounds_fly_the_corners_of_the_box_and_they_do():
     """The default maps the box first, its corners included (every gain at a bound): an engineer must know before
