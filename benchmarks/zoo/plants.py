@@ -729,8 +729,7 @@ def _blind() -> dict[str, Plant]:
 BLIND = _blind()
 
 
-# ----- the held-out set: written in session 35 before any method flew them, to score the answer change measured -----
-# on the zoo's select half (and nothing else) ------------------------------------------------------------------------
+# ----- the held-out set: written in session 35 before any method flew them, measured once -----------------------
 
 STEEP_OPTIMUM = (0.62, 0.4)  # the steep-sided bowl's minimum
 
@@ -771,7 +770,7 @@ def noisy_bowl_fly(x, seeds, rounds):
 
 def _heldout() -> dict[str, Plant]:
     """Kinds none of the other sets has, written in session 35 before any method flew them (`quality.py --zoo
-    heldout`): measured once, to score the answer rule chosen on the zoo's select half."""
+    heldout`): measured once (quality_heldout.md)."""
     out = [
         Plant("heldout sim noisy sensors step", "the simulator flying a 1 m step with 5 times the altitude (0.05 m) "
               "and vertical velocity (0.1 m/s) noise: the derivative gain amplifies the noise", ("kp", "kd"),
