@@ -38,7 +38,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from datetime import datetime, timezone  # noqa: E402
 from multiprocessing import get_context  # noqa: E402
 from pathlib import Path  # noqa: E402
-from typing import Any, Sequence  # noqa: E402
+from typing import Any, NamedTuple, Sequence  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -46,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_model  # noqa: E402
 from zoo import stats  # noqa: E402
 from zoo.methods import PEERS, Method, candidates, peer_run, tune_run  # noqa: E402
-from zoo.plants import ALL_PLANTS, BLIND, FRESH, HELDOUT, PLANTS, UNSEEN  # noqa: E402
+from zoo.plants import ALL_PLANTS, BLIND, FRESH, HELDOUT, PLANTS, UNSEEN, Plant  # noqa: E402
 from zoo.truth import Truth  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -265,16 +265,22 @@ def _width(s: dict[str, Any]) -> str:
     return f" ({w:.0%})" if w is not None and s.get("coverage") is not None else ""
 
 
-ZOOS = {"zoo": PLANTS, "unseen": UNSEEN, "fresh": FRESH, "blind": BLIND, "heldout": HELDOUT}
-ZOO_TITLES = {"zoo": "plant zoo", "unseen": "unseen plants (never chosen on)",
-              "fresh": "fresh plants (written blind in session 33, measured once)",
-              "blind": "blind plants (written blind in session 34, measured once)",
-              "heldout": "held-out plants (written blind in session 35, measured once)"}
+class PlantSet(NamedTuple):
+    """A set of plants `--zoo` offers, and the title its results are written under."""
+
+    plants: dict[str, Plant]
+    title: str
+
+
+ZOOS = {"zoo": PlantSet(PLANTS, "plant zoo"), "unseen": PlantSet(UNSEEN, "unseen plants (never chosen on)"),
+        "fresh": PlantSet(FRESH, "fresh plants (written blind in session 33, measured once)"),
+        "blind": PlantSet(BLIND, "blind plants (written blind in session 34, measured once)"),
+        "heldout": PlantSet(HELDOUT, "held-out plants (written blind in session 35, measured once)")}
 
 
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["meta"]
-    title = ZOO_TITLES[m.get("zoo", "zoo")]
+    title = ZOOS[m.get("zoo", "zoo")].title
     lines = [f"# Quality of the tuned gains on the {title} (issue 20) — {m['half']} half", "",
              f"Command: `{m['command']}` at commit `{m['commit']}` (mavtune source hash `{m['engine']}`), "
              f"{m['started_utc']} to {m['finished_utc']}; machine: {m['cpu_model']}, {m['cpus']} cores shared with "
@@ -374,7 +380,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     args = ap.parse_args(argv)
     if args.zoo != "zoo" and args.half == "select":
         ap.error(f"--zoo {args.zoo}: nothing is chosen on the {args.zoo} plants; use --half report")
-    zoo = ZOOS[args.zoo]
+    zoo = ZOOS[args.zoo].plants
     runs_n = args.runs if args.runs is not None else (2 if args.quick else 40)
     sizes = QUICK if args.quick else FULL
     plants = [p.strip() for p in args.plants.split(",") if p.strip()] or (

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import asdict
 import sys
 import time
+from dataclasses import asdict
 from datetime import datetime, timezone
 from pathlib import Path
 

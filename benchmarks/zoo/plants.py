@@ -739,8 +739,8 @@ def steep_side_fly(x, seeds, rounds):
     oscillation of a stiff loop grows): a fit pulled by the steep side answers short of the minimum; kd a plain
     quadratic; noise 8 % plus a share growing with the cost."""
     u, v = x[:, 0] - STEEP_OPTIMUM[0], x[:, 1] - STEEP_OPTIMUM[1]
-    c = 1.0 + 3.0 * u * u + 0.25 * np.expm1(np.maximum(u, 0.0) * 14.0) - 14.0 * 0.25 * np.maximum(u, 0.0) \
-        + 4.0 * v * v
+    above = np.maximum(u, 0.0)  # (the exponential's own slope at the minimum taken off: smooth there)
+    c = 1.0 + 3.0 * u * u + 0.25 * np.expm1(above * 14.0) - 14.0 * 0.25 * above + 4.0 * v * v
     z = _normals(seeds, rounds, 2)
     return c * (1.0 + 0.08 * z[:, 0]) + 0.1 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
 
