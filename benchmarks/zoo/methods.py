@@ -243,10 +243,18 @@ def swarms() -> list[Method]:
     """Today's default on another swarm (session 35): one vehicle flying every round's flights in turn (its budget is
     2 vehicles' flights, so twice the rounds), and four vehicles in 2 vehicles' rounds (twice the flights, the same
     time), each round's gains flown by all of them (avg) or each vehicle on its own point (split). Vehicles 0 and 1
-    of a run are those the 2-vehicle runs fly."""
+    of a run are those the 2-vehicle runs fly. Then four vehicles at 2 vehicles' flights (42 a gain), so in half
+    the rounds, averaging, split, or two points a round each flown by two (groups): does a bigger swarm finish
+    sooner without losing the answer (session 36)?"""
     return [Method("default on 1 vehicle", {"vehicles": 1}),
             Method("default on 4 vehicles, each round's gains flown by all (avg)", {"vehicles": 4}),
-            Method("default on 4 vehicles, each on its own point (split)", {"vehicles": 4, "strategy": "split"})]
+            Method("default on 4 vehicles, each on its own point (split)", {"vehicles": 4, "strategy": "split"},
+                   per_gain=84),  # 2 vehicles' rounds: since session 36 "auto" gives split 2 vehicles' flights
+            Method("default on 4 vehicles in half the rounds (avg)", {"vehicles": 4}, per_gain=42),
+            Method("default on 4 vehicles in half the rounds (split)", {"vehicles": 4, "strategy": "split"},
+                   per_gain=42),
+            Method("default on 4 vehicles in half the rounds (groups of 2)",
+                   {"vehicles": 4, "strategy": "groups", "replicates": 2}, per_gain=42)]
 
 
 def split_designs() -> list[Method]:
