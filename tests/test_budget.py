@@ -247,9 +247,9 @@ def test_the_default_budget_is_42_flights_a_gain_and_the_presets_keep_flying_wit
     assert load_config(base=saved_config(tmp_path)).settings().budget is None
 
 
-def test_the_default_budget_gives_a_bigger_swarm_the_same_rounds():
-    """`budget = "auto"`: 42 flights a gain on 2 vehicles; on more, as many rounds with every vehicle flying (a swarm
-    of 32 is never refused for a budget below its design's flights)."""
+def test_the_default_budget_gives_a_bigger_averaging_swarm_the_same_rounds():
+    """`budget = "auto"`: 42 flights a gain on 2 vehicles; on more averaging, as many rounds with every vehicle
+    flying (a swarm of 32 is never refused for a budget below its design's flights)."""
     from mavtune.config import Tuning
     from mavtune.plan import make_plan
 
@@ -257,6 +257,24 @@ def test_the_default_budget_gives_a_bigger_swarm_the_same_rounds():
     swarm = Tuning(vehicles=32).settings()
     assert swarm.budget == 42 * 32 and make_plan(swarm).rounds == 42
     assert Tuning(vehicles=3, space={"kp": (0.0, 1.0)}).settings().budget == 21 * 3
+    assert Tuning(vehicles=8, strategy="groups", replicates=4).settings().budget == 42 * 4  # 4 on a point: 42 rounds
+
+
+@pytest.mark.parametrize("vehicles, strategy, flights, rounds", [(4, "split", 84, 21), (4, "groups", 84, 21),
+                                                                 (3, "split", 84, 28), (2, "split", 84, 42),
+                                                                 (8, "groups", 90, 12)])  # 8: the designs' floor
+def test_the_default_budget_lets_a_swarm_that_spreads_its_points_finish_sooner(vehicles, strategy, flights, rounds):
+    """`budget = "auto"` where a strategy puts one or two vehicles on a point: two vehicles' 42 flights a gain,
+    spread over more points a round, so more vehicles finish in fewer rounds (quality_swarms_half.md: four vehicles
+    split or in groups of two tie with two averaging); a swarm whose designs need more is never refused."""
+    from mavtune.config import Tuning
+    from mavtune.plan import make_plan
+
+    swarm = Tuning(vehicles=vehicles, strategy=strategy).settings()
+    plan = make_plan(swarm)
+    assert swarm.budget == flights == plan.flights and plan.rounds == rounds
+    many = Tuning(vehicles=32, strategy="split").settings()
+    assert many.budget >= make_plan(many).flights > 84
 
 
 @given(st.integers(1, 4), st.integers(1, 3), st.integers(0, 40), st.integers(0, 10**6))
