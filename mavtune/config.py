@@ -88,23 +88,26 @@ BUDGET_PER_GAIN = 42
 4): the smallest of 28, 35, 42 and 56 a gain that was not significantly worse than the unbudgeted default over the
 zoo's selection half (benchmarks/results/selection_budget_default.md, selection_budget_curve*.md). At least the
 designs' own flights and AUTO_PASS_ROUNDS rounds for each line search (from 6 gains on 1 or 2 vehicles: the designs
-grow as 2^d). A swarm that puts more than two vehicles on a point flies each point that often, in as many rounds;
-one that puts one or two on a point keeps these flights and spreads them over more points a round, so it finishes
-sooner (quality_swarms_half.md: four vehicles split or in groups of two, at these flights in half the rounds, tie
-with two vehicles averaging)."""
+grow as 2^d). A swarm that puts more than two vehicles on a point flies two vehicles' points (21 a gain), each
+that often (averaging: in two vehicles' rounds); one that puts one or two on a point keeps these flights and spreads
+them over more points a round, so it finishes sooner, but in no fewer than half of two vehicles' rounds
+(quality_swarms_half.md, quality_swarms_eight.md: four vehicles split or in groups of two, in half the rounds, tie
+with two averaging; eight in a quarter of them, 12 rounds, lose; eight in half, at twice the flights, win)."""
 AUTO_PASS_ROUNDS = 2
 
 
-def resolved_budget(budget: Any, space: dict, design: bool, bootstraps: Any, per_point: int = 2) -> int | None:
+def resolved_budget(budget: Any, space: dict, design: bool, bootstraps: Any, per_point: int = 2,
+                    vehicles: int = 2) -> int | None:
     """The engine's budget of a [tuning] budget: a number as given; "none" (or None) no budget; "auto"
-    BUDGET_PER_GAIN flights per gain where the strategy puts at most two vehicles on a point (`per_point`), and as
-    many rounds where it puts more (each point flown by all of them), with a design and a fixed number of passes,
-    else none (the paper's setting, or a run without a design or with the paper's stop rule, keeps flying what it
-    asks for)."""
+    BUDGET_PER_GAIN flights per gain where the strategy puts at most two vehicles on a point (`per_point`), and two
+    vehicles' points each flown `per_point` times where it puts more, in at least half of two vehicles' rounds, with
+    a design and a fixed number of passes, else none (the paper's setting, or a run without a design or with the
+    paper's stop rule, keeps flying what it asks for)."""
     if budget == "auto":
         if not design or bootstraps in ("auto", None):
             return None
-        return math.ceil(BUDGET_PER_GAIN * len(space) / 2) * max(2, int(per_point))
+        rounds = math.ceil(BUDGET_PER_GAIN * len(space) / 2)  # two vehicles' rounds
+        return max(rounds * max(2, int(per_point)), math.ceil(rounds / 2) * int(vehicles))
     return None if budget in ("none", None) else budget
 
 
@@ -380,9 +383,9 @@ class Tuning(_Section):
                                      "flights it has), the designs fly all the rest (more flights of their points); "
                                      "the last round flies only the vehicles the budget has left. At least the "
                                      "designs' own flights. \"auto\": 42 flights per gain (BUDGET_PER_GAIN) with a "
-                                     "design and a fixed number of passes (a strategy that puts more than two "
-                                     "vehicles on a point: two vehicles' rounds, each point flown by all of its "
-                                     "vehicles), else none; \"none\": each stage flies "
+                                     "design and a fixed number of passes (in at least half of two vehicles' rounds; "
+                                     "a strategy that puts more than two vehicles on a point: two vehicles' points, "
+                                     "each flown by all of its vehicles), else none; \"none\": each stage flies "
                                      "what it asks for (the plan's count is then expected, not exact)")
     pick: Literal["best", "near-stock"] | None = Field(None, description="the answer among the run's flown points: "
                                                        "the search's optimum (best), or the flown point nearest the "
@@ -461,7 +464,7 @@ class Tuning(_Section):
         values = {k: dict(v) if isinstance(v, dict) else v for k, v in values.items()}
         free = Settings(**(values | {"budget": None}))  # the other fields validated; its strategy: vehicles a point
         values["budget"] = resolved_budget(values["budget"], values["space"], values["design"], values["bootstraps"],
-                                           free.strategy_rule.per_point(int(values["vehicles"])))
+                                           free.strategy_rule.per_point(int(values["vehicles"])), values["vehicles"])
         if auto and values["budget"] is not None:  # many gains: the designs' flights and two rounds a line search
             values["budget"] = max(values["budget"], free.budget_minimum()
                                    + AUTO_PASS_ROUNDS * free.line_searches() * int(values["vehicles"]))
