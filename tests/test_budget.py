@@ -257,7 +257,7 @@ def test_the_default_budget_gives_a_bigger_averaging_swarm_the_same_rounds():
     swarm = Tuning(vehicles=32).settings()
     assert swarm.budget == 42 * 32 and make_plan(swarm).rounds == 42
     assert Tuning(vehicles=3, space={"kp": (0.0, 1.0)}).settings().budget == 21 * 3
-    assert Tuning(vehicles=8, strategy="groups", replicates=4).settings().budget == 42 * 4  # 4 on a point: 42 rounds
+    assert Tuning(vehicles=8, strategy="groups", replicates=4).settings().budget == 42 * 4  # 42 points, each by 4
 
 
 @pytest.mark.parametrize("vehicles, strategy, flights, rounds", [(4, "split", 84, 21), (4, "groups", 84, 21),

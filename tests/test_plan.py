@@ -157,3 +157,15 @@ def test_the_expected_rounds_are_close_to_the_mean_flown_on_the_simulator(over):
         flown.append(len(result.rounds))
     mean = sum(flown) / len(flown)
     assert abs(expected - mean) <= 0.15 * mean, (expected, mean)
+
+
+@pytest.mark.parametrize("args, sooner", [(["-n", "4"], "84 flights in 21 rounds"),
+                                          (["-n", "8"], "168 flights in 21 rounds"), (["-n", "2"], None),
+                                          (["-n", "4", "--strategy", "groups"], None), (["-n", "5"], None),
+                                          (["-n", "4", "--budget", "200"], None)])
+def test_the_plan_offers_a_swarm_averaging_under_the_default_budget_the_groups_that_finish_sooner(args, sooner):
+    """Four or more vehicles averaging (an even swarm, the default budget): the plan names the rounds of groups of
+    two, which fly two vehicles' flights in half the rounds; nothing where there is no such swarm or budget."""
+    text = " ".join(CliRunner().invoke(app, ["plan", *args]).output.split())
+    assert ("sooner --strategy groups" in text) == (sooner is not None)
+    assert sooner is None or sooner in text
