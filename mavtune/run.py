@@ -534,7 +534,10 @@ def _sooner(config: Config, plan: Plan) -> list[str]:
         return []
     groups = config.model_copy(update={"tuning": t.model_copy(update={"strategy": "groups", "replicates": 2})})
     f = config.flight
-    other = make_plan(groups.settings(), f.primitive_s, f.settle_s, f.battery_s)
+    try:
+        other = make_plan(groups.settings(), f.primitive_s, f.settle_s, f.battery_s)
+    except MavtuneError:  # (a groups plan past the planner's work limit: no offer, never a refused plan)
+        return []
     if other.rounds >= plan.rounds:
         return []
     return [f"sooner        --strategy groups (two vehicles a point): {other.flights} flights in "

@@ -169,3 +169,20 @@ def test_the_plan_offers_a_swarm_averaging_under_the_default_budget_the_groups_t
     text = " ".join(CliRunner().invoke(app, ["plan", *args]).output.split())
     assert ("sooner --strategy groups" in text) == (sooner is not None)
     assert sooner is None or sooner in text
+
+
+def test_a_groups_plan_that_cannot_be_made_drops_the_offer_not_the_plan(monkeypatch):
+    """The offer is a second plan: where it fails (past the planner's work limit), the plan is shown without it."""
+    import mavtune.run
+    from mavtune.errors import MavtuneError
+
+    real = mavtune.run.make_plan
+
+    def refuse_groups(settings, *args):
+        if settings.strategy == "groups":
+            raise MavtuneError("planning takes too long")
+        return real(settings, *args)
+
+    monkeypatch.setattr(mavtune.run, "make_plan", refuse_groups)
+    out = CliRunner().invoke(app, ["plan", "-n", "4"])
+    assert out.exit_code == 0 and "42 exactly" in out.output and "sooner" not in out.output
