@@ -533,9 +533,8 @@ def _sooner(config: Config, plan: Plan) -> list[str]:
     if t.strategy != "avg" or t.vehicles < 4 or t.vehicles % 2 or t.budget != "auto" or plan.budget is None:
         return []
     groups = config.model_copy(update={"tuning": t.model_copy(update={"strategy": "groups", "replicates": 2})})
-    f = config.flight
     try:
-        other = make_plan(groups.settings(), f.primitive_s, f.settle_s, f.battery_s)
+        other = plan_of(groups)
     except MavtuneError:  # (a groups plan past the planner's work limit: no offer, never a refused plan)
         return []
     if other.rounds >= plan.rounds:
