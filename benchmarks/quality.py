@@ -218,11 +218,16 @@ def study_args(doc: str, plants: Sequence[str], repeats: int, name: str,
     return args, [p.strip() for p in args.plants.split(",") if p.strip()]
 
 
-def runs_args(doc: str, argv: list[str] | None, runs: int = 40) -> argparse.Namespace:
-    """A study of the report half's runs' command line: --runs (how many) and --workers (processes)."""
+def runs_args(doc: str, argv: list[str] | None, runs: int = 40, method: bool = False) -> argparse.Namespace:
+    """A study of the report half's runs' command line: --runs (how many) and --workers (processes); with `method`,
+    --method too (the label of the configuration flown, `zoo.methods.candidates`; the default's by default)."""
     ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("--runs", type=int, default=runs)
     ap.add_argument("--workers", type=int, default=2)
+    if method:
+        labels = [m.label for m in candidates()]
+        ap.add_argument("--method", default=labels[0], choices=labels, metavar="LABEL",
+                        help="the configuration flown (default: the default)")
     return ap.parse_args(argv)
 
 

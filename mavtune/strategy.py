@@ -55,9 +55,12 @@ class Strategy:
         """How many vehicles fly each point of a full round."""
         return max(1, vehicles // self.slots(vehicles))
 
-    def assign(self, search: LineSearch, vehicles: int, speculate: bool = True) -> list[float]:
+    def assign(self, search: LineSearch, vehicles: int, speculate: bool = True, turn: int = 0) -> list[float]:
         """The point each of `vehicles` flies this round: asked points first, then speculation (with reuse,
-        unless `speculate` is off) or replicates."""
+        unless `speculate` is off) or replicates; the points turn `turn` places (the round's index) along the
+        vehicles, so that a line search's points, asked again round after round, are flown by each vehicle in turn
+        and a vehicle that flies costlier than the others does not tilt every comparison of split or groups the same
+        way."""
         asked = search.ask()
         if not asked:
             raise MavtuneError("assign called on a finished search")
@@ -70,7 +73,8 @@ class Strategy:
         spare = vehicles - len(flown)
         # vehicles left over (uneven split, a fleet that shrank) replicate the asked points
         flown += [points[i % min(len(points), len(asked))] for i in range(spare)]
-        return flown
+        shift = turn % vehicles  # (one place a round: groups change members too, so every vehicle is compared)
+        return flown[shift:] + flown[:shift]
 
     @staticmethod
     def measured(points: list[float], flights: list[Flight]) -> tuple[list[float], list[float]]:

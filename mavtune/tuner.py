@@ -37,7 +37,7 @@ from mavtune.search.surface import (
 )
 from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
-from mavtune.vehicle_offsets import vehicle_offsets
+from mavtune.vehicle_offsets import VehicleOffset, line_searches, vehicle_offsets
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
                  "value the run's flights cannot rule out with all gains free (a gain vector is ruled out only when "
@@ -219,8 +219,8 @@ class TuningResult:
         the logarithm of the gains ("log scale"),
         the answer's fitted divergence chance where flights near it diverged ("divergence"), flights that measured
         a cost at or below zero ("cost at zero"), flights the last design's fit left out as spoiled ("outliers"), a
-        vehicle whose flights cost more or less than the others' at the same gains in the same rounds ("vehicles
-        differ": `vehicle_offsets`)."""
+        vehicle whose flights cost more or less than the others' at the same gains ("vehicles differ":
+        `vehicle_offsets`)."""
         out: list[tuple[str, str]] = []
 
         def say(kind: str, text: str) -> None:
@@ -313,13 +313,25 @@ class TuningResult:
                 gains = ", ".join(f"{n} {v:.4g}" for n, v in free.items())
                 say("divergence", f"{said}: the bound of {bound:.1%} on that chance moved the answer off the fit's "
                     f"minimum ({gains}), where it is {risk['unbounded_chance']:.1%}")
-        for o in vehicle_offsets(r.flights for r in self.rounds):
+        where = "line search" if self._spread else "rounds"
+        for o in self.vehicle_offsets():
             say("vehicles differ", f"{o.vehicle}'s flights cost {abs(o.ratio):.0%} {'more' if o.ratio > 0 else 'less'} "
-                f"than the other vehicles' at the same gains in the same rounds ({o.pairs} comparisons; {o.level:.0%} "
+                f"than the other vehicles' at the same gains in the same {where} ({o.pairs} comparisons; {o.level:.0%} "
                 f"interval {o.lo:+.0%} to {o.hi:+.0%}): the vehicles fly unlike each other (a worn propeller, a "
                 f"weaker battery, a payload, another airframe) and the gains answer their average; look at "
                 f"{o.vehicle} before loading them onto it, or tune it alone")
         return out
+
+    @property
+    def _spread(self) -> bool:
+        """Whether a round's vehicles flew different points (split, groups)."""
+        return self.settings.get("strategy", "avg") != "avg"
+
+    def vehicle_offsets(self) -> list[VehicleOffset]:
+        """The vehicles that flew apart from the others (`vehicle_offsets`), compared at the same gains in the same
+        round, or, where a round's vehicles flew different points, in the same line search."""
+        return vehicle_offsets(line_searches(((r.bootstrap, r.gain), r.flights) for r in self.rounds) if self._spread
+                               else (r.flights for r in self.rounds))
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
         """Per gain, from the last line search that set it: the evidence at the end of its span flown
@@ -1280,7 +1292,7 @@ class Tuner:
         vehicles = len(record.flights) if record is not None else self.fleet.size
         if vehicles < 1:
             raise MavtuneError(f"no vehicle is available to fly round {index}")
-        points = self.settings.strategy_rule.assign(search, vehicles)
+        points = self.settings.strategy_rule.assign(search, vehicles, turn=index)
         assignments = [place(p) if place is not None else {**gains, name: p} for p in points]
         flights = self._fly(assignments, bootstrap, name, search.bracket)
         told_points, costs = Strategy.measured(points, flights)

@@ -11,7 +11,9 @@ on a stale hold or a cost still falling at the outermost point, with a Bonferron
 
 The budgeted run (`budget`, config.Tuning's other fields at their defaults) was added on the budget branch (issue
 20); no other pin moved. Written again when main's answer came to take a plane on a bound and the divergence bound
-(merged into the budget branch): the same rounds and assignments, the design's answer (its gains) moved.
+(merged into the budget branch): the same rounds and assignments, the design's answer (its gains) moved. Written
+again for the ten split and groups runs when a round's points came to turn along the vehicles (session 37): their
+assignments moved; no plan and no averaging run did.
 
 What a run decides is pinned exactly: its rounds, every assignment flown (the search's decisions, adaptive
 reflights included), the iterations of each line search and a search answer's gains (a point flown). The numbers

@@ -172,8 +172,8 @@ def test_lost_flights_are_flown_again_and_the_result_does_not_change():
     dropped = mavtune.tune(DroppingFleet(2), strategy="split", reuse=False, design=False, **SETTINGS)
     assert dropped.gains == reference.gains
     assert len(dropped.rounds) > len(reference.rounds)
-    lost_points = [a["kp"] for a, f in zip(dropped.rounds[3].assignments, dropped.rounds[3].flights)]
-    assert [a["kp"] for a in dropped.rounds[4].assignments][:1] == lost_points[:1]
+    lost_points = [a["kp"] for a in dropped.rounds[3].assignments]
+    assert sorted(a["kp"] for a in dropped.rounds[4].assignments) == sorted(lost_points)  # (turned along the vehicles)
 
 
 def test_a_fleet_that_never_returns_stops_with_a_clear_error(tmp_path):

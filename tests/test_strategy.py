@@ -15,19 +15,25 @@ from mavtune.search import make_search
 from mavtune.strategy import Strategy
 
 
+def _walked(method: str, reuse: bool, steps: int):
+    """A line search walked `steps` iterations on a bowl; None where it finished by then."""
+    search = make_search(method, 0.0, 1.0, 0.1, reuse=reuse, points=3)
+    for _ in range(steps):
+        if search.done:
+            return None
+        asked = search.ask()
+        search.tell(asked, [(p - 0.3) ** 2 for p in asked])
+    return None if search.done else search
+
+
 @given(st.sampled_from(["avg", "split", "groups"]), st.integers(1, 6), st.integers(1, 3),
        st.sampled_from(["eql", "golden", "nsection"]), st.booleans(), st.integers(0, 5))
 def test_assign_uses_every_vehicle_and_flies_the_asked_points_first(name, half, r, method, reuse, steps):
     vehicles = 2 * half
     replicates = r if vehicles % r == 0 else 1
     rule = Strategy.make(name, vehicles, replicates)
-    search = make_search(method, 0.0, 1.0, 0.1, reuse=reuse, points=3)
-    for k in range(steps):  # walk the search a few iterations on a bowl
-        if search.done:
-            break
-        asked = search.ask()
-        search.tell(asked, [(p - 0.3) ** 2 for p in asked])
-    if search.done:
+    search = _walked(method, reuse, steps)
+    if search is None:
         return
     asked = search.ask()
     points = rule.assign(search, vehicles)
@@ -42,6 +48,23 @@ def test_assign_uses_every_vehicle_and_flies_the_asked_points_first(name, half, 
             assert points.count(p) == rule.replicates
     if not reuse:
         assert set(points) <= set(asked)  # no speculation without reuse: spare vehicles replicate
+
+
+@given(st.sampled_from(["split", "groups"]), st.integers(1, 4), st.sampled_from(["eql", "golden", "nsection"]),
+       st.integers(0, 4))
+def test_the_points_turn_along_the_vehicles_round_after_round(name, half, method, steps):
+    """Asked the same points round after round (an undecided comparison flown again), each vehicle flies each of the
+    round's points in turn: a vehicle that flies costlier than the others does not tilt every comparison of split or
+    groups the same way, and each point is flown by every vehicle, which `vehicle_offsets` compares."""
+    vehicles = 2 * half
+    rule = Strategy.make(name, vehicles)
+    search = _walked(method, True, steps)
+    if search is None:
+        return
+    turns = [rule.assign(search, vehicles, turn=t) for t in range(vehicles)]
+    assert all(sorted(flown) == sorted(turns[0]) for flown in turns)  # the same points, the same flights of each
+    for v in range(vehicles):  # each vehicle flies each of them
+        assert {flown[v] for flown in turns} == set(turns[0])
 
 
 def test_measured_keeps_every_measured_flight_and_the_search_averages_them():

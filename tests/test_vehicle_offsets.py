@@ -40,11 +40,18 @@ def test_of_three_vehicles_only_the_one_apart_is_named_and_a_cheaper_one_too():
 
 
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), spread=st.floats(0.0, 0.04))
+@given(seed=st.integers(0, 2**31 - 1), spread=st.floats(0.0, 0.02))
 def test_vehicles_within_a_few_percent_of_each_other_are_not_named(seed, spread):
-    """Vehicles apart by less than half of MIN_OFFSET, with noise as large as it, are never said to differ."""
-    assert spread < 0.5 * MIN_OFFSET
+    """Vehicles apart by a fifth of MIN_OFFSET or less, with noise as large as it, are never said to differ."""
+    assert spread <= 0.2 * MIN_OFFSET
     assert vehicle_offsets(_rounds([1.0, 1.0 + spread, 1.0 - spread], noise=0.1, seed=seed)) == []
+
+
+def test_vehicles_four_percent_apart_are_seldom_named():
+    """Vehicles 4 % apart (below MIN_OFFSET, beyond the flights' noise over 40 rounds) are named in at most 2 % of
+    fleets: an offset measured above 10 % there is three standard errors off."""
+    named = sum(bool(vehicle_offsets(_rounds([1.0, 1.04, 0.96], noise=0.1, seed=s))) for s in range(300))
+    assert named <= 6, named
 
 
 def test_flights_that_compare_nothing_are_left_out():
@@ -59,21 +66,28 @@ def test_flights_that_compare_nothing_are_left_out():
     assert vehicle_offsets(spoiled) == []  # 7 comparable rounds left: too few
 
 
+@pytest.mark.parametrize("strategy, vehicles, where", [("avg", 2, "rounds"), ("split", 2, "line search"),
+                                                       ("groups", 4, "line search")])
 @pytest.mark.parametrize("level, says", [(1.0, False), (1.3, True)])
-def test_a_run_whose_second_vehicle_flies_costlier_says_so(level, says):
-    """Through the tuner: a cost function whose vehicle 1 costs `level` times vehicle 0's at the same gains (the
-    vehicle index of each flight's context) ends with the caution "vehicles differ" naming it, or without it."""
+def test_a_run_whose_second_vehicle_flies_costlier_says_so(level, says, strategy, vehicles, where):
+    """Through the tuner: a cost function whose vehicle 1 costs `level` times the others' at the same gains (the
+    vehicle index of each flight's context) ends with the caution "vehicles differ" naming it, or without it; under
+    split and groups too, whose rounds fly different points on different vehicles: there the same gains are compared
+    across the rounds of a line search, which turn its points along the vehicles."""
     rng = np.random.default_rng(7)
 
     def evaluate(gains, context):
         return [((g["kp"] - 0.4) ** 2 + (g["kd"] - 0.6) ** 2 + 0.5) * (level if c.vehicle == 1 else 1.0)
                 * math.exp(0.05 * rng.standard_normal()) for g, c in zip(gains, context)]
 
-    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1, draws=0)
-    said = dict(result.caution_kinds()).get("vehicles differ")
-    assert (said is not None) == says
+    result = mavtune.tune(evaluate, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1, draws=0,
+                          strategy=strategy, vehicles=vehicles)
+    named = [text for kind, text in result.caution_kinds() if kind == "vehicles differ"]
+    assert len(named) == says  # (v1 alone: not its partner in a group of two, nor the other of two vehicles)
     if says:
+        said = named[0]
         assert said.startswith("v1's flights cost 3") and "% more than the other vehicles' at the same gains" in said
+        assert f"in the same {where} (" in said
         assert "vehicles differ" in result.to_dict()["caution_kinds"]
 
 
