@@ -88,8 +88,9 @@ def main(argv: list[str] | None = None) -> None:
 
     unequal = [scored(r) for r in rows if r["plant"] == UNEQUAL]
     vehicles = rows[0]["vehicles"]
-    default = args.method == candidates()[0].label
-    strategy = next(m for m in candidates() if m.label == args.method).tuning.get("strategy", "avg")
+    methods = candidates()
+    default = args.method == methods[0].label
+    strategy = next(m for m in methods if m.label == args.method).tuning.get("strategy", "avg")
     lines = [f"# The \"vehicles differ\" caution ({'session 34' if default else f'session 37: {args.method}'})", "",
              study_line(meta), "", __doc__.split("\n\n")[1].replace("\n", " "), "",
              f"## {UNEQUAL}: named against the true offset of the vehicle apart ({vehicles} vehicles)", "",

@@ -71,9 +71,9 @@ def vehicle_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, mi
             if len(by_vehicle) > 1:
                 groups.append({v: math.fsum(c) / len(c) for v, c in by_vehicle.items()})
     count = Counter(v for g in groups for v in g)
-    groups = [g for g in ({v: y for v, y in g.items() if count[v] >= min_pairs} for g in groups) if len(g) > 1]
+    groups = _among(groups, {v for v, n in count.items() if n >= min_pairs})
     vehicles = _connected(groups)
-    groups = [g for g in ({v: y for v, y in g.items() if v in vehicles} for g in groups) if len(g) > 1]
+    groups = _among(groups, set(vehicles))
     if len(vehicles) < 2:
         return []
     index = {v: i for i, v in enumerate(vehicles)}
@@ -106,6 +106,11 @@ def vehicle_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, mi
     if k == 2 and len(out) == 2:  # two vehicles: one offset and its mirror, the costlier one says it
         out = [o for o in out if o.ratio > 0.0]
     return out
+
+
+def _among(groups: list[dict[str, float]], vehicles: set[str]) -> list[dict[str, float]]:
+    """The comparisons narrowed to `vehicles`, those that still compare two or more."""
+    return [h for h in ({v: y for v, y in g.items() if v in vehicles} for g in groups) if len(h) > 1]
 
 
 def _connected(groups: list[dict[str, float]]) -> list[str]:
