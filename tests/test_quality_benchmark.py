@@ -109,6 +109,35 @@ def test_two_engines_results_are_paired_run_by_run(tmp_path):
         module.main([str(new), str(old), "--method-old", "no such method", "--out", str(tmp_path), "--name", "x"])
 
 
+def test_an_assignment_change_is_pooled_apart_on_interchangeable_plants(tmp_path):
+    """benchmarks/interchangeable.py: a method's runs before and after, paired run by run over several result pairs,
+    pooled apart on the plants `Plant.interchangeable` marks and on the rest; other methods and runs only one
+    side holds are left out, and a pair that is not OLD:NEW of two files is a one-line error."""
+    spec = importlib.util.spec_from_file_location("interchangeable", BENCH.with_name("interchangeable.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    label = "default on 4 vehicles in half the rounds (groups of 2)"
+
+    def result(path, excess):
+        runs = {plant: {label: [{"plant": plant, "run": i, "excess_pct": e} for i, e in enumerate(ex)],
+                        "default": [{"plant": plant, "run": 0, "excess_pct": 1.0}]}
+                for plant, ex in excess.items()}
+        path.write_text(json.dumps({"runs": runs}))
+        return str(path)
+
+    old = result(tmp_path / "old.json", {"analytic cliff": [1.0, 2.0, 3.0], "sim nominal": [1.0, 1.0]})
+    new = result(tmp_path / "new.json", {"analytic cliff": [2.0, 1.0, 5.0, 9.0], "sim nominal": [0.5, 1.0]})
+    doc = module.main([f"{old}:{new}", "--method", "groups", "--name", str(tmp_path / "pooled")])
+    kinds = doc["methods"][label]
+    sign = kinds["interchangeable"]["sign"]
+    assert (sign["runs"], sign["a_better"], sign["b_better"]) == (3, 2, 1)
+    sign = kinds["persistent"]["sign"]
+    assert (sign["runs"], sign["a_better"], sign["b_better"], sign["ties"]) == (2, 0, 1, 1)
+    assert list(doc["methods"]) == [label] and "| interchangeable (1) | 3 |" in (tmp_path / "pooled.md").read_text()
+    with pytest.raises(SystemExit, match="OLD.json:NEW.json"):
+        module.main([old, "--method", "groups", "--name", str(tmp_path / "x")])
+
+
 def test_a_missed_share_names_the_best_method_and_the_paired_test(quality):
     """The goal 'within 2 % in 90 % of runs, or the best of all methods' says, for a plant missed, which method was
     best and whether the two shares differ by more than luck (exact McNemar on the runs only one of them got)."""

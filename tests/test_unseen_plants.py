@@ -91,3 +91,19 @@ def test_an_analytic_plant_apart_is_lowest_where_its_docstring_says(name, optimu
             p[i] += step
             if 0.0 <= p[i] <= 1.0:
                 assert mean(p) > best, (name, p)
+
+
+@pytest.mark.parametrize("name", [n for n, p in ALL_PLANTS.items() if p.interchangeable]
+                         + ["blind analytic unequal vehicles"])
+def test_a_plant_called_interchangeable_keeps_nothing_of_a_vehicle_from_round_to_round(name):
+    """`Plant.interchangeable` (benchmarks/interchangeable.py pools on it): 30 vehicles flying one point in 30
+    rounds each; a vehicle's mean over its rounds departs from the others' no more than its rounds' spread allows
+    (one-way analysis of variance, p > 1e-4) on every plant called interchangeable, and far more on the unequal
+    vehicles, whose own optima and cost levels the flag exists to tell apart."""
+    from scipy.stats import f_oneway
+
+    plant = ALL_PLANTS[name]
+    seeds, rounds = np.repeat(9000 + np.arange(30), 30), np.tile(np.arange(30), 30)
+    cost = plant.fly(np.full((seeds.size, len(plant.gains)), 0.45), seeds, rounds)[0].reshape(30, 30)
+    p = f_oneway(*cost).pvalue
+    assert (p < 1e-6) if not plant.interchangeable else (p > 1e-4), (name, p)

@@ -48,6 +48,10 @@ class Plant:
     units: dict[str, tuple[str, float, float]] = field(default_factory=dict)  # gain -> (what, lo, hi) of the box
     judge_cap: int = 512  # most paired repeats when scoring an answer (slow plants less)
     chunk: int = 4000  # flights per truth task
+    # every flight's randomness drawn from (vehicle seed, round) alone, nothing a vehicle keeps from round to round
+    # (the analytic plants but the unequal vehicles; the simulators keep each vehicle's mass and rotor spread): which
+    # vehicle flies which point of a round then cannot change how a run's answers are distributed
+    interchangeable: bool = False
 
     @property
     def space(self) -> dict[str, tuple[float, float]]:
@@ -482,11 +486,12 @@ def _plants() -> dict[str, Plant]:
         Plant("sim corner box", "nominal, box kp [0, 0.3] x kd [0, 0.4]: the optimum in the corner", ("kp", "kd"),
               sim_fly({}, corner_box), _sim_units(corner_box)),
         PX4_CASCADE,
-        Plant("analytic valley", "curved asymmetric valley, heteroscedastic noise", ("kp", "kd"), valley_fly),
+        Plant("analytic valley", "curved asymmetric valley, heteroscedastic noise", ("kp", "kd"), valley_fly,
+              interchangeable=True),
         Plant("analytic edge", "optimum on the kp edge, asymmetric kd valley, heteroscedastic noise", ("kp", "kd"),
-              edge_fly),
+              edge_fly, interchangeable=True),
         Plant("analytic 4 gains", "4 coupled gains, one optimum on an edge, heteroscedastic noise",
-              ("kp", "kd", "ki", "kf"), four_fly),
+              ("kp", "kd", "ki", "kf"), four_fly, interchangeable=True),
         Plant("mavsim ArduPilot", "ArduCopter AC_PosControl z cascade, PSC_POSZ_P [1, 3] x PSC_VELZ_P [1, 8]",
               ("kp", "kd"), ardupilot_cascade_fly({}), ARDUPILOT_UNITS,
               judge_cap=128, chunk=256),
@@ -498,13 +503,13 @@ def _plants() -> dict[str, Plant]:
               ("kp", "kd"), spoiled(sim_fly({}, FULL)), _sim_units(FULL)),
         Plant("analytic cliff", "bowl whose minimum lies beyond a divergence cliff that moves with each flight: the "
               "optimum is inside, next to the cliff (unseen until 2026-11-25, when it showed every method answering "
-              "gains beside the cliff)", ("kp", "kd"), cliff_fly),
+              "gains beside the cliff)", ("kp", "kd"), cliff_fly, interchangeable=True),
         Plant("sim wide box", "nominal, ranges three times too wide (normalised kp, kd [0, 3]): the optimum near a "
               "seventh of each between two walls of near-unstable flights, as a user who does not know the scale "
               "sets them (added 2026-11-28)", ("kp", "kd"), sim_fly({}, WIDE), _sim_units(WIDE)),
         Plant("analytic decades", "gains whose good values span decades, tuned on a linear scale: the cost grows "
               "with the log of each gain's ratio to its best (0.04, 0.15 of ranges from 0), steep below and "
-              "shallow above, lognormal noise 8 % (added 2026-11-28)", ("kp", "kd"), decades_fly),
+              "shallow above, lognormal noise 8 % (added 2026-11-28)", ("kp", "kd"), decades_fly, interchangeable=True),
     ]
     return {p.name: p for p in out}
 
@@ -544,10 +549,10 @@ def _unseen() -> dict[str, Plant]:
               "with the zoo's OU gusts", ("kp", "kd"), crazyflow_variant({"primitive": "figure8"}, CF_PAYLOAD_N),
               {g: ("Mellinger " + g + " z", lo, hi) for g, (lo, hi) in CF_BOX.items()}, judge_cap=128, chunk=1024),
         Plant("unseen analytic banana", "Rosenbrock-like curved valley (the floor bends through the box), "
-              "multiplicative lognormal noise 10 %", ("kp", "kd"), banana_fly),
+              "multiplicative lognormal noise 10 %", ("kp", "kd"), banana_fly, interchangeable=True),
         Plant("unseen analytic damping wall", "bowl whose minimum lies below the damping a flight needs: a curved "
               "wall (the kd needed grows with kp²) that moves with each flight, lognormal noise", ("kp", "kd"),
-              damping_wall_fly),
+              damping_wall_fly, interchangeable=True),
     ]
     return {p.name: p for p in out}
 
@@ -628,15 +633,15 @@ def _fresh() -> dict[str, Plant]:
                                      "wind": {"mean_mps": 0.5, "gust_xy_mps": 0.3, "gust_z_mps": 0.15}}, FULL),
               _sim_units(FULL)),
         Plant("fresh analytic twin basins", "two basins: the optimum in a narrow one, a broad one 12 % above it, "
-              "lognormal noise 8 %", ("kp", "kd"), twin_basins_fly),
+              "lognormal noise 8 %", ("kp", "kd"), twin_basins_fly, interchangeable=True),
         Plant("fresh analytic weak third gain", "3 gains, coupled kp and kd, a third the cost barely depends on, "
-              "heteroscedastic noise", ("kp", "kd", "ki"), weak_gain_fly),
+              "heteroscedastic noise", ("kp", "kd", "ki"), weak_gain_fly, interchangeable=True),
         Plant("fresh analytic low corner", "the optimum in the lower corner (0, 0) of the box, approached by a shallow "
-              "slope", ("kp", "kd"), low_corner_fly),
+              "slope", ("kp", "kd"), low_corner_fly, interchangeable=True),
         Plant("fresh analytic kinked valley", "a cost growing with the distance from its minimum (a kink, as a dead "
-              "band gives), tilted, noise 5 %", ("kp", "kd"), v_valley_fly),
+              "band gives), tilted, noise 5 %", ("kp", "kd"), v_valley_fly, interchangeable=True),
         Plant("fresh analytic heavy tails", "a rotated bowl with Student-t (3 degrees of freedom) noise of 5 %",
-              ("kp", "kd"), heavy_tails_fly),
+              ("kp", "kd"), heavy_tails_fly, interchangeable=True),
     ]
     return {p.name: p for p in out}
 
@@ -716,12 +721,13 @@ def _blind() -> dict[str, Plant]:
               ardupilot_cascade_fly({"wind": {"gust_xy_mps": 2.0, "gust_z_mps": 1.0}}, "balanced"), ARDUPILOT_UNITS,
               judge_cap=128, chunk=256),
         Plant("blind analytic drifting conditions", "a tilted bowl whose every cost rises through the session (up to "
-              "30 %): points flown in different rounds compare unfairly", ("kp", "kd"), drift_fly),
+              "30 %): points flown in different rounds compare unfairly", ("kp", "kd"), drift_fly,
+              interchangeable=True),
         Plant("blind analytic unequal vehicles", "each vehicle its own optimum (0.06 sd off the fleet's) and its own "
               "cost level (10 % sd): the fleet's optimum from vehicles that disagree", ("kp", "kd"),
               unequal_vehicles_fly),
         Plant("blind analytic plateau", "a bowl that levels off a short way from its minimum: most of the box flat",
-              ("kp", "kd"), plateau_fly),
+              ("kp", "kd"), plateau_fly, interchangeable=True),
     ]
     return {p.name: p for p in out}
 
@@ -789,11 +795,11 @@ def _heldout() -> dict[str, Plant]:
               px4_cascade_fly(("kp", "kd"), {"wind": {"gust_xy_mps": 2.0, "gust_z_mps": 1.0}}, "balanced"),
               px4_units(("kp", "kd")), judge_cap=128, chunk=256),
         Plant("heldout analytic steep side", "a bowl gentle below its minimum in kp and exponentially steep above "
-              "it, noise 8 % growing with the cost", ("kp", "kd"), steep_side_fly),
+              "it, noise 8 % growing with the cost", ("kp", "kd"), steep_side_fly, interchangeable=True),
         Plant("heldout analytic narrow valley", "a straight valley 30 times steeper across than along, at 35° to kp: "
-              "the gains trade against each other", ("kp", "kd"), narrow_valley_fly),
+              "the gains trade against each other", ("kp", "kd"), narrow_valley_fly, interchangeable=True),
         Plant("heldout analytic noisy bowl", "a shallow tilted bowl through 25 % lognormal noise", ("kp", "kd"),
-              noisy_bowl_fly),
+              noisy_bowl_fly, interchangeable=True),
     ]
     return {p.name: p for p in out}
 
