@@ -14,12 +14,13 @@ from __future__ import annotations
 import math
 import numbers
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from mavtune.errors import MavtuneError
-from mavtune.fleet import Fleet, Flight, Gains
+from mavtune.fleet import Fleet, Flight, Gains, Status
 from mavtune.flown import by_gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
@@ -37,7 +38,7 @@ from mavtune.search.surface import (
 )
 from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
-from mavtune.vehicle_offsets import VehicleOffset, line_searches, vehicle_offsets
+from mavtune.vehicle_offsets import VehicleOffset, fleet_offsets, line_searches, vehicle_offsets
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
                  "value the run's flights cannot rule out with all gains free (a gain vector is ruled out only when "
@@ -330,8 +331,27 @@ class TuningResult:
     def vehicle_offsets(self) -> list[VehicleOffset]:
         """The vehicles that flew apart from the others (`vehicle_offsets`), compared at the same gains in the same
         round, or, where a round's vehicles flew different points, in the same line search."""
-        return vehicle_offsets(line_searches(((r.bootstrap, r.gain), r.flights) for r in self.rounds) if self._spread
-                               else (r.flights for r in self.rounds))
+        return vehicle_offsets(self._compared())
+
+    def vehicles(self) -> list[dict[str, Any]]:
+        """Each vehicle's flights (flown, failed, lost) and its cost against the others' at the same gains
+        (`fleet_offsets`: offset, interval, comparisons, named or not; absent where it was not compared), in the
+        order the vehicles first flew: the fleet at a glance, beside the cautions that name a vehicle."""
+        tally: dict[str, Counter] = {}
+        for r in self.rounds:
+            for f in r.flights:
+                tally.setdefault(f.vehicle, Counter())[f.status.value] += 1
+        offsets = {o.vehicle: o.to_dict() for o in fleet_offsets(self._compared())}
+        return [{"vehicle": v, "flights": sum(n.values()), "failed": n[Status.FAILED.value],
+                 "lost": n[Status.LOST.value], **{k: x for k, x in offsets.get(v, {}).items() if k != "vehicle"}}
+                for v, n in tally.items()]
+
+    def _compared(self) -> list[Sequence[Flight]]:
+        """The sets of flights within which the vehicles are compared: each round's, or, where a round's vehicles
+        flew different points (split, groups), each line search's."""
+        if self._spread:
+            return line_searches(((r.bootstrap, r.gain), r.flights) for r in self.rounds)
+        return [r.flights for r in self.rounds]
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
         """Per gain, from the last line search that set it: the evidence at the end of its span flown
@@ -362,6 +382,7 @@ class TuningResult:
             "uncertainty_note": INTERVAL_NOTE,
             "cautions": [text for _, text in kinds],
             "caution_kinds": [kind for kind, _ in kinds],  # each line's kind, in order (`caution_kinds`)
+            "vehicles": self.vehicles(),
             "divergence": self.divergence,
             "outliers": self.outliers,
             "noise": self.noise,

@@ -38,7 +38,8 @@ def line_searches(rounds: Iterable[tuple[Hashable, Sequence[Flight]]]) -> list[l
 @dataclass(frozen=True)
 class VehicleOffset:
     """How much costlier one vehicle flies than the others at the same gains: `ratio` − 1 (a share; negative:
-    cheaper) with its interval at `level` (a share too), from `pairs` comparisons it was in."""
+    cheaper) with its interval at `level` (a share too), from `pairs` comparisons it was in; `named` where that is
+    beyond the flights' noise and large enough to say (`vehicle_offsets`)."""
 
     vehicle: str
     ratio: float
@@ -46,11 +47,25 @@ class VehicleOffset:
     hi: float
     pairs: int
     level: float = INTERVAL
+    named: bool = True
+
+    def to_dict(self) -> dict[str, object]:
+        return {"vehicle": self.vehicle, "offset": self.ratio, "lo": self.lo, "hi": self.hi, "level": self.level,
+                "comparisons": self.pairs, "named": self.named}
 
 
 def vehicle_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, min_offset: float = MIN_OFFSET,
                     min_pairs: int = MIN_PAIRS) -> list[VehicleOffset]:
-    """The vehicles whose costs run apart from the others' at the same gains, largest first. Each set of flights in
+    """The vehicles whose costs run apart from the others' at the same gains (those `fleet_offsets` names), largest
+    first."""
+    named = [o for o in fleet_offsets(rounds, level, min_offset, min_pairs) if o.named]
+    return sorted(named, key=lambda o: -abs(math.log1p(o.ratio)))
+
+
+def fleet_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, min_offset: float = MIN_OFFSET,
+                  min_pairs: int = MIN_PAIRS) -> list[VehicleOffset]:
+    """Every vehicle compared with the others at the same gains, in the order first compared, each `named` where
+    its costs run apart from theirs. Each set of flights in
     `rounds` (a round's; a line search's, `line_searches`) gives, at each gains two vehicles or more flew there, each
     such vehicle's mean logarithm of its usable costs (flown, finite, above zero): a comparison. The logarithms are
     fitted as the gains' level plus each vehicle's offset (least squares within the comparisons, so that vehicles
@@ -58,7 +73,8 @@ def vehicle_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, mi
     against the other's (two vehicles) or the median of all of theirs (three or more: a vehicle apart is measured
     against the others, not they against it). A vehicle in at least `min_pairs` comparisons is named where that
     offset lies beyond zero at `level` (two-sided, divided among the vehicles compared) and beyond log(1 ±
-    `min_offset`). Of two vehicles only the costlier is named: the other's offset is its mirror."""
+    `min_offset`); of two vehicles only the costlier, the other's offset being its mirror. A vehicle in fewer
+    comparisons, or outside the largest linked set, is not listed."""
     import numpy as np  # here, not at the top: `mavtune plan` imports the tuner but compares no vehicles
 
     groups: list[dict[str, float]] = []  # a comparison: vehicle → its mean log cost at the same gains
@@ -99,12 +115,9 @@ def vehicle_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, mi
         against[i] = 1.0
         mean = float(b[i] - (b[1 - i] if k == 2 else middle))
         se = math.sqrt(max(float(against @ cov @ against), 0.0))
-        if abs(mean) > z * se and abs(mean) >= math.log(1.0 + min_offset):
-            out.append(VehicleOffset(v, math.exp(mean) - 1.0, math.exp(mean - z_interval * se) - 1.0,
-                                     math.exp(mean + z_interval * se) - 1.0, count[v]))
-    out.sort(key=lambda o: -abs(math.log1p(o.ratio)))
-    if k == 2 and len(out) == 2:  # two vehicles: one offset and its mirror, the costlier one says it
-        out = [o for o in out if o.ratio > 0.0]
+        named = abs(mean) > z * se and abs(mean) >= math.log(1.0 + min_offset) and (k > 2 or mean > 0.0)
+        out.append(VehicleOffset(v, math.exp(mean) - 1.0, math.exp(mean - z_interval * se) - 1.0,
+                                 math.exp(mean + z_interval * se) - 1.0, count[v], named=named))
     return out
 
 

@@ -84,6 +84,12 @@ def test_a_run_whose_second_vehicle_flies_costlier_says_so(level, says, strategy
                           strategy=strategy, vehicles=vehicles)
     named = [text for kind, text in result.caution_kinds() if kind == "vehicles differ"]
     assert len(named) == says  # (v1 alone: not its partner in a group of two, nor the other of two vehicles)
+    fleet = result.to_dict()["vehicles"]  # every vehicle, as the report's Vehicles table shows it
+    assert [v["vehicle"] for v in fleet] == [f"v{j}" for j in range(vehicles)]
+    assert sum(v["flights"] for v in fleet) == result.flights and all(v["lost"] == 0 for v in fleet)
+    assert [v["vehicle"] for v in fleet if v["named"]] == ["v1"] * says
+    assert all(v["lo"] < v["offset"] < v["hi"] and v["comparisons"] >= 8 for v in fleet)
+    assert (fleet[1]["offset"] > 0.2) == says and fleet[1]["lo"] < level - 1.0 < fleet[1]["hi"]
     if says:
         said = named[0]
         assert said.startswith("v1's flights cost 3") and "% more than the other vehicles' at the same gains" in said

@@ -343,9 +343,15 @@ def _tuned_params(rep: Report) -> list[str]:
     return tuned_params_section(rep.summary)
 
 
-SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _line_searches, _tuned_params,
-                                                  _plan_vs_actual, _tuning, _designs, _timeline, _cost_surface, _rounds,
-                                                  _points, _fleet_events]
+def _vehicles(rep: Report) -> list[str]:
+    from mavtune.report.vehicles import vehicles_section
+
+    return vehicles_section(rep.summary)
+
+
+SECTIONS: list[Callable[[Report], list[str]]] = [_settings, _final_gains, _line_searches, _tuned_params, _vehicles,
+                                                  _plan_vs_actual, _tuning, _designs, _timeline, _cost_surface,
+                                                  _rounds, _points, _fleet_events]
 
 
 def _read_json(path: Path) -> dict[str, Any]:

@@ -1,0 +1,45 @@
+"""The run report's Vehicles section: each vehicle's flights and its cost against the others' at the same gains."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mavtune.report import markdown as md
+from mavtune.vehicle_offsets import MIN_OFFSET, MIN_PAIRS
+
+LISTED = 32  # more vehicles than this: the table lists the named ones and those furthest from the others
+
+
+def vehicles_section(summary: dict[str, Any]) -> list[str]:
+    """The section from result.json's `vehicles` (`TuningResult.vehicles`); nothing for one vehicle (or none)."""
+    rows = summary.get("vehicles") or []
+    if len(rows) < 2:
+        return []
+    where = ("in the same line search (the vehicles of a round flew different points)"
+             if (summary.get("settings") or {}).get("strategy", "avg") != "avg" else "in the same round")
+    shown, note = rows, ""
+    if len(rows) > LISTED:
+        compared = sorted((r for r in rows if "offset" in r), key=lambda r: (not r["named"], -abs(r["offset"])))
+        named = sum(r["named"] for r in compared)
+        shown, rest = compared[:max(LISTED, named)], [r["offset"] for r in compared[max(LISTED, named):]]
+        shown.sort(key=lambda r: r["offset"])
+        note = (f" Of {len(rows)} vehicles the {len(shown)} furthest from the others are listed"
+                + (f"; the other {len(rest)} compared lie between {min(rest):+.1%} and {max(rest):+.1%}" if rest
+                   else "") + (f"; {len(rows) - len(compared)} not compared" if len(compared) < len(rows) else "")
+                + ".")
+    table = [[f"`{r['vehicle']}`", r["flights"], r["failed"] or "", r["lost"] or "", _offset(r),
+              r.get("comparisons", 0), "named" if r.get("named") else ""] for r in shown]
+    return ["## Vehicles", "",
+            f"Each vehicle's costs at the same gains {where}, against the other vehicle's (of two) or the median "
+            f"vehicle's (of more): the offset fitted on the logarithm of the cost, with its 90 % interval. A vehicle is named in the cautions where its offset is "
+            f"beyond the flights' noise and at least {MIN_OFFSET * 100:g} % (of two vehicles, the costlier: "
+            f"each one's offset is the other's mirror); one in fewer than {MIN_PAIRS} comparisons is not "
+            f"compared.{note}", "",
+            md.table(["vehicle", "flights", "failed", "lost", "cost against the others (90 % interval)",
+                      "comparisons", "cautions"], table, ["l", "r", "r", "r", "r", "r", "l"]), ""]
+
+
+def _offset(row: dict[str, Any]) -> str:
+    if "offset" not in row:
+        return "not compared"
+    return f"{row['offset']:+.1%} ({row['lo']:+.1%} to {row['hi']:+.1%})"
