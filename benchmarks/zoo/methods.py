@@ -246,7 +246,9 @@ def swarms() -> list[Method]:
     of a run are those the 2-vehicle runs fly. Then four vehicles at 2 vehicles' flights (42 a gain), so in half
     the rounds, averaging, split, or two points a round each flown by two (groups): does a bigger swarm finish
     sooner without losing the answer (session 36)? And eight vehicles split or in groups of two in about a quarter of
-    the rounds (2 vehicles' flights) and in half of them (twice the flights)."""
+    the rounds (2 vehicles' flights) and in half of them (twice the flights). And six vehicles under the default
+    budget (session 38): averaging (two vehicles' 42 rounds, 252 flights), in groups of two or three, or split (half
+    the rounds, 126 flights), as `mavtune plan` offers a swarm of six averaging groups of two."""
     return [Method("default on 1 vehicle", {"vehicles": 1}),
             Method("default on 4 vehicles, each round's gains flown by all (avg)", {"vehicles": 4}),
             Method("default on 4 vehicles, each on its own point (split)", {"vehicles": 4, "strategy": "split"},
@@ -263,7 +265,11 @@ def swarms() -> list[Method]:
             Method("default on 8 vehicles split in half the rounds", {"vehicles": 8, "strategy": "split"},
                    per_gain=84),
             Method("default on 8 vehicles in groups of 2 in half the rounds",
-                   {"vehicles": 8, "strategy": "groups", "replicates": 2}, per_gain=84)]
+                   {"vehicles": 8, "strategy": "groups", "replicates": 2}, per_gain=84),
+            Method("default on 6 vehicles (avg)", {"vehicles": 6}),
+            Method("default on 6 vehicles in groups of 2", {"vehicles": 6, "strategy": "groups", "replicates": 2}),
+            Method("default on 6 vehicles in groups of 3", {"vehicles": 6, "strategy": "groups", "replicates": 3}),
+            Method("default on 6 vehicles split", {"vehicles": 6, "strategy": "split"})]
 
 
 def split_designs() -> list[Method]:
