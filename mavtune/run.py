@@ -528,7 +528,8 @@ def plan_panel(config: Config, plan: Plan) -> str:
 
 def _sooner(config: Config, plan: Plan) -> list[str]:
     """For four or more vehicles averaging under the default budget: the rounds the same swarm would fly in groups of
-    two, which finish sooner (quality_swarms_half.md, quality_swarms_eight.md), so that the faster swarm is offered."""
+    two, which finish sooner (quality_swarms_half.md, quality_swarms_six.md, quality_swarms_eight.md), so that the
+    faster swarm is offered."""
     t = config.tuning
     if t.strategy != "avg" or t.vehicles < 4 or t.vehicles % 2 or t.budget != "auto" or plan.budget is None:
         return []
@@ -540,8 +541,9 @@ def _sooner(config: Config, plan: Plan) -> list[str]:
     if other.rounds >= plan.rounds:
         return []
     return [f"sooner        --strategy groups (two vehicles a point): {other.flights} flights in "
-            f"{counted(other.rounds, 'round')} ({_clock_s(other.flight_time_s)}); four and eight vehicles so were no "
-            "worse than two averaging on the plant zoo (the guide: how it works, strategies)"]
+            f"{counted(other.rounds, 'round')} ({_clock_s(other.flight_time_s)}); four, six and eight vehicles so "
+            "were no worse than two averaging on the plant zoo, though beside a wall of fly-away gains they answered "
+            "nearer it (the guide: how it works, strategies)"]
 
 
 def _result_table(result: TuningResult) -> Table:

@@ -31,10 +31,10 @@ def vehicles_section(summary: dict[str, Any]) -> list[str]:
               r.get("comparisons", 0), "named" if r.get("named") else ""] for r in shown]
     return ["## Vehicles", "",
             f"Each vehicle's costs at the same gains {where}, against the other vehicle's (of two) or the median "
-            f"vehicle's (of more): the offset fitted on the logarithm of the cost, with its 90 % interval. A vehicle is named in the cautions where its offset is "
-            f"beyond the flights' noise and at least {MIN_OFFSET * 100:g} % (of two vehicles, the costlier: "
-            f"each one's offset is the other's mirror); one in fewer than {MIN_PAIRS} comparisons is not "
-            f"compared.{note}", "",
+            f"vehicle's (of more): the offset fitted on the logarithm of the cost, with its 90 % interval. A vehicle "
+            f"is named in the cautions where its offset is beyond the flights' noise and at least "
+            f"{MIN_OFFSET * 100:g} % (of two vehicles, the costlier: each one's offset is the other's mirror); one "
+            f"in fewer than {MIN_PAIRS} comparisons is not compared.{note}", "",
             md.table(["vehicle", "flights", "failed", "lost", "cost against the others (90 % interval)",
                       "comparisons", "cautions"], table, ["l", "r", "r", "r", "r", "r", "l"]), ""]
 
