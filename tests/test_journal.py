@@ -174,6 +174,9 @@ def test_lost_flights_are_flown_again_and_the_result_does_not_change():
     assert len(dropped.rounds) > len(reference.rounds)
     lost_points = [a["kp"] for a in dropped.rounds[3].assignments]
     assert sorted(a["kp"] for a in dropped.rounds[4].assignments) == sorted(lost_points)  # (turned along the vehicles)
+    odd = sum(r.index % 2 for r in dropped.rounds)  # the report's Vehicles table counts each vehicle's lost flights
+    assert [(v["vehicle"], v["flights"], v["lost"]) for v in dropped.to_dict()["vehicles"]] == [
+        ("v0", len(dropped.rounds), 1), ("v1", len(dropped.rounds), odd)]
 
 
 def test_a_fleet_that_never_returns_stops_with_a_clear_error(tmp_path):

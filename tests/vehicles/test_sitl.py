@@ -99,6 +99,9 @@ def test_two_agents_under_the_zenoh_coordinator_give_each_vehicles_parameters(tm
     tuned = result["tuned_params"]["s1"]
     assert f"s1: PSC_POSZ_P = {tuned['PSC_POSZ_P']:.4g} ± 0.5, PSC_VELZ_P = {tuned['PSC_VELZ_P']:.4g} ± 1.8" in log
     report = (out / "report.md").read_text()
+    flown = {v["vehicle"]: v["flights"] for v in result["vehicles"]}  # the report's Vehicles table, from the agents
+    assert flown.keys() == {"s0", "s1"} and sum(flown.values()) == result["flights"]
+    assert "## Vehicles" in report and all(f"| `{name}` | {n} |" in report for name, n in flown.items())
     for edge in result["range_edges"]:  # on SITL the cost falls toward the top corner: usually at the edge
         assert edge["param"] in ORIGINALS and "documented limit" in edge["hint"]
         assert f"range edge: {edge['message']}" in " ".join(log.split()) and edge["message"] in report
