@@ -68,7 +68,7 @@ def one(task: tuple[str, int, float]) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=40, help="runs 0 … runs−1 of each method (both halves of the zoo's)")
+    ap.add_argument("--runs", type=int, default=40, help="runs 0 … runs−1 of each method (both zoo halves)")
     ap.add_argument("--ceilings", default="0.01,0.003,0.001")
     ap.add_argument("--methods", default="|".join(METHODS), help="the zoo's method labels, separated by |")
     ap.add_argument("--workers", type=int, default=2)
