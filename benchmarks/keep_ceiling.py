@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -63,7 +62,7 @@ def one(task: tuple[str, int, float]) -> dict[str, Any]:
     result = run_tuning(settings, ZooFleet(plant, settings.vehicles, tune_seed(run)))
     cost, chance = truth(result.gains["kp"], result.gains["kd"])
     return {"method": label, "run": run, "ceiling": ceiling, "cost": float(cost), "chance": float(chance),
-            "flights": result.flights, "kept_caution": "divergence" in {k for k, _ in result.caution_kinds()}}
+            "flights": result.flights, "divergence_caution": "divergence" in {k for k, _ in result.caution_kinds()}}
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -98,7 +97,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 r["excess_pct"] = float(e)
             lines.append(f"| {m} | {c:.1%} | {np.mean(excess <= 2.0):.0%} | {excess.mean():.2f} % | "
                          f"{np.median(excess):.2f} % | {int(np.sum(chance > 0.001))} | {int(np.sum(chance > 0.003))} "
-                         f"| {chance.max():.2%} | {sum(r['kept_caution'] for r in rs)} |")
+                         f"| {chance.max():.2%} | {sum(r['divergence_caution'] for r in rs)} |")
     write_results(args.name, lines + [""], {"best_cost": low, "facts": facts, "runs": rows})
     return {"rows": rows, "best": low}
 
