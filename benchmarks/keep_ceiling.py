@@ -4,7 +4,7 @@ Beside a wall of failed flights the last design answers the design before's answ
 flights put that answer's chance of a fly-away above the ceiling (1 % by default, since session 16, chosen on two
 vehicles averaging). Swarms that fly more flights answer gains nearer the cliff (quality_swarms_six.md,
 quality_swarms_turned_eight.md); this flies the zoo's cliff runs again with other ceilings. The cliff's truth is exact
-(`zoo.plants.cliff_fly`: a flight at (kp, kd) diverges with chance Φ((kp − 0.5 kd − 0.4) / 0.03) and then costs
+(`zoo.plants.cliff_truth`: a flight at (kp, kd) diverges with chance Φ((kp − 0.5 kd − 0.4) / 0.03) and then costs
 CLIFF_COST, else its bowl's cost on mean), so each answer's chance of a fly-away and its excess over the box's best
 expected cost are computed, not sampled.
 
@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import cpu_s, facts_line, pooled, write_results  # noqa: E402
-from zoo.plants import CLIFF_COST  # noqa: E402
+from zoo.plants import CLIFF_COST, cliff_truth  # noqa: E402
 
 PLANT = "analytic cliff"
 METHODS = ("default (config.Tuning())", "default on 6 vehicles (avg)", "default on 6 vehicles in groups of 2",
@@ -30,39 +30,24 @@ METHODS = ("default (config.Tuning())", "default on 6 vehicles (avg)", "default 
 GRID = 801  # points a gain of the grid the box's best expected cost is taken on (its step 0.00125)
 
 
-def truth(kp, kd) -> tuple[np.ndarray, np.ndarray]:
-    """The cliff's expected cost and chance of a fly-away at (kp, kd) (arrays or floats)."""
-    from scipy.stats import norm
-
-    kp, kd = np.asarray(kp, float), np.asarray(kd, float)
-    bowl = 1.0 + 3.0 * (kp - 0.8) ** 2 + 6.0 * (kd - 0.45) ** 2
-    chance = norm.cdf((kp - 0.5 * kd - 0.4) / 0.03)
-    return (1.0 - chance) * bowl + chance * CLIFF_COST, chance
-
-
 def best() -> float:
     """The lowest expected cost in the box."""
     g = np.linspace(0.0, 1.0, GRID)
-    return float(truth(*np.meshgrid(g, g, indexing="ij"))[0].min())
+    return float(cliff_truth(np.column_stack([a.ravel() for a in np.meshgrid(g, g, indexing="ij")]))[0].min())
 
 
 def one(task: tuple[str, int, float]) -> dict[str, Any]:
     """Run `run` of the zoo's method `label` on the cliff with the kept answer's ceiling `ceiling`."""
-    from zoo.methods import ZooFleet, candidates, swarms, tune_seed
-    from zoo.plants import ALL_PLANTS
+    from zoo.methods import candidates, tune_run
 
     from mavtune.search import surface
-    from mavtune.tuner import run_tuning
 
     label, run, ceiling = task
     surface.answer.__kwdefaults__["keep_risk"] = ceiling  # (the tuner calls it with the default)
-    method = {m.label: m for m in [*candidates(), *swarms()]}[label]
-    plant = ALL_PLANTS[PLANT]
-    settings = method.settings(plant, run)
-    result = run_tuning(settings, ZooFleet(plant, settings.vehicles, tune_seed(run)))
-    cost, chance = truth(result.gains["kp"], result.gains["kd"])
-    return {"method": label, "run": run, "ceiling": ceiling, "cost": float(cost), "chance": float(chance),
-            "flights": result.flights, "divergence_caution": "divergence" in {k for k, _ in result.caution_kinds()}}
+    row = tune_run(PLANT, {m.label: m for m in candidates()}[label], run)
+    cost, chance = cliff_truth(np.array([row["x"]]))
+    return {"method": label, "run": run, "ceiling": ceiling, "cost": float(cost[0]), "chance": float(chance[0]),
+            "flights": row["flights"], "divergence_caution": "divergence" in row["cautions"]}
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:

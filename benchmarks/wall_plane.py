@@ -25,14 +25,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import facts_line, pooled, write_results  # noqa: E402
 
+from mavtune.search.risk import RISK  # noqa: E402
+
 METHODS = ("default (config.Tuning())", "default on 6 vehicles (avg)",
            "default on 8 vehicles in groups of 2 in half the rounds")
 
 
 def one(task: tuple[str, str, int, tuple[float, ...]]) -> dict[str, Any]:
     """Run `run` of `method` on `plant`; per design after the passes, its fit's chance at `optimum` and its answer."""
-    from zoo.methods import ZooFleet, candidates, swarms, tune_seed
-    from zoo.plants import ALL_PLANTS
+    from zoo.methods import candidates, tune_run
 
     import mavtune.tuner as tuner
     from mavtune.search.surface import REACH, fly_away
@@ -55,15 +56,11 @@ def one(task: tuple[str, str, int, tuple[float, ...]]) -> dict[str, Any]:
 
     tuner.surface_answer = seen
     try:
-        method = {m.label: m for m in [*candidates(), *swarms()]}[label]
-        plant = ALL_PLANTS[plant_name]
-        settings = method.settings(plant, run)
-        fleet = ZooFleet(plant, settings.vehicles, tune_seed(run))
-        result = tuner.run_tuning(settings, fleet)
+        row = tune_run(plant_name, {m.label: m for m in candidates()}[label], run)
     finally:
         tuner.surface_answer = answer
-    return {"method": label, "run": run, "x": [float(result.gains[g]) for g in plant.gains], "designs": designs,
-            "diverged_flights": fleet.diverged, "flights": result.flights}
+    return {"method": label, "run": run, "x": row["x"], "designs": designs,
+            "diverged_flights": row["diverged_flights"], "flights": row["flights"]}
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -82,23 +79,22 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     methods = args.methods.split("|")
     tasks = [(args.plant, m, 2 * i + 1, optimum) for m in methods for i in range(args.runs)]
     rows, facts = pooled(one, tasks, args.workers)
-    risk = 0.001
     lines = ["# The divergence fit at the true optimum, design by design", "",
              f"`python benchmarks/wall_plane.py {' '.join(argv if argv is not None else sys.argv[1:])}`; "
              + facts_line(facts), "",
              f"{args.plant}: the truth's optimum {tuple(round(v, 4) for v in optimum)} (its {truth['optimum_repeats']} "
              f"flights diverged in {truth['optimum_fly_away']:.1%}). Each design after the passes fits one logistic "
-             "plane to the flights near it; an answer keeps its chance to 0.1 %. Per design: the runs whose fit put "
-             "the true optimum above 0.1 %, the median of that chance, the median failed flights the fit saw, the "
-             "runs whose answer is the design before's (kept beside a wall).", "",
-             "| method | design | runs | optimum above 0.1 % | median chance at the optimum | median failed flights "
-             "| kept |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+             f"plane to the flights near it; an answer keeps its chance to {RISK * 100:g} %. Per design: the runs "
+             f"whose fit put the true optimum above {RISK * 100:g} %, the median of that chance, the median failed "
+             "flights the fit saw, the runs whose answer is the design before's (kept beside a wall).", "",
+             f"| method | design | runs | optimum above {RISK * 100:g} % | median chance at the optimum | "
+             "median failed flights | kept |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for m in methods:
         rs = [r for r in rows if r["method"] == m]
         for d in range(max(len(r["designs"]) for r in rs)):
             at = [r["designs"][d] for r in rs if len(r["designs"]) > d]
             chance = [a["chance_at_optimum"] or 0.0 for a in at]
-            lines.append(f"| {m} | {d + 1} | {len(at)} | {sum(c > risk for c in chance)} | "
+            lines.append(f"| {m} | {d + 1} | {len(at)} | {sum(c > RISK for c in chance)} | "
                          f"{np.median(chance):.2%} | {np.median([a['failed'] for a in at]):.0f} | "
                          f"{sum(a['kept'] for a in at)} |")
     write_results(args.name, lines + [""], {"plant": args.plant, "optimum": optimum, "facts": facts, "runs": rows})

@@ -404,16 +404,34 @@ def banana_fly(x, seeds, rounds):
 
 
 CLIFF_COST = 10.0  # a diverged flight's cost (10 x the optimum's, as a crashed primitive's penalty)
+CLIFF_EDGE, CLIFF_SPREAD = 0.4, 0.03  # kp − 0.5·kd beyond which a flight diverges, and that edge's sd per flight
+
+
+def _cliff_bowl(x: np.ndarray) -> np.ndarray:
+    return 1.0 + 3.0 * (x[:, 0] - 0.8) ** 2 + 6.0 * (x[:, 1] - 0.45) ** 2
+
+
+def _cliff_margin(x: np.ndarray) -> np.ndarray:
+    return x[:, 0] - 0.5 * x[:, 1]
 
 
 def cliff_fly(x, seeds, rounds):
     """A bowl whose minimum (0.8, 0.45) lies beyond a divergence cliff: a flight diverges where kp − 0.5·kd exceeds
     0.4 + 0.03·z (too much position gain for the damping; the margin moves with each flight's gusts) and then
     costs CLIFF_COST; the optimum is inside, next to the cliff. Noise 5 % plus a share growing with the cost."""
-    c = 1.0 + 3.0 * (x[:, 0] - 0.8) ** 2 + 6.0 * (x[:, 1] - 0.45) ** 2
+    c = _cliff_bowl(x)
     z = _normals(seeds, rounds, 3)
-    diverged = x[:, 0] - 0.5 * x[:, 1] > 0.4 + 0.03 * z[:, 2]
+    diverged = _cliff_margin(x) > CLIFF_EDGE + CLIFF_SPREAD * z[:, 2]
     return np.where(diverged, CLIFF_COST, c * (1.0 + 0.05 * z[:, 0]) + 0.15 * (c - 1.0) * z[:, 1]), diverged
+
+
+def cliff_truth(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The cliff's exact truth at each gain vector (rows of `x`): a flight's expected cost (CLIFF_COST with the chance
+    that it diverges, its bowl's cost on mean else) and that chance (benchmarks/keep_ceiling.py)."""
+    from scipy.stats import norm
+
+    chance = norm.cdf((_cliff_margin(x) - CLIFF_EDGE) / CLIFF_SPREAD)
+    return (1.0 - chance) * _cliff_bowl(x) + chance * CLIFF_COST, chance
 
 
 def damping_wall_fly(x, seeds, rounds):
