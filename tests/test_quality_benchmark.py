@@ -216,3 +216,29 @@ def test_a_result_run_is_compared_with_today_and_the_engine_that_flew_it(monkeyp
     again = same_answers.control("HEAD", method.label, [("analytic valley", 1)])
     assert same_answers.alike(same_answers.compare(tune_run("analytic valley", method, 1),
                                                    again[("analytic valley", 1)]))
+
+
+def test_the_wall_shapes_fit_the_engine_s_plane_and_two_walls():
+    """benchmarks/wall_shapes.py: its plane is the engine's divergence fit (the comparison changes only the shape);
+    beside two walls (too much of the first gain, too little of the second) two walls keep the safe corner safe and
+    both walls failing, where one plane cannot, and the quadratic bends towards them."""
+    import numpy as np
+
+    from mavtune.search.risk import divergence
+
+    spec = importlib.util.spec_from_file_location("wall_shapes", BENCH.with_name("wall_shapes.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    rng = np.random.default_rng(1)
+    points: dict[tuple[float, ...], list[float]] = {}
+    for x in np.round(rng.uniform(0.0, 1.0, (300, 2)), 2):
+        points.setdefault(tuple(x), []).append(math.inf if x[0] > 0.7 or x[1] < 0.2 else 1.0)
+    args = (points, [0.5, 0.5], [0.5, 0.5], lambda u: np.ones(len(u)))
+    at = np.array([[0.6, 0.3], [0.9, 0.6], [0.4, 0.05], [0.3, 0.8]])  # the corner, beyond each wall, far inside
+    plane = module.fit("plane")(*args)
+    np.testing.assert_allclose(plane.chance(at), divergence(*args).chance(at), rtol=1e-6, atol=1e-12)
+    two = module.fit("two walls")(*args).chance(at)
+    assert two[0] < 0.01 and two[1] > 0.99 and two[2] > 0.99 and two[3] < 1e-6
+    assert not (plane.chance(at)[0] < 0.01 and min(plane.chance(at)[1:3]) > 0.99)  # one plane cannot do both
+    curved = module.fit("curved")(*args).chance(at)
+    assert curved[1] > 0.9 and curved[2] > 0.9 and curved[3] < 0.01
