@@ -1,5 +1,5 @@
-"""Would a divergence fit that bends answer better beside walls? The engine's one logistic plane against a quadratic
-in the log-odds and against two walls, on the zoo's plants where the default's flights fail, select half.
+"""Would a divergence fit that bends, or doubts, answer better beside walls? The engine's one logistic plane against a
+quadratic in the log-odds, two walls and its own upper bound, on the zoo's plants where the default's flights fail.
 
 An answer keeps to a fitted divergence chance of `risk.RISK` (0.1 %), fitted by one logistic plane over the flights
 near the design (`risk.divergence`). Where the failed flights lie along two walls (the wide box: too little damping,
@@ -10,7 +10,10 @@ fit the one plane surer, and lose to two vehicles averaging: `--method`):
 - `curved`: the log-odds quadratic in the gains, its curvatures under a normal prior of `CURVE_SD` log-odds per
   share of a range squared (the slopes keep `risk.SLOPE_SD`);
 - `two walls`: a flight fails where either of two logistic planes says so (it survives both), the second fitted
-  first to the flights the one plane calls safe, then both together (a wall is what fails among those).
+  first to the flights the one plane calls safe, then both together (a wall is what fails among those);
+- and a shape that does not bend but doubts: `upper`, the plane's chance at its one-sided 90 % upper bound (the
+  log-odds' standard error from the fit's curvature, the Laplace approximation): a wall seen through few flights
+  keeps answers further off.
 
 Each answer is judged as quality.py judges it (`zoo.truth.Truth`, the same cache) and compared run by run with the
 plane's answer on the same vehicles.
@@ -35,21 +38,27 @@ from common import facts_line, pooled, write_results  # noqa: E402
 from zoo.stats import sign_test  # noqa: E402
 
 PLANTS = ("sim latency +60 ms", "sim heavy +30 %", "sim gusts x2.5", "analytic cliff", "sim wide box")
-SHAPES = ("plane", "curved", "two walls")
+SHAPES = ("plane", "curved", "two walls", "upper")
+UPPER_Z = 1.2816  # the one-sided 90 % normal quantile
 METHOD = "default (config.Tuning())"
 CURVE_SD = 1000.0  # (wall_plane's fit at the optimum: 300 bent it less, 3000 the same as 1000)
 
 
 class Walls:
-    """A divergence chance whose log-odds is `design(u) @ coef[k]` for each wall k, failing where any wall does."""
+    """A divergence chance whose log-odds is `design(u) @ coef[k]` for each wall k, failing where any wall does; with
+    `cov` (one wall's coefficients' covariance) at the log-odds' UPPER_Z upper bound."""
 
-    def __init__(self, centre: np.ndarray, half: np.ndarray, coef: np.ndarray, design: Callable):
-        self.centre, self.half, self.coef, self.design = centre, half, np.atleast_2d(coef), design
+    def __init__(self, centre: np.ndarray, half: np.ndarray, coef: np.ndarray, design: Callable,
+                 cov: np.ndarray | None = None):
+        self.centre, self.half, self.coef, self.design, self.cov = centre, half, np.atleast_2d(coef), design, cov
 
     def chance(self, x: np.ndarray) -> np.ndarray:
         from scipy.special import expit
 
-        eta = self.design((np.atleast_2d(x) - self.centre) / self.half) @ self.coef.T
+        d = self.design((np.atleast_2d(x) - self.centre) / self.half)
+        eta = d @ self.coef.T
+        if self.cov is not None:
+            eta = eta + UPPER_Z * np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", d, self.cov, d), 0.0))[:, None]
         return 1.0 - np.prod(expit(-eta), axis=1)
 
 
@@ -96,6 +105,10 @@ def fit(shape: str) -> Callable:
         first = minimize(one, np.zeros(d.shape[1]), args=(everyone,), jac=True, method="BFGS").x
         if not np.all(np.isfinite(first)):
             return None
+        if shape == "upper":  # the penalised log-likelihood's curvature at the fit: its inverse, the covariance
+            pq = n * expit(d @ first) * expit(-(d @ first))
+            curvature = d.T @ (pq[:, None] * d) + np.diag(precision + 1e-9)
+            return Walls(centre, half, first, design, np.linalg.inv(curvature))
         safe = (d @ first < 0.0).astype(float)  # the flights the one wall calls safe
         if shape != "two walls" or not np.any(safe * f > 0):
             return Walls(centre, half, first, design)
@@ -165,8 +178,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
              + facts_line(facts), "",
              f"{args.method} on runs 0, 2 … {2 * args.runs - 2} of each plant (the select half), its "
              f"divergence fit one plane (the engine's), a quadratic in the log-odds (curvature prior sd {CURVE_SD:g}"
-             " per share squared) or two walls. Judged on quality.py's truth; a fly-away answer: any truth repeat "
-             "there diverged. Against the plane: runs whose true excess is lower–higher (sign test).", "",
+             " per share squared), two walls, or the plane at its 90 % upper bound. Judged on quality.py's truth; "
+             "a fly-away answer: any truth repeat there diverged. Against the plane: runs whose true excess is "
+             "lower–higher (sign test).", "",
              "| plant | fit | within 2 % | median excess % | worst % | fly-away answers | against the plane |",
              "| --- | --- | ---: | ---: | ---: | ---: | --- |"]
     for p in [*plants, None]:
