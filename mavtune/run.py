@@ -309,6 +309,8 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console.print(f"tuned after {counted(len(result.rounds), 'round')}, {counted(result.flights, 'flight')} "
                   f"({_clock_s(len(result.rounds) * plan.round_s)} of flight)")
     console.print(_result_table(result))
+    if (vehicles := _vehicles_table(summary.get("vehicles") or [])) is not None:
+        console.print(vehicles)
     for line in result.cautions():
         console.print(f"[yellow]caution:[/] {escape(line)}", highlight=False)
     print_outcome(console, outcome)
@@ -570,6 +572,30 @@ def _result_table(result: TuningResult) -> Table:
         sure = (f"{sum(i.p_correct >= 0.9 for i in search.iterations)} of {len(search.iterations)}"
                 if search is not None else "")
         table.add_row(name, plus_minus(value, se), interval, sure)
+    return table
+
+
+def _vehicles_table(rows: list[dict[str, Any]]) -> Table | None:
+    """result.json's `vehicles`, the ones the report lists (`report.vehicles.listed`), in 80 columns; None for fewer
+    than two vehicles."""
+    from mavtune.report.vehicles import listed
+
+    if len(rows) < 2:
+        return None
+    shown, note = listed(rows)
+    named = any(r.get("named") for r in shown)
+    table = Table(caption="cost: each vehicle's at the same gains against the other vehicle's (of two) or the "
+                          "median vehicle's (of more), with its 90 % interval"
+                          + ("; named: beyond the flights' noise (a caution says so)" if named else "")
+                          + (f". {note}" if note else ""), caption_justify="left")
+    for column in ("vehicle", "flights", "failed", "lost", "cost", "90 % interval", *(("caution",) if named else ())):
+        table.add_column(column, justify="left" if column in ("vehicle", "caution") else "right",
+                         no_wrap=column != "vehicle")
+    for r in shown:
+        cost, interval = ((f"{r['offset']:+.1%}", f"{r['lo']:+.1%} to {r['hi']:+.1%}") if "offset" in r
+                          else ("—", "not compared"))
+        table.add_row(r["vehicle"], str(r["flights"]), str(r["failed"] or ""), str(r["lost"] or ""), cost,
+                      interval, *(("named" if r.get("named") else "",) if named else ()))
     return table
 
 

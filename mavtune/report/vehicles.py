@@ -10,6 +10,21 @@ from mavtune.vehicle_offsets import MIN_OFFSET, MIN_PAIRS
 LISTED = 32  # more vehicles than this: the table lists the named ones and those furthest from the others
 
 
+def listed(rows: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], str]:
+    """The vehicles to list of result.json's `vehicles`, and a sentence on those left out: all of them up to LISTED;
+    past it, the named ones and those furthest from the others (by their offset), with the range of the rest."""
+    if len(rows) <= LISTED:
+        return rows, ""
+    compared = sorted((r for r in rows if "offset" in r), key=lambda r: (not r["named"], -abs(r["offset"])))
+    named = sum(r["named"] for r in compared)
+    shown, rest = compared[:max(LISTED, named)], [r["offset"] for r in compared[max(LISTED, named):]]
+    shown.sort(key=lambda r: r["offset"])
+    return shown, (f"Of {len(rows)} vehicles the {len(shown)} furthest from the others are listed"
+                   + (f"; the other {len(rest)} compared lie between {min(rest):+.1%} and {max(rest):+.1%}" if rest
+                      else "") + (f"; {len(rows) - len(compared)} not compared" if len(compared) < len(rows) else "")
+                   + ".")
+
+
 def vehicles_section(summary: dict[str, Any]) -> list[str]:
     """The section from result.json's `vehicles` (`TuningResult.vehicles`); nothing for one vehicle (or none)."""
     rows = summary.get("vehicles") or []
@@ -17,16 +32,7 @@ def vehicles_section(summary: dict[str, Any]) -> list[str]:
         return []
     where = ("in the same line search (the vehicles of a round flew different points)"
              if (summary.get("settings") or {}).get("strategy", "avg") != "avg" else "in the same round")
-    shown, note = rows, ""
-    if len(rows) > LISTED:
-        compared = sorted((r for r in rows if "offset" in r), key=lambda r: (not r["named"], -abs(r["offset"])))
-        named = sum(r["named"] for r in compared)
-        shown, rest = compared[:max(LISTED, named)], [r["offset"] for r in compared[max(LISTED, named):]]
-        shown.sort(key=lambda r: r["offset"])
-        note = (f" Of {len(rows)} vehicles the {len(shown)} furthest from the others are listed"
-                + (f"; the other {len(rest)} compared lie between {min(rest):+.1%} and {max(rest):+.1%}" if rest
-                   else "") + (f"; {len(rows) - len(compared)} not compared" if len(compared) < len(rows) else "")
-                + ".")
+    shown, note = listed(rows)
     table = [[f"`{r['vehicle']}`", r["flights"], r["failed"] or "", r["lost"] or "", _offset(r),
               r.get("comparisons", 0), "named" if r.get("named") else ""] for r in shown]
     return ["## Vehicles", "",
@@ -34,7 +40,7 @@ def vehicles_section(summary: dict[str, Any]) -> list[str]:
             f"vehicle's (of more): the offset fitted on the logarithm of the cost, with its 90 % interval. A vehicle "
             f"is named in the cautions where its offset is beyond the flights' noise and at least "
             f"{MIN_OFFSET * 100:g} % (of two vehicles, the costlier: each one's offset is the other's mirror); one "
-            f"in fewer than {MIN_PAIRS} comparisons is not compared.{note}", "",
+            f"in fewer than {MIN_PAIRS} comparisons is not compared.{' ' + note if note else ''}", "",
             md.table(["vehicle", "flights", "failed", "lost", "cost against the others (90 % interval)",
                       "comparisons", "cautions"], table, ["l", "r", "r", "r", "r", "r", "l"]), ""]
 

@@ -38,3 +38,36 @@ def test_a_wide_fleet_lists_the_named_and_the_furthest_and_says_where_the_rest_l
     assert len(listed) == LISTED and "| `x` |" in listed[-1] and "| `v0` |" in listed[0]  # sorted by offset
     assert f"Of {len(rows)} vehicles the {LISTED} furthest from the others are listed; the other 9 compared lie " \
            "between" in text and "; 1 not compared." in text
+
+
+def _console(rows: list[dict]) -> str:
+    from rich.console import Console
+
+    from mavtune.run import _vehicles_table
+
+    console = Console(width=80, record=True, file=open("/dev/null", "w"))
+    table = _vehicles_table(rows)
+    if table is None:
+        return ""
+    console.print(table)
+    return console.export_text()
+
+
+def test_the_console_lists_the_vehicles_in_80_columns_and_marks_the_named_one():
+    """`mavtune tune` prints the table the report holds, fitted to a terminal: cost and interval apart, a caution
+    column only where a vehicle is named; one vehicle, no table; a wide fleet the report's listed ones."""
+    text = _console([_row("sim0", -0.2, failed=3), _row("sim1", 0.25, named=True), _row("sim2", None)])
+    lines = text.splitlines()
+    assert max(map(len, lines)) <= 80
+    sim0 = next(line for line in lines if "sim0" in line)
+    assert "21" in sim0 and " 3 " in sim0 and "-20.0%" in sim0 and "-25.0% to -15.0%" in sim0 and "named" not in sim0
+    assert "named" in next(line for line in lines if "sim1" in line)
+    assert "not compared" in next(line for line in lines if "sim2" in line)
+    assert "caution says so" in text
+    quiet = _console([_row("sim0", -0.01), _row("sim1", 0.01)])
+    assert "caution" not in quiet and "sim1" in quiet
+    assert _console([_row("sim0", None)]) == ""
+    rows = [_row(f"v{j}", 0.001 * (j - 20)) for j in range(LISTED + 8)] + [_row("x", 0.4, named=True)]
+    wide = _console(rows)
+    assert sum(f"│ v{j} " in wide for j in range(LISTED + 8)) == LISTED - 1 and "│ x " in wide
+    assert f"Of {len(rows)} vehicles the {LISTED} furthest" in " ".join(wide.split())
