@@ -29,7 +29,7 @@ from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal, blank
 from mavtune.plan import Plan, clock as _clock_s, counted, make_plan
 from mavtune.runfolder import claimed
-from mavtune.tuner import Round, StageDone, Tuner, TuningResult
+from mavtune.tuner import Round, StageDone, Tuner, TuningResult, gains_text
 
 JOURNAL = "journal.sqlite"
 REPORT = "report.md"
@@ -311,6 +311,8 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
     console.print(_result_table(result))
     if (vehicles := _vehicles_table(summary.get("vehicles") or [])) is not None:
         console.print(vehicles)
+    if own := _own_line(summary.get("vehicles") or []):
+        console.print(own, highlight=False)
     for line in result.cautions():
         console.print(f"[yellow]caution:[/] {escape(line)}", highlight=False)
     print_outcome(console, outcome)
@@ -475,7 +477,8 @@ def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path, c
     (± the search tolerance) and the ground-station parameter files written; an edge is said with what the
     flights there say (`LineSearch.edge_evidence`). With `chosen` (a `near_stock.Pick`) its gains are the answer
     (`gains`, the parameters and files; `answer` says why), and a gain it moved off the search's optimum has no
-    range edge (it lies where the flights put it, nearer stock)."""
+    range edge (it lies where the flights put it, nearer stock). Where the run gave each vehicle its own answer
+    (`TuningResult.own`: a vehicle differs), those as each vehicle's parameters too (`own_params`; no file)."""
     from mavtune.vehicles.tuned import explained_edges, tuned_outcome as outcome
 
     maps = fleet.param_maps() if hasattr(fleet, "param_maps") else {}
@@ -483,6 +486,8 @@ def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path, c
     gains = chosen.gains if chosen is not None else result.gains
     kept = {n: v for n, v in gains.items() if v == result.gains.get(n)}
     said = outcome(maps, gains, settings.space, settings.epsilon, out_dir, evidence, flown, result.brackets(), kept)
+    if own := {v: m.values(result.own[v]) for v, m in maps.items() if v in result.own and m.covers(result.own[v])}:
+        said["own_params"] = own  # (each vehicle's own answer as its parameters: `TuningResult.own`)
     if chosen is None:
         return said
     moved = {n: v for n, v in result.gains.items() if n not in kept}  # where the search's optimum lay instead
@@ -499,6 +504,9 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
         values = ", ".join(f"{n} = {v:.4g} {tolerance_text(outcome, vehicle, n, inline=True)}"
                            for n, v in params.items())
         console.print(f"{vehicle}: {values} (the search tolerance)", highlight=False)
+    for vehicle, params in outcome.get("own_params", {}).items():
+        console.print(f"{vehicle}'s own: {', '.join(f'{n} = {v:.4g}' for n, v in params.items())} (its flights alone)",
+                      highlight=False)
     if outcome.get("param_files"):
         console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
                       f"{escape(', '.join(outcome['param_files']))}", highlight=False, soft_wrap=True)
@@ -597,6 +605,13 @@ def _vehicles_table(rows: list[dict[str, Any]]) -> Table | None:
         table.add_row(r["vehicle"], str(r["flights"]), str(r["failed"] or ""), str(r["lost"] or ""), cost,
                       interval, *(("named" if r.get("named") else "",) if named else ()))
     return table
+
+
+def _own_line(rows: list[dict[str, Any]]) -> str:
+    """Each vehicle's own gains (result.json's `vehicles`: where one differs) in a line; '' where none has them."""
+    own = [v for v in rows if "own_gains" in v]
+    return ("own gains (a vehicle differs: each one's flights alone, fitted as the answer is to all): "
+            + "; ".join(f"{v['vehicle']} {gains_text(v['own_gains'])}" for v in own)) if own else ""
 
 
 def plus_minus(value: float, se: float) -> str:

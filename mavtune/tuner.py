@@ -94,6 +94,11 @@ class Round:
         }
 
 
+def gains_text(gains: Gains) -> str:
+    """Gains in a line: 'kp 0.41, kd 0.5213'."""
+    return ", ".join(f"{n} {v:.4g}" for n, v in gains.items())
+
+
 def designed_after(rounds: list[Round]) -> set[str]:
     """The gains whose last line search a response-surface design flew after: its flights, every gain varied around
     the answer, measured each such gain where the other gains are now, so the line search's hold of the others
@@ -207,6 +212,7 @@ class TuningResult:
     open_face: Gains = field(default_factory=dict)  # gains the last design answered on its box's face inside the range
     outliers: list[dict[str, Any]] = field(default_factory=list)  # flights the last design's fit left out: gains, cost
     designs: list[DesignRecord] = field(default_factory=list)  # the response surface's designs in the order flown
+    own: dict[str, Gains] = field(default_factory=dict)  # a named vehicle's own answer: `Tuner.own`
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each (`caution_kinds` names them)."""
@@ -285,7 +291,7 @@ class TuningResult:
                 "range would search it finer")
         if self.outliers and designed:
             worst = max(self.outliers, key=lambda f: f["cost"])
-            at = ", ".join(f"{n} {v:.4g}" for n, v in worst["gains"].items())
+            at = gains_text(worst["gains"])
             many = len(self.outliers) > 1
             say("outliers", f"{len(self.outliers)} flight{'s' if many else ''} left out of the last design's fit as "
                 f"{'outliers, each' if many else 'an outlier,'} far off both the same gains' other flights and the "
@@ -301,7 +307,7 @@ class TuningResult:
                 safer = risk.get("off_wall")
                 nearest = "" if not safer else (
                     "; the nearest gains the last design's flights put under the bound are "
-                    + ", ".join(f"{n} {v:.4g}" for n, v in safer.items())
+                    + gains_text(safer)
                     + f" (chance {risk['off_wall_chance']:.2%}; not flown themselves)")
                 say("divergence", f"{said}, above the {bound:.1%} an answer keeps to: it is the design before's "
                     "answer, kept beside the wall (that design's flights put it under the bound; the last one's, "
@@ -311,7 +317,7 @@ class TuningResult:
                 say("divergence", f"{said}, above the {bound:.1%} an answer keeps to, which no point flown in the "
                     "design meets: fly the design away from the failed flights (narrower ranges) before trusting it")
             elif free:
-                gains = ", ".join(f"{n} {v:.4g}" for n, v in free.items())
+                gains = gains_text(free)
                 say("divergence", f"{said}: the bound of {bound:.1%} on that chance moved the answer off the fit's "
                     f"minimum ({gains}), where it is {risk['unbounded_chance']:.1%}")
         where = "line search" if self._spread else "rounds"
@@ -320,7 +326,10 @@ class TuningResult:
                 f"than the other vehicles' at the same gains in the same {where} ({o.pairs} comparisons; {o.level:.0%} "
                 f"interval {o.lo:+.0%} to {o.hi:+.0%}): the vehicles fly unlike each other (a worn propeller, a "
                 f"weaker battery, a payload, another airframe) and the gains answer their average; look at "
-                f"{o.vehicle} before loading them onto it, or tune it alone")
+                f"{o.vehicle} before loading them onto it"
+                + (f": its own flights answer {gains_text(self.own[o.vehicle])} (the last design fitted to them alone, "
+                   "inside its box; each vehicle's own gains: the Vehicles table)," if o.vehicle in self.own else ",")
+                + " or tune it alone")
         return out
 
     @property
@@ -343,7 +352,8 @@ class TuningResult:
                 tally.setdefault(f.vehicle, Counter())[f.status.value] += 1
         offsets = {o.vehicle: o.to_dict() for o in fleet_offsets(self._compared())}
         return [{"vehicle": v, "flights": sum(n.values()), "failed": n[Status.FAILED.value],
-                 "lost": n[Status.LOST.value], **{k: x for k, x in offsets.get(v, {}).items() if k != "vehicle"}}
+                 "lost": n[Status.LOST.value], **{k: x for k, x in offsets.get(v, {}).items() if k != "vehicle"},
+                 **({"own_gains": dict(self.own[v])} if v in self.own else {})}
                 for v, n in tally.items()]
 
     def _compared(self) -> list[Sequence[Flight]]:
@@ -864,6 +874,9 @@ class Tuner:
         self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self.open_face: Gains = {}  # the gains the last design answered on its box's face inside the range (`_surface`)
         self.outliers: list[dict[str, Any]] = []  # the flights the last design's fit left out (`_surface`)
+        self.own: dict[str, Gains] = {}  # each named vehicle's own answer (`_own`)
+        self._last_fit: tuple[list[tuple[float, float]], dict[str, Any]] | None = None  # the run's answer's box and
+        # fit options (`_surface`: the last design's), for `_own`
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
         self._step: tuple[list[tuple[float, float]], tuple[float, ...], float | None] | None = None  # last
         # design's box, its answer, and how steeply the cost rises into the flights failed within its half-width of
@@ -894,7 +907,7 @@ class Tuner:
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
                             designed=self.designed, divergence=self.divergence, open_face=dict(self.open_face),
-                            outliers=list(self.outliers), designs=list(self.designs))
+                            outliers=list(self.outliers), designs=list(self.designs), own=dict(self.own))
 
     def _record(self, bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason (and the range
@@ -953,17 +966,20 @@ class Tuner:
         vector with its costs, a failed flight's as infinite, a lost one's left out."""
         return plausible_region(self._flown(), self.pool, list(self.settings.space.values()))
 
-    def _flown(self) -> dict[tuple[float, ...], list[float]]:
-        """Every gain vector flown in the run (in the order of the space) with its flights' costs as the searches
-        count them (`Strategy.measured`: a failed flight's as infinite, a lost one's left out)."""
+    def _flown(self, vehicle: str | None = None) -> dict[tuple[float, ...], list[float]]:
+        """Every gain vector flown in the run (in the order of the space; by `vehicle` alone, if given) with its
+        flights' costs as the searches count them (`Strategy.measured`: a failed flight's as infinite, a lost one's
+        left out)."""
         names = list(self.settings.space)
-        told = (pair for r in self.rounds for pair in zip(*Strategy.measured([f.gains for f in r.flights], r.flights)))
+        flights = ([f for f in r.flights if vehicle is None or f.vehicle == vehicle] for r in self.rounds)
+        told = (pair for fs in flights for pair in zip(*Strategy.measured([f.gains for f in fs], fs)))
         return {key: costs for key, (_, costs) in by_gains(told, names, digits=None).items()}
 
-    def _flown_shares(self) -> dict[tuple[float, ...], list[float]]:
+    def _flown_shares(self, vehicle: str | None = None) -> dict[tuple[float, ...], list[float]]:
         """`_flown` with each gain vector in shares of each range (what the response surface fits)."""
         ranges = list(self.settings.space.values())
-        return {tuple((x - a) / (b - a) for x, (a, b) in zip(key, ranges)): c for key, c in self._flown().items()}
+        return {tuple((x - a) / (b - a) for x, (a, b) in zip(key, ranges)): c
+                for key, c in self._flown(vehicle).items()}
 
     def run(self) -> TuningResult:
         s = self.settings
@@ -1008,7 +1024,40 @@ class Tuner:
                 half *= self._shrink()
         if not self._usable:
             self._no_cost()
+        self.own = self._own()
         return self.snapshot()
+
+    def _own(self) -> dict[str, Gains]:
+        """Averaging, where the run's cautions name a vehicle (`vehicle_offsets`), every vehicle's own answer
+        (`own_answer`): the swarm's answer then lies between unlike airframes, which each one's own flights answer
+        better (benchmarks/own_answers.py: with one vehicle heavier, the others' own answers flew better for them
+        too). Not where no vehicle is named (on vehicles alike, own answers are noisier than the swarm's), nor where
+        the vehicles flew different points (each flew a part of the run's)."""
+        if self._last_fit is None or self.settings.strategy != "avg":
+            return {}
+        flights = [r.flights for r in self.rounds]
+        if not vehicle_offsets(flights):
+            return {}
+        return {v: self.own_answer(v) for v in dict.fromkeys(f.vehicle for fs in flights for f in fs)}
+
+    def own_answer(self, vehicle: str) -> Gains:
+        """The run's answer fitted to one vehicle's flights alone: the last design's fit inside the same box and
+        bounds (no answer kept from the design before: that was the swarm's), so never a gain it did not fly.
+        Averaging, every vehicle flew every point, so its flights hold its own surface (benchmarks/own_answers.py:
+        where each airframe's optimum lies elsewhere, such answers flew better for the vehicle than the swarm's)."""
+        box, options = self._last_fit
+        flown, _ = surface_inliers(self._flown_shares(vehicle), box, float(self.settings.design_outliers))
+        best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool), self.pool,
+                                 **{**options, "keep": None, "hold": None})
+        return self._gains(best)
+
+    def _gains(self, shares: Sequence[float]) -> Gains:
+        """A gain vector given in shares of each range, as gains inside the ranges."""
+        out = {}
+        for (n, (a, b)), u in zip(self.settings.space.items(), shares):
+            w = b - a
+            out[n] = min(max(a + w * u, a), a + w)
+        return out
 
     def _no_cost(self) -> None:
         """Refuse to answer a run none of whose flights measured a usable cost: every gain it would hand out failed
@@ -1074,11 +1123,11 @@ class Tuner:
         if layout is not None:  # (evenly in the logarithm of the gains: finer towards each range's low end)
             points = [layout.back(p) for p in surface_design(layout.to(centre), half, s.design_inner_at(step))]
         per_point = s.design_per_point(step)
-        queue = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, p)}
+        queue = [self._gains(p)
                  for _ in range(s.design_repeats_at(step)) for p in points for _ in range(per_point)]
         box = _span(points)
         reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
-        todo, limit = self._design_budget(queue, points, names, lo, width, step)
+        todo, limit = self._design_budget(queue, points, step)
         first_round = len(self.rounds)
         while todo and (limit is None or limit > 0):
             record = self.recorded.get(len(self.rounds))
@@ -1113,10 +1162,12 @@ class Tuner:
         # the design before's, not the passes' answer)
         options = answer_options(self.settings, half, keep, final, logged, hold) | ({"risk": None} if start else {})
         best, fitted = surface_answer(flown, box, ruled, self.pool, **options)
+        if final:
+            self._last_fit = (box, options)
         low = far_lowest(flown, box, best, float(s.design_map_far)) if start and s.design_map_far else None
         if low is not None:  # (`design_map_far`: the passes start in the low region the fit averaged away)
             best, fitted = low, SURFACE_FAR
-        self.gains = {n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, best)}
+        self.gains = self._gains(best)
         self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None, final,
                                            logged)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
@@ -1189,23 +1240,18 @@ class Tuner:
         if free is None:
             free, _ = surface_answer(flown, box, ruled, self.pool, risk=None, **options)
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
-        names, s = list(self.settings.space), self.settings
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
         kept = keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))
         safer = surface_answer(flown, box, ruled, self.pool, keep_bound=True, **options)[0] \
             if kept and chance > RISK else best
         off = any(abs(a - b) > 1e-9 for a, b in zip(safer, best))
-
-        def gains(u: Sequence[float]) -> dict[str, float]:
-            return {n: s.space[n][0] + (s.space[n][1] - s.space[n][0]) * v for n, v in zip(names, u)}
-
-        return {"chance": chance, "risk": RISK, "unbounded": gains(free) if moved else None,
+        return {"chance": chance, "risk": RISK, "unbounded": self._gains(free) if moved else None,
                 "unbounded_chance": free_chance if moved else None, "kept": kept,
-                "off_wall": gains(safer) if off else None,
+                "off_wall": self._gains(safer) if off else None,
                 "off_wall_chance": float(fit.chance([safer])[0]) if off else None}
 
-    def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]], names: list[str], lo: list[float],
-                       width: list[float], step: int) -> tuple[list[Gains], int | None]:
+    def _design_budget(self, queue: list[Gains], points: list[tuple[float, ...]],
+                       step: int) -> tuple[list[Gains], int | None]:
         """The flights of design `step` in order and how many it flies: without a budget its `queue` (each point as
         the settings say) until every one has measured; with one, its share of what the budget has left
         (`Settings.design_share`): the queue, then one more flight of each point in turn (the centre first) until
@@ -1216,7 +1262,7 @@ class Tuner:
         share = s.design_share(step, int(s.budget) - self._spent())
         if step < s.designs_before_passes():  # before the passes: its own flights, whole rounds
             share = math.ceil(s.design_flights(step) / int(s.vehicles)) * int(s.vehicles)
-        more = [{n: min(max(a + w * u, a), a + w) for n, a, w, u in zip(names, lo, width, points[k % len(points)])}
+        more = [self._gains(points[k % len(points)])
                 for k in range(max(0, share - len(queue)))]
         return list(queue) + more, share
 

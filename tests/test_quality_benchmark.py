@@ -242,3 +242,22 @@ def test_the_wall_shapes_fit_the_engine_s_plane_and_two_walls():
     assert not (plane.chance(at)[0] < 0.01 and min(plane.chance(at)[1:3]) > 0.99)  # one plane cannot do both
     curved = module.fit("curved")(*args).chance(at)
     assert curved[1] > 0.9 and curved[2] > 0.9 and curved[3] < 0.01
+
+
+def test_own_answers_fly_each_vehicle_at_its_own_answer_and_the_swarm_s():
+    """benchmarks/own_answers.py: its one-heavy plant loads each run's vehicle 1 alone (the same gains, rounds and
+    its seed otherwise cost the same), and a run gives a row per vehicle: the swarm's answer, the vehicle's own
+    (`Tuner.own_answer`), their paired difference."""
+    import numpy as np
+
+    spec = importlib.util.spec_from_file_location("own_answers", BENCH.with_name("own_answers.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    plant = module.one_heavy()
+    x = np.full((4, 2), 0.5)
+    cost, _ = plant.fly(x, np.array([10100, 10101, 10201, 10202]), np.zeros(4, int))
+    nominal, _ = module.ALL_PLANTS["sim nominal"].fly(x, np.array([10100, 10101, 10201, 10202]), np.zeros(4, int))
+    assert cost[0] == nominal[0] and cost[3] == nominal[3] and cost[1] > nominal[1] and cost[2] > nominal[2]
+    rows = module.one(("blind analytic unequal vehicles", "default (config.Tuning())", 1, 8))["rows"]
+    assert [r["vehicle"] for r in rows] == ["v0", "v1"]
+    assert all(r["own"] != r["swarm"] and math.isfinite(r["diff_pct"]) and r["se_pct"] > 0 for r in rows)

@@ -113,3 +113,59 @@ def test_a_resumed_run_says_the_same(tmp_path):
     assert all(r.replayed for r in resumed.rounds)
     said = dict(flown.caution_kinds())["vehicles differ"]
     assert dict(resumed.caution_kinds())["vehicles differ"] == said
+
+
+def _unlike(shift: float, level: float, seed: int = 7):
+    """A cost function whose vehicle 1 has its optimum `shift` higher in kp and costs `level` times the others'."""
+    rng = np.random.default_rng(seed)
+
+    def evaluate(gains, context):
+        return [((g["kp"] - 0.4 - (shift if c.vehicle == 1 else 0.0)) ** 2 + (g["kd"] - 0.6) ** 2 + 0.5)
+                * (level if c.vehicle == 1 else 1.0) * math.exp(0.03 * rng.standard_normal())
+                for g, c in zip(gains, context)]
+
+    return evaluate
+
+
+def test_where_a_vehicle_differs_each_vehicle_gets_its_own_answer_from_its_own_flights():
+    """Averaging, a run that names a vehicle answers every vehicle's own gains: the last design fitted to its flights
+    alone, inside the hull of the points it flew (never a gain it did not fly), the differing vehicle's nearer its own
+    optimum than the swarm's answer; said in the caution, `vehicles` and the report's Vehicles table."""
+    from scipy.spatial import Delaunay
+
+    from mavtune.report.vehicles import vehicles_section
+
+    space = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
+    result = mavtune.tune(_unlike(0.25, 1.3), space=space, seed=1, draws=0, vehicles=3)
+    assert set(result.own) == {"v0", "v1", "v2"}
+    for vehicle, own in result.own.items():
+        flown = {(f.gains["kp"], f.gains["kd"]) for r in result.rounds for f in r.flights
+                 if f.vehicle == vehicle and f.usable}
+        assert Delaunay(np.array(sorted(flown))).find_simplex([[own["kp"], own["kd"]]], tol=1e-9)[0] >= 0
+    mine, swarm = result.own["v1"], result.gains
+    assert abs(mine["kp"] - 0.65) < abs(swarm["kp"] - 0.65) - 0.05  # (the swarm's answer lies between 0.4 and 0.65)
+    assert abs(result.own["v0"]["kp"] - 0.4) < abs(mine["kp"] - 0.4)
+    said = dict(result.caution_kinds())["vehicles differ"]
+    assert said.startswith("v1's") and f"its own flights answer kp {mine['kp']:.4g}, kd {mine['kd']:.4g}" in said
+    summary = result.to_dict()
+    assert [v["own_gains"] for v in summary["vehicles"]] == [result.own[f"v{j}"] for j in range(3)]
+    text = "\n".join(vehicles_section(summary))
+    assert "own gains |" in text and f"| kp {mine['kp']:.4g}, kd {mine['kd']:.4g} |" in text
+
+
+@pytest.mark.parametrize("strategy, shift, level", [("avg", 0.0, 1.0), ("split", 0.25, 1.3)])
+def test_no_own_answers_where_no_vehicle_is_named_or_the_vehicles_flew_apart(strategy, shift, level):
+    """Vehicles alike: no vehicle named, the swarm's answer alone (own answers are noisier); split: each vehicle
+    flew a part of the run's points, too few for its own surface, so none either."""
+    result = mavtune.tune(_unlike(shift, level), space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1, draws=0,
+                          strategy=strategy)
+    assert result.own == {} and all("own_gains" not in v for v in result.to_dict()["vehicles"])
+    assert ("vehicles differ" in dict(result.caution_kinds())) == (level > 1.0)
+
+
+def test_the_console_says_each_vehicle_s_own_gains_in_a_line():
+    from mavtune.run import _own_line
+
+    rows = [{"vehicle": "v0", "own_gains": {"kp": 0.4, "kd": 0.61234}}, {"vehicle": "v1"}]
+    assert _own_line(rows).endswith("fitted as the answer is to all): v0 kp 0.4, kd 0.6123")
+    assert _own_line([{"vehicle": "v0"}, {"vehicle": "v1"}]) == ""

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from mavtune.report import markdown as md
+from mavtune.tuner import gains_text
 from mavtune.vehicle_offsets import MIN_OFFSET, MIN_PAIRS
 
 LISTED = 32  # more vehicles than this: the table lists the named ones and those furthest from the others
@@ -33,16 +34,22 @@ def vehicles_section(summary: dict[str, Any]) -> list[str]:
     where = ("in the same line search (the vehicles of a round flew different points)"
              if (summary.get("settings") or {}).get("strategy", "avg") != "avg" else "in the same round")
     shown, note = listed(rows)
+    own = any("own_gains" in r for r in rows)
     table = [[f"`{r['vehicle']}`", r["flights"], r["failed"] or "", r["lost"] or "", _offset(r),
-              r.get("comparisons", 0), "named" if r.get("named") else ""] for r in shown]
+              r.get("comparisons", 0), "named" if r.get("named") else "",
+              *([gains_text(r.get("own_gains") or {})] if own else [])] for r in shown]
     return ["## Vehicles", "",
             f"Each vehicle's costs at the same gains {where}, against the other vehicle's (of two) or the median "
             f"vehicle's (of more): the offset fitted on the logarithm of the cost, with its 90 % interval. A vehicle "
             f"is named in the cautions where its offset is beyond the flights' noise and at least "
             f"{MIN_OFFSET * 100:g} % (of two vehicles, the costlier: each one's offset is the other's mirror); one "
-            f"in fewer than {MIN_PAIRS} comparisons is not compared.{' ' + note if note else ''}", "",
+            f"in fewer than {MIN_PAIRS} comparisons is not compared.{' ' + note if note else ''}"
+            + (" Where one is named, each vehicle's own gains are the last design fitted to its flights alone (every "
+               "vehicle flew every point): the swarm's answer lies between unlike vehicles, and each one's own "
+               "answer is nearer its own best." if own else ""), "",
             md.table(["vehicle", "flights", "failed", "lost", "cost against the others (90 % interval)",
-                      "comparisons", "cautions"], table, ["l", "r", "r", "r", "r", "r", "l"]), ""]
+                      "comparisons", "cautions", *(["own gains"] if own else [])], table,
+                     ["l", "r", "r", "r", "r", "r", "l", *(["l"] if own else [])]), ""]
 
 
 def _offset(row: dict[str, Any]) -> str:
