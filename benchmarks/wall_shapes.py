@@ -26,7 +26,6 @@ plane's answer on the same vehicles.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 from typing import Any, Callable
@@ -76,20 +75,16 @@ def fit(shape: str) -> Callable:
     from scipy.optimize import minimize
     from scipy.special import expit, log_expit
 
-    from mavtune.search.risk import SLOPE_SD
+    from mavtune.search.risk import SLOPE_SD, weighted_flights
 
     def divergence(points, centre, half, weight):
-        keys = [k for k, c in points.items() if c]
         centre, half = np.asarray(centre, float), np.asarray(half, float)
-        x = np.array(keys, float).reshape(len(keys), len(centre))
-        flights = np.array([len(points[k]) for k in keys], float)
-        failed = np.array([sum(not math.isfinite(c) for c in points[k]) for k in keys], float)
-        w = np.asarray(weight((x - centre) / half), float) if len(keys) else np.zeros(0)
-        if not np.any((failed > 0) & (w > 0)):
+        counted = weighted_flights(points, centre, half, weight)
+        if counted is None:
             return None
+        x, n, f = counted
         design = _quadratic if shape == "curved" else _linear
         d = design((x - centre) / half)
-        n, f = w * flights, w * failed
         precision = np.concatenate([[0.0], 1.0 / (SLOPE_SD * half) ** 2])
         if shape == "curved":
             i, j = np.triu_indices(len(half))

@@ -48,6 +48,22 @@ def _design(x: np.ndarray, centre: np.ndarray, half: np.ndarray) -> np.ndarray:
     return np.column_stack([np.ones(len(x)), (x - centre) / half])
 
 
+def weighted_flights(points: Mapping[tuple[float, ...], Sequence[float]], centre: np.ndarray, half: np.ndarray,
+                     weight: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The flown gain vectors (rows), and at each the flights and the failed ones weighted by `weight(u)` — what
+    `divergence` fits; None when no flight the kernel reaches failed."""
+    import numpy as np
+
+    keys = [k for k, c in points.items() if c]
+    x = np.array(keys, float).reshape(len(keys), len(centre))
+    flights = np.array([len(points[k]) for k in keys], float)
+    failed = np.array([sum(not math.isfinite(c) for c in points[k]) for k in keys], float)
+    w = np.asarray(weight((x - centre) / half), float) if len(keys) else np.zeros(0)
+    if not np.any((failed > 0) & (w > 0)):
+        return None
+    return x, w * flights, w * failed
+
+
 def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequence[float], half: Sequence[float],
                weight: Callable[[np.ndarray], np.ndarray]) -> Divergence | None:
     """The divergence chance fitted to every flight of `points` (gain vector in shares of each range → its
@@ -57,16 +73,12 @@ def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequ
     from scipy.optimize import minimize
     from scipy.special import expit, log_expit
 
-    keys = [k for k, c in points.items() if c]
     centre, half = np.asarray(centre, float), np.asarray(half, float)
-    x = np.array(keys, float).reshape(len(keys), len(centre))
-    flights = np.array([len(points[k]) for k in keys], float)
-    failed = np.array([sum(not math.isfinite(c) for c in points[k]) for k in keys], float)
-    w = np.asarray(weight((x - centre) / half), float) if len(keys) else np.zeros(0)
-    if not np.any((failed > 0) & (w > 0)):
+    counted = weighted_flights(points, centre, half, weight)
+    if counted is None:
         return None
+    x, n, f = counted
     design = _design(x, centre, half)
-    n, f = w * flights, w * failed
     precision = np.concatenate([[0.0], 1.0 / (SLOPE_SD * half) ** 2])  # (per half-width; the intercept is free)
 
     def loss(beta: np.ndarray) -> tuple[float, np.ndarray]:
