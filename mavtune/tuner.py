@@ -212,7 +212,7 @@ class TuningResult:
     open_face: Gains = field(default_factory=dict)  # gains the last design answered on its box's face inside the range
     outliers: list[dict[str, Any]] = field(default_factory=list)  # flights the last design's fit left out: gains, cost
     designs: list[DesignRecord] = field(default_factory=list)  # the response surface's designs in the order flown
-    own: dict[str, Gains] = field(default_factory=dict)  # a named vehicle's own answer: `Tuner.own`
+    own: dict[str, Gains] = field(default_factory=dict)  # each vehicle's own answer where one differs: `Tuner._own`
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each (`caution_kinds` names them)."""
@@ -874,7 +874,7 @@ class Tuner:
         self.divergence: dict[str, Any] | None = None  # the last design's answer's divergence chance (`_surface`)
         self.open_face: Gains = {}  # the gains the last design answered on its box's face inside the range (`_surface`)
         self.outliers: list[dict[str, Any]] = []  # the flights the last design's fit left out (`_surface`)
-        self.own: dict[str, Gains] = {}  # each named vehicle's own answer (`_own`)
+        self.own: dict[str, Gains] = {}  # each vehicle's own answer where one differs (`_own`)
         self._last_fit: tuple[list[tuple[float, float]], dict[str, Any]] | None = None  # the run's answer's box and
         # fit options (`_surface`: the last design's), for `_own`
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
@@ -1032,7 +1032,7 @@ class Tuner:
         (`own_answer`): the swarm's answer then lies between unlike airframes, which each one's own flights answer
         better (benchmarks/own_answers.py: with one vehicle heavier, the others' own answers flew better for them
         too). Not where no vehicle is named (on vehicles alike, own answers are noisier than the swarm's), nor where
-        the vehicles flew different points (each flew a part of the run's)."""
+        the vehicles flew different points (each flew a part of the run's), nor without a design (none to refit)."""
         if self._last_fit is None or self.settings.strategy != "avg":
             return {}
         flights = [r.flights for r in self.rounds]
@@ -1123,8 +1123,7 @@ class Tuner:
         if layout is not None:  # (evenly in the logarithm of the gains: finer towards each range's low end)
             points = [layout.back(p) for p in surface_design(layout.to(centre), half, s.design_inner_at(step))]
         per_point = s.design_per_point(step)
-        queue = [self._gains(p)
-                 for _ in range(s.design_repeats_at(step)) for p in points for _ in range(per_point)]
+        queue = [self._gains(p) for _ in range(s.design_repeats_at(step)) for p in points for _ in range(per_point)]
         box = _span(points)
         reason, self.stop_reason = self.stop_reason, f"flying the response surface's design ({len(points)} points)"
         todo, limit = self._design_budget(queue, points, step)
@@ -1262,8 +1261,7 @@ class Tuner:
         share = s.design_share(step, int(s.budget) - self._spent())
         if step < s.designs_before_passes():  # before the passes: its own flights, whole rounds
             share = math.ceil(s.design_flights(step) / int(s.vehicles)) * int(s.vehicles)
-        more = [self._gains(points[k % len(points)])
-                for k in range(max(0, share - len(queue)))]
+        more = [self._gains(points[k % len(points)]) for k in range(max(0, share - len(queue)))]
         return list(queue) + more, share
 
     def _spent(self) -> int:

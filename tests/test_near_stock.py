@@ -167,10 +167,12 @@ def test_an_answer_moved_off_the_limit_says_where_the_optimum_lay(tmp_path):
     chosen = pick({"kp": 0.5, "kd": 1.0}, flown(flights, ["kp", "kd"], 0.2), [m.normalised({"PSC_POSZ_P": 1.0,
                   "PSC_VELZ_P": 5.0})], SPACE, 0.2, MANY)
     assert chosen.gains == {"kp": 0.5, "kd": 0.875}
-    result = SimpleNamespace(gains={"kp": 0.5, "kd": 1.0}, edges=lambda: ({}, {}), brackets=lambda: {})
+    result = SimpleNamespace(gains={"kp": 0.5, "kd": 1.0}, edges=lambda: ({}, {}), brackets=lambda: {},
+                             own={"v": {"kp": 0.25, "kd": 0.5}, "w": {"kp": 0.5, "kd": 0.5}})
     fleet = SimpleNamespace(param_maps=lambda: {"v": m})
     out = tuned_outcome(fleet, result, SimpleNamespace(space=SPACE, epsilon=0.125), tmp_path, chosen)
     assert out["gains"] == chosen.gains and out["tuned_params"]["v"] == {"PSC_POSZ_P": 2.0, "PSC_VELZ_P": 7.125}
+    assert out["own_params"] == {"v": {"PSC_POSZ_P": 1.5, "PSC_VELZ_P": 4.5}}  # (w has no parameter map)
     assert out["range_edges"] == []  # the answer lies inside: nothing to say of it
     [said] = out["answer"]["plain_range_edges"]  # but the search's optimum lay on the documented limit
     assert "PSC_VELZ_P" in said and "the autopilot's limit, not the search, stopped it" in said

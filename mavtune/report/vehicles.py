@@ -45,8 +45,8 @@ def vehicles_section(summary: dict[str, Any]) -> list[str]:
             f"{MIN_OFFSET * 100:g} % (of two vehicles, the costlier: each one's offset is the other's mirror); one "
             f"in fewer than {MIN_PAIRS} comparisons is not compared.{' ' + note if note else ''}"
             + (" Where one is named, each vehicle's own gains are the last design fitted to its flights alone (every "
-               "vehicle flew every point): the swarm's answer lies between unlike vehicles, and each one's own "
-               "answer is nearer its own best." if own else ""), "",
+               "vehicle flew every point), inside the same box: where the vehicles fly unlike each other, the swarm's "
+               "answer lies between them." if own else ""), "",
             md.table(["vehicle", "flights", "failed", "lost", "cost against the others (90 % interval)",
                       "comparisons", "cautions", *(["own gains"] if own else [])], table,
                      ["l", "r", "r", "r", "r", "r", "l", *(["l"] if own else [])]), ""]
