@@ -1,5 +1,6 @@
-"""Would each vehicle fly better with gains fitted to its own flights than with the swarm's answer? Measured before
-a per-vehicle answer is built.
+"""Does each vehicle fly better with its own gains, fitted to its own flights, than with the swarm's answer?
+
+Measured before the run gave own answers, and what they are given on.
 
 When the vehicles of a swarm differ (a heavier airframe, a worn rotor), the run answers the gains that suit them on
 average. Averaging, every vehicle flies every point of the run, so each one's own flights already hold a surface of
