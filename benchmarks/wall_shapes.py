@@ -75,7 +75,7 @@ def fit(shape: str) -> Callable:
     from scipy.optimize import minimize
     from scipy.special import expit, log_expit
 
-    from mavtune.search.risk import SLOPE_SD, weighted_flights
+    from mavtune.search.risk import SLOPE_SD, logistic, weighted_flights
 
     def divergence(points, centre, half, weight):
         centre, half = np.asarray(centre, float), np.asarray(half, float)
@@ -90,14 +90,7 @@ def fit(shape: str) -> Callable:
             i, j = np.triu_indices(len(half))
             precision = np.concatenate([precision, 1.0 / (CURVE_SD * half[i] * half[j]) ** 2])
 
-        def one(beta: np.ndarray, keep: np.ndarray) -> tuple[float, np.ndarray]:
-            eta = d @ beta
-            ll = keep * (f * log_expit(eta) + (n - f) * log_expit(-eta))
-            return (float(0.5 * np.sum(precision * beta * beta) - np.sum(ll)),
-                    precision * beta - d.T @ (keep * (f - n * expit(eta))))
-
-        everyone = np.ones(len(n))
-        first = minimize(one, np.zeros(d.shape[1]), args=(everyone,), jac=True, method="BFGS").x
+        first = logistic(d, n, f, precision)
         if not np.all(np.isfinite(first)):
             return None
         if shape == "upper":  # the penalised log-likelihood's curvature at the fit: its inverse, the covariance
@@ -107,7 +100,7 @@ def fit(shape: str) -> Callable:
         safe = (d @ first < 0.0).astype(float)  # the flights the one wall calls safe
         if shape != "two walls" or not np.any(safe * f > 0):
             return Walls(centre, half, first, design)
-        second = minimize(one, np.zeros(d.shape[1]), args=(safe,), jac=True, method="BFGS").x
+        second = logistic(d, safe * n, safe * f, precision)
         p = d.shape[1]
 
         def both(beta: np.ndarray) -> tuple[float, np.ndarray]:

@@ -70,16 +70,23 @@ def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequ
     flights' costs, a failed flight's inf), each point weighted by `weight(u)` (the surface fit's kernel at
     u = (x − centre) / half); None when no flight the kernel reaches failed (no wall to keep off)."""
     import numpy as np
-    from scipy.optimize import minimize
-    from scipy.special import expit, log_expit
 
     centre, half = np.asarray(centre, float), np.asarray(half, float)
     counted = weighted_flights(points, centre, half, weight)
     if counted is None:
         return None
     x, n, f = counted
-    design = _design(x, centre, half)
     precision = np.concatenate([[0.0], 1.0 / (SLOPE_SD * half) ** 2])  # (per half-width; the intercept is free)
+    coef = logistic(_design(x, centre, half), n, f, precision)
+    return Divergence(centre, half, coef) if np.all(np.isfinite(coef)) else None
+
+
+def logistic(design: np.ndarray, n: np.ndarray, f: np.ndarray, precision: np.ndarray) -> np.ndarray:
+    """The coefficients of log-odds `design @ coef` most likely for `f` failed of `n` flights at each row, under a
+    normal prior of `precision` per coefficient (zero: free)."""
+    import numpy as np
+    from scipy.optimize import minimize
+    from scipy.special import expit, log_expit
 
     def loss(beta: np.ndarray) -> tuple[float, np.ndarray]:
         eta = design @ beta
@@ -87,5 +94,4 @@ def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequ
         return (float(0.5 * np.sum(precision * beta * beta) - np.sum(ll)),
                 precision * beta - design.T @ (f - n * expit(eta)))
 
-    fit = minimize(loss, np.zeros(design.shape[1]), jac=True, method="BFGS")
-    return Divergence(centre, half, fit.x) if np.all(np.isfinite(fit.x)) else None
+    return minimize(loss, np.zeros(design.shape[1]), jac=True, method="BFGS").x
