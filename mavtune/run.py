@@ -478,8 +478,10 @@ def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path, c
     flights there say (`LineSearch.edge_evidence`). With `chosen` (a `near_stock.Pick`) its gains are the answer
     (`gains`, the parameters and files; `answer` says why), and a gain it moved off the search's optimum has no
     range edge (it lies where the flights put it, nearer stock). Where the run gave each vehicle its own answer
-    (`TuningResult.own`: a vehicle differs), those as each vehicle's parameters too (`own_params`; no file)."""
-    from mavtune.vehicles.tuned import explained_edges, tuned_outcome as outcome
+    (`TuningResult.own`: a vehicle differs), those as each vehicle's parameters too (`own_params`, with their
+    intervals: `own_params_interval`) and its own parameter files (`own_param_files`: `own-K`, beside the
+    swarm's)."""
+    from mavtune.vehicles.tuned import explained_edges, tuned_outcome as outcome, write_own_files
 
     maps = fleet.param_maps() if hasattr(fleet, "param_maps") else {}
     evidence, flown = result.edges()
@@ -488,6 +490,11 @@ def tuned_outcome(fleet: Fleet, result: TuningResult, settings, out_dir: Path, c
     said = outcome(maps, gains, settings.space, settings.epsilon, out_dir, evidence, flown, result.brackets(), kept)
     if own := {v: m.values(result.own[v]) for v, m in maps.items() if v in result.own and m.covers(result.own[v])}:
         said["own_params"] = own  # (each vehicle's own answer as its parameters: `TuningResult.own`)
+        if spans := {v: m.intervals(result.own_uncertainty[v]) for v, m in maps.items()
+                     if v in own and v in result.own_uncertainty}:
+            said["own_params_interval"] = spans  # (and its 90 % interval in each parameter's units)
+        files = write_own_files(maps, result.own, out_dir)
+        said |= {"own_param_files": list(files), "own_param_file_vehicles": files}
     if chosen is None:
         return said
     moved = {n: v for n, v in result.gains.items() if n not in kept}  # where the search's optimum lay instead
@@ -505,11 +512,19 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
                            for n, v in params.items())
         console.print(f"{vehicle}: {values} (the search tolerance)", highlight=False)
     for vehicle, params in outcome.get("own_params", {}).items():
-        console.print(f"{vehicle}'s own: {', '.join(f'{n} = {v:.4g}' for n, v in params.items())} (its flights alone)",
+        spans = outcome.get("own_params_interval", {}).get(vehicle, {})
+        values = ", ".join(f"{n} = {v:.4g}" + (f" ({spans[n][0]:.3g} to {spans[n][1]:.3g})" if n in spans else "")
+                           for n, v in params.items())
+        console.print(f"{vehicle}'s own: {values} (its flights alone" + ("; 90 % intervals)" if spans else ")"),
                       highlight=False)
     if outcome.get("param_files"):
         console.print(f"parameter files (Mission Planner / MAVProxy .parm, QGroundControl .params): "
                       f"{escape(', '.join(outcome['param_files']))}", highlight=False, soft_wrap=True)
+    if own := outcome.get("own_param_file_vehicles"):
+        files = {v: [name for name, vs in own.items() if v in vs] for vs in own.values() for v in vs}
+        console.print("each vehicle's own parameter files: "
+                      + escape("; ".join(f"{v} {', '.join(names)}" for v, names in files.items())),
+                      highlight=False, soft_wrap=True)
     for edge in outcome.get("range_edges", []):
         console.print(f"[yellow]range edge:[/] {escape(edge['message'])}", highlight=False)
     if answer := outcome.get("answer"):
@@ -611,7 +626,8 @@ def _own_line(rows: list[dict[str, Any]]) -> str:
     """Each vehicle's own gains (result.json's `vehicles`: where one differs) in a line; '' where none has them."""
     own = [v for v in rows if "own_gains" in v]
     return ("own gains (a vehicle differs: each one's flights alone, fitted as the answer is to all): "
-            + "; ".join(f"{v['vehicle']} {gains_text(v['own_gains'])}" for v in own)) if own else ""
+            + "; ".join(f"{v['vehicle']} {gains_text(v['own_gains'], v.get('own_uncertainty'))}" for v in own)
+            + " (90 % intervals)") if own else ""
 
 
 def plus_minus(value: float, se: float) -> str:

@@ -25,7 +25,8 @@ from mavtune.flown import by_gains
 from mavtune.journal import Journal, RoundRecord
 from mavtune.search import Adaptive, Iteration, LineSearch, NoisePool, make_search
 from mavtune.search.interval import (
-    DRAWS, Interval, edge_reach, held_elsewhere, joint, plausible_region, resample, resolution, stale,
+    DRAWS, REFIT_RESOLUTION, REFITS, Interval, edge_reach, held_elsewhere, joint, plausible_region, refitted, resample,
+    resolution, stale,
 )
 from mavtune.search.joint import newton_step
 from mavtune.search.model import beside_failure, flown_span
@@ -94,9 +95,15 @@ class Round:
         }
 
 
-def gains_text(gains: Gains) -> str:
-    """Gains in a line: 'kp 0.41, kd 0.5213'."""
-    return ", ".join(f"{n} {v:.4g}" for n, v in gains.items())
+def gains_text(gains: Gains, intervals: dict[str, dict[str, float]] | None = None) -> str:
+    """Gains in a line: 'kp 0.41, kd 0.5213'; with `intervals` (gain -> `Interval.to_dict`), each one's after it:
+    'kp 0.41 (0.33 to 0.52)'."""
+    def interval(n: str) -> str:
+        i = (intervals or {}).get(n) or {}
+        known = "lo" in i and "hi" in i and math.isfinite(i["lo"]) and math.isfinite(i["hi"])
+        return f" ({i['lo']:.3g} to {i['hi']:.3g})" if known else ""
+
+    return ", ".join(f"{n} {v:.4g}{interval(n)}" for n, v in gains.items())
 
 
 def designed_after(rounds: list[Round]) -> set[str]:
@@ -213,6 +220,7 @@ class TuningResult:
     outliers: list[dict[str, Any]] = field(default_factory=list)  # flights the last design's fit left out: gains, cost
     designs: list[DesignRecord] = field(default_factory=list)  # the response surface's designs in the order flown
     own: dict[str, Gains] = field(default_factory=dict)  # each vehicle's own answer where one differs: `Tuner._own`
+    own_uncertainty: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)  # its interval per gain
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each (`caution_kinds` names them)."""
@@ -327,8 +335,9 @@ class TuningResult:
                 f"interval {o.lo:+.0%} to {o.hi:+.0%}): the vehicles fly unlike each other (a worn propeller, a "
                 f"weaker battery, a payload, another airframe) and the gains answer their average; look at "
                 f"{o.vehicle} before loading them onto it"
-                + (f": its own flights answer {gains_text(self.own[o.vehicle])} (the last design fitted to them alone, "
-                   "inside its box; each vehicle's own gains: the Vehicles table)," if o.vehicle in self.own else ",")
+                + (f": its own flights answer {gains_text(self.own[o.vehicle], self.own_uncertainty.get(o.vehicle))} "
+                   "(the last design fitted to them alone, inside its box; 90 % intervals; each vehicle's own gains: "
+                   "the Vehicles table)," if o.vehicle in self.own else ",")
                 + " or tune it alone")
         return out
 
@@ -344,8 +353,9 @@ class TuningResult:
 
     def vehicles(self) -> list[dict[str, Any]]:
         """Each vehicle's flights (flown, failed, lost) and its cost against the others' at the same gains
-        (`fleet_offsets`: offset, interval, comparisons, named or not; absent where it was not compared), in the
-        order the vehicles first flew: the fleet at a glance, beside the cautions that name a vehicle."""
+        (`fleet_offsets`: offset, interval, comparisons, named or not; absent where it was not compared), and where
+        the run gave them its own gains and their intervals (`own_gains`, `own_uncertainty`), in the order the
+        vehicles first flew: the fleet at a glance, beside the cautions that name a vehicle."""
         tally: dict[str, Counter] = {}
         for r in self.rounds:
             for f in r.flights:
@@ -353,7 +363,8 @@ class TuningResult:
         offsets = {o.vehicle: o.to_dict() for o in fleet_offsets(self._compared())}
         return [{"vehicle": v, "flights": sum(n.values()), "failed": n[Status.FAILED.value],
                  "lost": n[Status.LOST.value], **{k: x for k, x in offsets.get(v, {}).items() if k != "vehicle"},
-                 **({"own_gains": dict(self.own[v])} if v in self.own else {})}
+                 **({"own_gains": dict(self.own[v])} if v in self.own else {}),
+                 **({"own_uncertainty": dict(self.own_uncertainty[v])} if v in self.own_uncertainty else {})}
                 for v, n in tally.items()]
 
     def _compared(self) -> list[Sequence[Flight]]:
@@ -875,6 +886,7 @@ class Tuner:
         self.open_face: Gains = {}  # the gains the last design answered on its box's face inside the range (`_surface`)
         self.outliers: list[dict[str, Any]] = []  # the flights the last design's fit left out (`_surface`)
         self.own: dict[str, Gains] = {}  # each vehicle's own answer where one differs (`_own`)
+        self.own_uncertainty: dict[str, dict[str, dict[str, float]]] = {}  # and its interval per gain
         self._last_fit: tuple[list[tuple[float, float]], dict[str, Any]] | None = None  # the run's answer's box and
         # fit options (`_surface`: the last design's), for `_own`
         self._centre: tuple[float, ...] | None = None  # the next design's centre, shares of each range (`_surface`)
@@ -907,7 +919,8 @@ class Tuner:
                             settings=self.settings.fingerprint(), uncertainty=self.uncertainty(),
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
                             designed=self.designed, divergence=self.divergence, open_face=dict(self.open_face),
-                            outliers=list(self.outliers), designs=list(self.designs), own=dict(self.own))
+                            outliers=list(self.outliers), designs=list(self.designs), own=dict(self.own),
+                            own_uncertainty=dict(self.own_uncertainty))
 
     def _record(self, bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason (and the range
@@ -1024,32 +1037,71 @@ class Tuner:
                 half *= self._shrink()
         if not self._usable:
             self._no_cost()
-        self.own = self._own()
+        self.own, self.own_uncertainty = self._own()
         return self.snapshot()
 
-    def _own(self) -> dict[str, Gains]:
+    def _own(self) -> tuple[dict[str, Gains], dict[str, dict[str, dict[str, float]]]]:
         """Averaging, where the run's cautions name a vehicle (`vehicle_offsets`), every vehicle's own answer
-        (`own_answer`): the swarm's answer then lies between unlike airframes, which each one's own flights answer
-        better (benchmarks/own_answers.py: with one vehicle heavier, the others' own answers flew better for them
-        too). Not where no vehicle is named (on vehicles alike, own answers are noisier than the swarm's), nor where
-        the vehicles flew different points (each flew a part of the run's), nor without a design (none to refit)."""
+        (`own_answer`) and its interval (`own_interval`): the swarm's answer then lies between unlike airframes,
+        which each one's own flights answer better (benchmarks/own_answers.py: with one vehicle heavier, the others'
+        own answers flew better for them too). Not where no vehicle is named (on vehicles alike, own answers are
+        noisier than the swarm's), nor where the vehicles flew different points (each flew a part of the run's), nor
+        without a design (none to refit)."""
         if self._last_fit is None or self.settings.strategy != "avg":
-            return {}
+            return {}, {}
         flights = [r.flights for r in self.rounds]
         if not vehicle_offsets(flights):
-            return {}
-        return {v: self.own_answer(v) for v in dict.fromkeys(f.vehicle for fs in flights for f in fs)}
+            return {}, {}
+        vehicles = list(dict.fromkeys(f.vehicle for fs in flights for f in fs))
+        return ({v: self.own_answer(v) for v in vehicles},
+                {v: self.own_interval(v, seed=k) for k, v in enumerate(vehicles)} if self.draws else {})
+
+    def _own_fit(self, vehicle: str) -> tuple[dict[tuple[float, ...], list[float]], Callable[..., Sequence[float]],
+                                               NoisePool]:
+        """One vehicle's flights inside the last design's box (in shares of each range, the same outlier rule), the
+        run's last fit as a function of such flights (the same box, options and bounds; no answer kept from the
+        design before: that was the swarm's), and the noise of one vehicle's flights it tests them with
+        (`_vehicle_noise`)."""
+        box, options = self._last_fit
+        pool = self._vehicle_noise()
+        flown, _ = surface_inliers(self._flown_shares(vehicle), box, float(self.settings.design_outliers))
+
+        def fit(points: dict[tuple[float, ...], list[float]]) -> Sequence[float]:
+            return surface_answer(points, box, surface_ruled_out(points, pool), pool,
+                                  **{**options, "keep": None, "hold": None})[0]
+
+        return flown, fit, pool
+
+    def _vehicle_noise(self) -> NoisePool:
+        """The noise of one vehicle's flights: each vehicle's repeats of a gain vector, pooled over the vehicles.
+        The run's pool (`pool`) also holds how the vehicles of a round differ, which one vehicle's flights compared
+        among themselves do not (six times one vehicle's noise where one vehicle costs 30 % more); the run's where
+        no vehicle flew a point twice."""
+        pool, names = NoisePool(), list(self.settings.space)
+        for r in self.rounds:
+            for gains, cost, f in zip(*Strategy.measured([f.gains for f in r.flights], r.flights), r.flights):
+                pool.add((f.vehicle, tuple(gains[n] for n in names)), cost)
+        return pool if math.isfinite(pool.cv) else self.pool
 
     def own_answer(self, vehicle: str) -> Gains:
-        """The run's answer fitted to one vehicle's flights alone: the last design's fit inside the same box and
-        bounds (no answer kept from the design before: that was the swarm's), so never a gain it did not fly.
+        """The run's answer fitted to one vehicle's flights alone (`_own_fit`), so never a gain it did not fly.
         Averaging, every vehicle flew every point, so its flights hold its own surface (benchmarks/own_answers.py:
         where each airframe's optimum lies elsewhere, such answers flew better for the vehicle than the swarm's)."""
-        box, options = self._last_fit
-        flown, _ = surface_inliers(self._flown_shares(vehicle), box, float(self.settings.design_outliers))
-        best, _ = surface_answer(flown, box, surface_ruled_out(flown, self.pool), self.pool,
-                                 **{**options, "keep": None, "hold": None})
-        return self._gains(best)
+        flown, fit, _ = self._own_fit(vehicle)
+        return self._gains(fit(flown))
+
+    def own_interval(self, vehicle: str, seed: int = 0, resolution: float = REFIT_RESOLUTION
+                     ) -> dict[str, dict[str, float]]:
+        """Per gain the interval of `own_answer` (`interval.refitted`: the fit again on its flights resampled, and
+        beyond the last design's box where those answers reach its face, to where the vehicle's own flights, every
+        gain free, no longer rule its minimiser out), in the gain's units (`Interval.to_dict`)."""
+        flown, fit, pool = self._own_fit(vehicle)
+        box, ranges = self._last_fit[0], self.settings.space
+        region = plausible_region(self._flown_shares(vehicle), pool, [(0.0, 1.0)] * len(ranges))
+        shares = refitted(fit, flown, pool, fit(flown), box, region, draws=min(self.draws, REFITS),
+                          seed=(self.settings.seed or 0) * 1000 + seed, resolution=resolution)
+        return {n: Interval(a + (b - a) * i.value, (b - a) * i.se, a + (b - a) * i.lo, a + (b - a) * i.hi,
+                            i.level).to_dict() for (n, (a, b)), i in zip(ranges.items(), shares)}
 
     def _gains(self, shares: Sequence[float]) -> Gains:
         """A gain vector given in shares of each range, as gains inside the ranges."""

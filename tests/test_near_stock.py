@@ -158,7 +158,11 @@ def test_the_simulator_answers_nearest_stock_only_when_asked(tmp_path):
 def test_an_answer_moved_off_the_limit_says_where_the_optimum_lay(tmp_path):
     from types import SimpleNamespace
 
-    from mavtune.run import tuned_outcome
+    from math import nan
+
+    from rich.console import Console
+
+    from mavtune.run import print_outcome, tuned_outcome
     from mavtune.vehicles.parammap import GainBinding, ParamMap
 
     m = ParamMap(stack="ardupilot", gains={"kp": GainBinding(param="PSC_POSZ_P", lo=1.0, hi=3.0, limit_hi=3.0),
@@ -168,11 +172,21 @@ def test_an_answer_moved_off_the_limit_says_where_the_optimum_lay(tmp_path):
                   "PSC_VELZ_P": 5.0})], SPACE, 0.2, MANY)
     assert chosen.gains == {"kp": 0.5, "kd": 0.875}
     result = SimpleNamespace(gains={"kp": 0.5, "kd": 1.0}, edges=lambda: ({}, {}), brackets=lambda: {},
-                             own={"v": {"kp": 0.25, "kd": 0.5}, "w": {"kp": 0.5, "kd": 0.5}})
+                             own={"v": {"kp": 0.25, "kd": 0.5}, "w": {"kp": 0.5, "kd": 0.5}},
+                             own_uncertainty={"v": {"kp": {"lo": 0.0, "hi": 0.5}, "kd": {"lo": nan, "hi": nan}}})
     fleet = SimpleNamespace(param_maps=lambda: {"v": m})
     out = tuned_outcome(fleet, result, SimpleNamespace(space=SPACE, epsilon=0.125), tmp_path, chosen)
     assert out["gains"] == chosen.gains and out["tuned_params"]["v"] == {"PSC_POSZ_P": 2.0, "PSC_VELZ_P": 7.125}
     assert out["own_params"] == {"v": {"PSC_POSZ_P": 1.5, "PSC_VELZ_P": 4.5}}  # (w has no parameter map)
+    assert out["own_params_interval"] == {"v": {"PSC_POSZ_P": (1.0, 2.0)}}  # (kd's unknown)
+    assert out["own_param_file_vehicles"] == {"own-1.parm": ["v"], "own-1.params": ["v"]}  # beside the swarm's
+    assert (tmp_path / "own-1.parm").read_text().splitlines()[-2:] == ["PSC_POSZ_P 1.5", "PSC_VELZ_P 4.5"]
+    assert (tmp_path / "tuned.parm").read_text().splitlines()[-2:] == ["PSC_POSZ_P 2", "PSC_VELZ_P 7.125"]
+    console = Console(record=True, width=120)
+    print_outcome(console, out)
+    printed = console.export_text()
+    assert "v's own: PSC_POSZ_P = 1.5 (1 to 2), PSC_VELZ_P = 4.5 (its flights alone; 90 % intervals)" in printed
+    assert "each vehicle's own parameter files: v own-1.parm, own-1.params" in printed
     assert out["range_edges"] == []  # the answer lies inside: nothing to say of it
     [said] = out["answer"]["plain_range_edges"]  # but the search's optimum lay on the documented limit
     assert "PSC_VELZ_P" in said and "the autopilot's limit, not the search, stopped it" in said

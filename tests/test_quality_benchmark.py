@@ -258,6 +258,19 @@ def test_own_answers_fly_each_vehicle_at_its_own_answer_and_the_swarm_s():
     cost, _ = plant.fly(x, np.array([10100, 10101, 10201, 10202]), np.zeros(4, int))
     nominal, _ = module.ALL_PLANTS["sim nominal"].fly(x, np.array([10100, 10101, 10201, 10202]), np.zeros(4, int))
     assert cost[0] == nominal[0] and cost[3] == nominal[3] and cost[1] > nominal[1] and cost[2] > nominal[2]
-    rows = module.one(("blind analytic unequal vehicles", "default (config.Tuning())", 1, 8))["rows"]
+    rows = module.one(("blind analytic unequal vehicles", "default (config.Tuning())", 1, 8, None))["rows"]
     assert [r["vehicle"] for r in rows] == ["v0", "v1"]
     assert all(r["own"] != r["swarm"] and math.isfinite(r["diff_pct"]) and r["se_pct"] > 0 for r in rows)
+    for r in rows:  # each vehicle's optimum known exactly, and its interval judged on it
+        assert all(lo <= r["own"][g] <= hi for g, (lo, hi) in r["interval"].items())
+        assert r["covers"] == all(lo <= o <= hi for (lo, hi), o in zip(r["interval"].values(), r["optimum"]))
+    assert rows[0]["optimum"] != rows[1]["optimum"]
+    off = module.HERE["analytic one vehicle off"]
+    cost, _ = off.fly(np.array([module.OFF_OPTIMUM, module.UNEQUAL_OPTIMUM]), np.array([10101, 10101]), np.zeros(2))
+    assert cost[0] < cost[1] and module.vehicle_optimum(off.name, 10101) == list(module.OFF_OPTIMUM)
+    assert module.vehicle_optimum(off.name, 10102) == list(module.UNEQUAL_OPTIMUM)
+    assert module.vehicle_optimum("sim nominal", 10101) is None
+    raw = [{**r, "plant": "p", "method": "m", "interval": {"kp": [0.4, 0.5], "kd": [0.5, 0.6]},
+            "optimum": [0.52, 0.55], "half_width": [0.08, 0.08], "named": True} for r in rows]  # (kp 0.02 beyond)
+    table = "\n".join(module.widening(raw, ["p"], ["m"]))
+    assert "| 0 | 0 of 2 | 0 of 2 | 0 of 2 |" in table and "| 0.25 | 2 of 2 | 2 of 2 | 2 of 2 |" in table

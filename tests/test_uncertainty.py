@@ -425,3 +425,65 @@ def test_an_answer_above_the_divergence_bound_is_cautioned():
     assert [c for c in result.cautions() if "chance 3.10%, above the 0.1%" in c]
     result.gains["kp"] = 0.45  # another stage answered: the design's verdict is not this answer's
     assert not [c for c in result.cautions() if "diverges with chance" in c]
+
+
+def _bowl_flights(centre: tuple[float, float], box: list[tuple[float, float]], cv: float, seed: int = 3):
+    """Three flights at each point of a 5 × 5 grid over `box` of a bowl about `centre` (shares), noise `cv`."""
+    rng = random.Random(seed)
+    axes = [[a + (b - a) * k / 4 for k in range(5)] for a, b in box]
+    return {(u, v): [(1.0 + 4 * (u - centre[0]) ** 2 + 4 * (v - centre[1]) ** 2) * (1 + cv * rng.gauss(0, 1))
+                     for _ in range(3)] for u in axes[0] for v in axes[1]}
+
+
+def _lowest_fit(box: list[tuple[float, float]]):
+    """A stand-in fit: the minimum of the quadratic through the flights' means, clipped to `box`."""
+    import numpy as np
+
+    def fit(points):
+        x = np.array(list(points))
+        y = np.array([sum(c) / len(c) for c in points.values()])
+        a = np.column_stack([np.ones(len(x)), x[:, 0], x[:, 1], x[:, 0] ** 2, x[:, 1] ** 2])
+        c = np.linalg.lstsq(a, y, rcond=None)[0]
+        return tuple(float(np.clip(-c[1 + k] / (2 * c[3 + k]), *box[k])) for k in range(2))
+
+    return fit
+
+
+def test_a_refitted_interval_holds_the_answer_and_widens_with_the_noise():
+    """`refitted`: the fit again on resampled flights; more noise, a wider interval; noise-free, the answer itself;
+    the noise unknown, no interval."""
+    from mavtune.search.interval import refitted
+
+    box = [(0.2, 0.6), (0.3, 0.7)]
+    spans = []
+    for cv in (0.02, 0.1):
+        points, pool = _bowl_flights((0.4, 0.5), box, cv), NoisePool.prior(cv, 50)
+        value = _lowest_fit(box)(points)
+        out = refitted(_lowest_fit(box), points, pool, value, box, None, seed=1, resolution=0.0)
+        assert all(i.lo <= v <= i.hi and a <= i.lo and i.hi <= b for i, v, (a, b) in zip(out, value, box))
+        spans.append(sum(i.hi - i.lo for i in out))
+    assert spans[1] > 2 * spans[0] > 0
+    exact = _bowl_flights((0.4, 0.5), box, 0.0)
+    value = _lowest_fit(box)(exact)
+    out = refitted(_lowest_fit(box), exact, NoisePool.prior(0.0, 50), value, box, None, resolution=0.0)
+    assert [(i.lo, i.hi) for i in out] == [(v, v) for v in value]
+    out = refitted(_lowest_fit(box), exact, NoisePool.prior(0.0, 50), value, box, None, resolution=0.5)
+    assert [x for i in out for x in (i.lo, i.hi)] == pytest.approx([x for v in value for x in (v - 0.1, v + 0.1)])
+    # (a half of the box's half-width, 0.2)
+    assert all(math.isnan(i.lo) for i in refitted(_lowest_fit(box), exact, NoisePool(), value, box, None))
+
+
+def test_a_refitted_answer_on_its_box_face_has_an_interval_that_goes_on_to_where_the_flights_allow():
+    """The fit answers inside its box: an optimum beyond a face (inside the range) leaves the answers on that face,
+    so the interval reaches on to the plausible region's end there (the range's bound where none is given), and no
+    further on the other side."""
+    from mavtune.search.interval import refitted
+
+    box = [(0.2, 0.6), (0.3, 0.7)]
+    points, pool = _bowl_flights((0.8, 0.5), box, 0.03), NoisePool.prior(0.03, 50)
+    value = _lowest_fit(box)(points)
+    assert value[0] == 0.6
+    kp, kd = refitted(_lowest_fit(box), points, pool, value, box, [(0.1, 0.9), (0.25, 0.75)], seed=2, resolution=0.0)
+    assert (kp.lo > 0.4, kp.hi) == (True, 0.9) and 0.3 < kd.lo <= 0.5 <= kd.hi < 0.7
+    kp, _ = refitted(_lowest_fit(box), points, pool, value, box, None, seed=2)
+    assert kp.hi == 1.0

@@ -153,6 +153,40 @@ def test_where_a_vehicle_differs_each_vehicle_gets_its_own_answer_from_its_own_f
     assert "own gains |" in text and f"| kp {mine['kp']:.4g}, kd {mine['kd']:.4g} |" in text
 
 
+def test_each_own_answer_has_an_interval_that_holds_its_vehicle_s_optimum():
+    """With intervals (draws), each own answer has its own (`Tuner.own_interval`): it holds the answer and each
+    vehicle's true optimum — v1's kp of 0.65 lies beyond the last design's box, which the interval reaches past —
+    and it is said in the caution, `vehicles`, the report and the console's line."""
+    from mavtune.report.vehicles import vehicles_section
+    from mavtune.run import _own_line
+
+    result = mavtune.tune(_unlike(0.25, 1.3), space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1, vehicles=3)
+    assert set(result.own_uncertainty) == set(result.own) == {"v0", "v1", "v2"}
+    for vehicle, own in result.own.items():
+        optimum = {"kp": 0.65 if vehicle == "v1" else 0.4, "kd": 0.6}
+        for gain, i in result.own_uncertainty[vehicle].items():
+            assert i["lo"] <= own[gain] <= i["hi"] and i["lo"] <= optimum[gain] <= i["hi"], (vehicle, gain, i)
+    assert result.own_uncertainty["v1"]["kp"]["lo"] > 0.4  # (the other vehicles' optimum is not v1's)
+    i = result.own_uncertainty["v1"]["kp"]
+    said = f"kp {result.own['v1']['kp']:.4g} ({i['lo']:.3g} to {i['hi']:.3g})"
+    assert said in dict(result.caution_kinds())["vehicles differ"]
+    rows = result.to_dict()["vehicles"]
+    assert [r["own_uncertainty"] for r in rows] == [result.own_uncertainty[f"v{j}"] for j in range(3)]
+    assert said in "\n".join(vehicles_section(result.to_dict())) and said in _own_line(rows)
+
+
+def test_one_vehicle_s_noise_leaves_out_how_the_vehicles_differ():
+    """The own answers' noise: each vehicle's repeats of a point, pooled; the run's pool also holds the 30 % by which
+    v1 costs more at every point, five times and more its 3 % flight noise."""
+    from mavtune.api import CallableFleet, default_settings
+    from mavtune.tuner import Tuner
+
+    settings = default_settings(3, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1)
+    tuner = Tuner(settings, CallableFleet(_unlike(0.25, 1.3), 3, seed=1), draws=0)
+    tuner.run()
+    assert 0.015 < tuner._vehicle_noise().cv < 0.045 and tuner.pool.cv > 5 * tuner._vehicle_noise().cv
+
+
 @pytest.mark.parametrize("strategy, shift, level", [("avg", 0.0, 1.0), ("split", 0.25, 1.3)])
 def test_no_own_answers_where_no_vehicle_is_named_or_the_vehicles_flew_apart(strategy, shift, level):
     """Vehicles alike: no vehicle named, the swarm's answer alone (own answers are noisier); split: each vehicle
@@ -167,5 +201,7 @@ def test_the_console_says_each_vehicle_s_own_gains_in_a_line():
     from mavtune.run import _own_line
 
     rows = [{"vehicle": "v0", "own_gains": {"kp": 0.4, "kd": 0.61234}}, {"vehicle": "v1"}]
-    assert _own_line(rows).endswith("fitted as the answer is to all): v0 kp 0.4, kd 0.6123")
+    assert _own_line(rows).endswith("fitted as the answer is to all): v0 kp 0.4, kd 0.6123 (90 % intervals)")
+    rows[0]["own_uncertainty"] = {"kp": {"lo": 0.35, "hi": 0.5}, "kd": {"lo": math.nan, "hi": math.nan}}
+    assert _own_line(rows).endswith("v0 kp 0.4 (0.35 to 0.5), kd 0.6123 (90 % intervals)")  # (kd's unknown)
     assert _own_line([{"vehicle": "v0"}, {"vehicle": "v1"}]) == ""

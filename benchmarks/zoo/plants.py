@@ -334,7 +334,7 @@ def _crazyflow(x, seeds, rounds, changes: dict[str, Any], payload_n: float):
 # ----- analytic costs -----------------------------------------------------------------------------------------
 
 
-def _normals(seeds, rounds, k: int) -> np.ndarray:
+def normals(seeds, rounds, k: int) -> np.ndarray:
     """(n, k) standard normals of each flight, from (seed, round) alone (the same at every gain vector)."""
     out = np.empty((len(seeds), k))
     pairs = {}
@@ -370,7 +370,7 @@ def valley_fly(x, seeds, rounds):
     along = np.where(u > 0, 40.0 * u * u, 4.0 * u * u)
     across = np.where(v > 0, 80.0 * v * v, 15.0 * v * v)
     c = 1.0 + along + across
-    z = _normals(seeds, rounds, 2)
+    z = normals(seeds, rounds, 2)
     return c * (1.0 + 0.05 * z[:, 0]) + 0.25 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
 
 
@@ -378,7 +378,7 @@ def edge_fly(x, seeds, rounds):
     """The unconstrained minimum lies beyond kp = 1 (at 1.2): the optimum of the box is on its edge; kd's
     valley is asymmetric; noise 6 % plus a share growing with the cost."""
     c = 1.0 + 3.0 * (x[:, 0] - 1.2) ** 2 - 0.48 + np.where(x[:, 1] > 0.3, 20.0, 6.0) * (x[:, 1] - 0.3) ** 2
-    z = _normals(seeds, rounds, 2)
+    z = normals(seeds, rounds, 2)
     return c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 0.52) * z[:, 1], np.zeros(len(c), dtype=bool)
 
 
@@ -390,7 +390,7 @@ def four_fly(x, seeds, rounds):
     q = 6 * d[:, 0] ** 2 + 10 * d[:, 1] ** 2 + 3 * d[:, 2] ** 2 + 2 * d[:, 3] ** 2 + 5 * d[:, 0] * d[:, 1] \
         + 2 * d[:, 1] * d[:, 2] + np.where(d[:, 2] > 0, 4.0, 0.0) * d[:, 2] ** 2
     c = 1.0 + q
-    z = _normals(seeds, rounds, 2)
+    z = normals(seeds, rounds, 2)
     return c * (1.0 + 0.05 * z[:, 0]) + 0.2 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
 
 
@@ -399,7 +399,7 @@ def banana_fly(x, seeds, rounds):
     optimum is s = t = 1), shallow along the floor, steep across it; lognormal (multiplicative) noise of 10 %."""
     s, t = (x[:, 0] - 0.2) / 0.52, (x[:, 1] - 0.05) / 0.5
     c = 1.0 + 0.5 * (1.0 - s) ** 2 + 5.0 * (t - s * s) ** 2
-    z = _normals(seeds, rounds, 1)
+    z = normals(seeds, rounds, 1)
     return c * np.exp(0.1 * z[:, 0] - 0.005), np.zeros(len(c), dtype=bool)
 
 
@@ -420,7 +420,7 @@ def cliff_fly(x, seeds, rounds):
     0.4 + 0.03·z (too much position gain for the damping; the margin moves with each flight's gusts) and then
     costs CLIFF_COST; the optimum is inside, next to the cliff. Noise 5 % plus a share growing with the cost."""
     c = _cliff_bowl(x)
-    z = _normals(seeds, rounds, 3)
+    z = normals(seeds, rounds, 3)
     diverged = _cliff_margin(x) > CLIFF_EDGE + CLIFF_SPREAD * z[:, 2]
     return np.where(diverged, CLIFF_COST, c * (1.0 + 0.05 * z[:, 0]) + 0.15 * (c - 1.0) * z[:, 1]), diverged
 
@@ -439,7 +439,7 @@ def damping_wall_fly(x, seeds, rounds):
     short of 0.1 + 0.4·kp² + 0.025·z (the damping needed grows with the position gain; the margin moves with each
     flight) and then costs 0.8 CLIFF_COST; lognormal noise of 6 % and a share growing with the cost."""
     c = 1.0 + 4.0 * (x[:, 0] - 0.55) ** 2 + 5.0 * (x[:, 1] - 0.1) ** 2
-    z = _normals(seeds, rounds, 3)
+    z = normals(seeds, rounds, 3)
     diverged = x[:, 1] < 0.1 + 0.4 * x[:, 0] ** 2 + 0.025 * z[:, 2]
     return np.where(diverged, 0.8 * CLIFF_COST, c * np.exp(0.06 * z[:, 0]) + 0.1 * (c - 1.0) * z[:, 1]), diverged
 
@@ -459,7 +459,7 @@ def decades_fly(x, seeds, rounds):
     each gain's ratio to its best (kp 0.04, kd 0.15 of ranges from 0), so it is steep below the optimum and shallow
     above it; lognormal noise of 8 % (mean-one)."""
     c = decades_cost(x)
-    z = _normals(seeds, rounds, 1)
+    z = normals(seeds, rounds, 1)
     return c * np.exp(0.08 * z[:, 0] - 0.0032), np.zeros(len(c), dtype=bool)
 
 
@@ -593,7 +593,7 @@ def twin_basins_fly(x, seeds, rounds):
     """Two basins (`twin_basins_cost`): the optimum in a narrow one, a broad second basin 12 % above it that a
     search started mid-box may settle in; multiplicative lognormal noise of 8 %."""
     c = twin_basins_cost(x)
-    z = _normals(seeds, rounds, 1)
+    z = normals(seeds, rounds, 1)
     return c * np.exp(0.08 * z[:, 0] - 0.0032), np.zeros(len(c), dtype=bool)
 
 
@@ -602,7 +602,7 @@ def weak_gain_fly(x, seeds, rounds):
     coupled in a tilted bowl about (0.35, 0.65); noise 6 % plus a share growing with the cost."""
     u, v, w = x[:, 0] - 0.35, x[:, 1] - 0.65, x[:, 2] - 0.6
     c = 1.0 + 5.0 * u * u + 7.0 * v * v - 4.0 * u * v + 0.15 * w * w
-    z = _normals(seeds, rounds, 2)
+    z = normals(seeds, rounds, 2)
     return c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
 
 
@@ -610,7 +610,7 @@ def low_corner_fly(x, seeds, rounds):
     """The unconstrained minimum lies below both lower bounds (−0.15, −0.1): the optimum is the corner (0, 0),
     approached by a shallow slope; noise 6 % plus a share growing with the cost."""
     c = 1.0 + 2.0 * (x[:, 0] + 0.15) ** 2 + 3.0 * (x[:, 1] + 0.1) ** 2 + 1.5 * x[:, 0] * x[:, 1] - 0.075
-    z = _normals(seeds, rounds, 2)
+    z = normals(seeds, rounds, 2)
     return c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 0.9) * z[:, 1], np.zeros(len(c), dtype=bool)
 
 
@@ -619,7 +619,7 @@ def v_valley_fly(x, seeds, rounds):
     dominated by a dead band or a saturation does; a quadratic fits it worst near the optimum; noise 5 %."""
     u, v = x[:, 0] - 0.45, x[:, 1] - 0.3
     c = 1.0 + 0.8 * np.abs(u + 0.3 * v) + 0.5 * np.abs(v) + 2.0 * u * u
-    z = _normals(seeds, rounds, 1)
+    z = normals(seeds, rounds, 1)
     return c * (1.0 + 0.05 * z[:, 0]), np.zeros(len(c), dtype=bool)
 
 
@@ -629,7 +629,7 @@ def heavy_tails_fly(x, seeds, rounds):
     cost."""
     u, v = x[:, 0] - 0.3, x[:, 1] - 0.6
     c = 1.0 + 6.0 * u * u + 3.0 * v * v + 3.0 * u * v
-    z = _normals(seeds, rounds, 4)
+    z = normals(seeds, rounds, 4)
     t = z[:, 0] / np.sqrt((z[:, 1] ** 2 + z[:, 2] ** 2 + z[:, 3] ** 2) / 3.0)
     return c * np.maximum(0.5, 1.0 + 0.05 * t), np.zeros(len(c), dtype=bool)
 
@@ -679,7 +679,7 @@ def drift_fly(x, seeds, rounds):
     the cost."""
     u, v = x[:, 0] - 0.6, x[:, 1] - 0.35
     c = 1.0 + 4.0 * u * u + 5.0 * v * v + 2.0 * u * v
-    z = _normals(seeds, rounds, 2)
+    z = normals(seeds, rounds, 2)
     drift = 1.0 + DRIFT_SHARE * (1.0 - np.exp(-np.asarray(rounds, float) / DRIFT_ROUNDS))
     return drift * (c * (1.0 + 0.06 * z[:, 0]) + 0.2 * (c - 1.0) * z[:, 1]), np.zeros(len(c), dtype=bool)
 
@@ -702,7 +702,7 @@ def unequal_vehicles_fly(x, seeds, rounds):
     u = x[:, 0] - UNEQUAL_OPTIMUM[0] - UNEQUAL_SHIFT * b[:, 0]
     v = x[:, 1] - UNEQUAL_OPTIMUM[1] - UNEQUAL_SHIFT * b[:, 1]
     c = (1.0 + 5.0 * u * u + 4.0 * v * v + 1.5 * u * v) * np.exp(UNEQUAL_LEVEL * b[:, 2] - 0.005)
-    z = _normals(seeds, rounds, 1)
+    z = normals(seeds, rounds, 1)
     return c * (1.0 + 0.05 * z[:, 0]), np.zeros(len(c), dtype=bool)
 
 
@@ -713,7 +713,7 @@ def plateau_fly(x, seeds, rounds):
     u, v = x[:, 0] - 0.25, x[:, 1] - 0.8
     q = 6.0 * u * u + 4.0 * v * v + 2.0 * u * v
     c = 1.0 + 1.2 * np.tanh(q / 1.2)
-    z = _normals(seeds, rounds, 1)
+    z = normals(seeds, rounds, 1)
     return c * np.exp(0.06 * z[:, 0] - 0.0018), np.zeros(len(c), dtype=bool)
 
 
@@ -765,7 +765,7 @@ def steep_side_fly(x, seeds, rounds):
     u, v = x[:, 0] - STEEP_OPTIMUM[0], x[:, 1] - STEEP_OPTIMUM[1]
     above = np.maximum(u, 0.0)  # (the exponential's own slope at the minimum taken off: smooth there)
     c = 1.0 + 3.0 * u * u + 0.25 * np.expm1(above * 14.0) - 14.0 * 0.25 * above + 4.0 * v * v
-    z = _normals(seeds, rounds, 2)
+    z = normals(seeds, rounds, 2)
     return c * (1.0 + 0.08 * z[:, 0]) + 0.1 * (c - 1.0) * z[:, 1], np.zeros(len(c), dtype=bool)
 
 
@@ -779,7 +779,7 @@ def narrow_valley_fly(x, seeds, rounds):
     along = u * math.cos(RIDGE_ANGLE) + v * math.sin(RIDGE_ANGLE)
     across = -u * math.sin(RIDGE_ANGLE) + v * math.cos(RIDGE_ANGLE)
     c = 1.0 + 1.5 * along * along + 45.0 * across * across
-    z = _normals(seeds, rounds, 1)
+    z = normals(seeds, rounds, 1)
     return c * np.exp(0.07 * z[:, 0] - 0.00245), np.zeros(len(c), dtype=bool)
 
 
@@ -788,7 +788,7 @@ def noisy_bowl_fly(x, seeds, rounds):
     airframe): the flights barely tell its minimum."""
     u, v = x[:, 0] - 0.3, x[:, 1] - 0.7
     c = 1.0 + 2.0 * u * u + 1.5 * v * v - 1.0 * u * v
-    z = _normals(seeds, rounds, 1)
+    z = normals(seeds, rounds, 1)
     return c * np.exp(0.25 * z[:, 0] - 0.03125), np.zeros(len(c), dtype=bool)
 
 

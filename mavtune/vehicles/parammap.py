@@ -141,6 +141,11 @@ class ParamMap(BaseModel):
         log-scale parameters (a linear one's is its ±)."""
         return {b.param: b.band(tolerance[g], gains[g]) for g, b in self.gains.items() if b.log}
 
+    def intervals(self, intervals: Mapping[str, Mapping[str, float]]) -> dict[str, tuple[float, float]]:
+        """{parameter: (low, high)} of each bound gain's interval (normalised: `Interval.to_dict`), where known."""
+        return {b.param: (b.value(i["lo"]), b.value(i["hi"])) for g, b in self.gains.items()
+                if (i := intervals.get(g)) and math.isfinite(i["lo"]) and math.isfinite(i["hi"])}
+
     def explain_edge(self, edge: RangeEdge) -> RangeEdge:
         """The edge with the parameter it drives and what to widen: the tuning space when it ends inside the
         parameter's range, else the parameter's range — up to the autopilot's documented limit, or nothing to

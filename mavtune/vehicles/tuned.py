@@ -11,6 +11,7 @@ from mavtune.edges import range_edges
 from mavtune.vehicles.parammap import ParamMap
 
 STEM = "tuned"
+OWN_STEM = "own"  # each vehicle's own gains' files (`write_own_files`)
 
 
 def file_groups(maps: Mapping[str, ParamMap], gains: Mapping[str, float]) -> dict[str, list[str]]:
@@ -29,14 +30,29 @@ def write_tuned_files(maps: Mapping[str, ParamMap], gains: Mapping[str, float], 
                       ) -> dict[str, list[str]]:
     """Write the tuned parameters as `.parm` (Mission Planner, MAVProxy) and `.params` (QGroundControl) files in
     out_dir, grouped as `file_groups` says; returns {file name: vehicles it is for}."""
+    return _write(maps, file_groups(maps, gains), {v: gains for v in maps}, "tuned altitude gains", out_dir)
+
+
+def write_own_files(maps: Mapping[str, ParamMap], own: Mapping[str, Mapping[str, float]], out_dir: str | Path
+                    ) -> dict[str, list[str]]:
+    """Write each vehicle's own gains (`TuningResult.own`: where a vehicle flew unlike the others) as its own
+    parameter files, `own-K` for the K-th vehicle (from 1, as `file_groups` numbers them), beside the swarm's;
+    returns {file name: [its vehicle]}. A vehicle without own gains its map binds gets none."""
+    groups = {f"{OWN_STEM}-{k}": [v] for k, (v, m) in enumerate(maps.items(), 1) if v in own and m.covers(own[v])}
+    return _write(maps, groups, own, "its own altitude gains (its flights alone)", out_dir)
+
+
+def _write(maps: Mapping[str, ParamMap], groups: Mapping[str, list[str]],
+           gains: Mapping[str, Mapping[str, float]], what: str, out_dir: str | Path) -> dict[str, list[str]]:
+    """Write each group's files (`stem` -> vehicles, the first vehicle's map and `gains`); {file name: vehicles}."""
     from mavtune.vehicles.mavlink.paramfile import write_param_files
 
     written: dict[str, list[str]] = {}
-    for stem, vehicles in file_groups(maps, gains).items():
+    for stem, vehicles in groups.items():
         m = maps[vehicles[0]]
-        paths = write_param_files(out_dir, stem, m.values(gains), system_id=m.system_id,
+        paths = write_param_files(out_dir, stem, m.values(gains[vehicles[0]]), system_id=m.system_id,
                                   component_id=m.component_id, stack=m.stack,
-                                  comment=f"mavtune: tuned altitude gains of {', '.join(vehicles)}")
+                                  comment=f"mavtune: {what} of {', '.join(vehicles)}")
         written |= {p.name: list(vehicles) for p in paths}
     return written
 
