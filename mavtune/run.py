@@ -627,7 +627,7 @@ def _own_line(rows: list[dict[str, Any]]) -> str:
     own = [v for v in rows if "own_gains" in v]
     return ("own gains (a vehicle differs: each one's flights alone, fitted as the answer is to all): "
             + "; ".join(f"{v['vehicle']} {gains_text(v['own_gains'], v.get('own_uncertainty'))}" for v in own)
-            + " (90 % intervals)") if own else ""
+            + (" (90 % intervals)" if any("own_uncertainty" in v for v in own) else "")) if own else ""
 
 
 def plus_minus(value: float, se: float) -> str:

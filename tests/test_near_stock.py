@@ -156,9 +156,8 @@ def test_the_simulator_answers_nearest_stock_only_when_asked(tmp_path):
 
 
 def test_an_answer_moved_off_the_limit_says_where_the_optimum_lay(tmp_path):
-    from types import SimpleNamespace
-
     from math import nan
+    from types import SimpleNamespace
 
     from rich.console import Console
 

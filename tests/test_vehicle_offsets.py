@@ -201,7 +201,7 @@ def test_the_console_says_each_vehicle_s_own_gains_in_a_line():
     from mavtune.run import _own_line
 
     rows = [{"vehicle": "v0", "own_gains": {"kp": 0.4, "kd": 0.61234}}, {"vehicle": "v1"}]
-    assert _own_line(rows).endswith("fitted as the answer is to all): v0 kp 0.4, kd 0.6123 (90 % intervals)")
+    assert _own_line(rows).endswith("fitted as the answer is to all): v0 kp 0.4, kd 0.6123")  # (no interval)
     rows[0]["own_uncertainty"] = {"kp": {"lo": 0.35, "hi": 0.5}, "kd": {"lo": math.nan, "hi": math.nan}}
     assert _own_line(rows).endswith("v0 kp 0.4 (0.35 to 0.5), kd 0.6123 (90 % intervals)")  # (kd's unknown)
     assert _own_line([{"vehicle": "v0"}, {"vehicle": "v1"}]) == ""
