@@ -29,7 +29,7 @@ from mavtune.fleet import Fleet, Status
 from mavtune.journal import Journal, blank
 from mavtune.plan import Plan, clock as _clock_s, counted, make_plan
 from mavtune.runfolder import claimed
-from mavtune.tuner import Round, StageDone, Tuner, TuningResult, gains_text
+from mavtune.tuner import Round, StageDone, Tuner, TuningResult, gains_text, span_text
 
 JOURNAL = "journal.sqlite"
 REPORT = "report.md"
@@ -513,8 +513,7 @@ def print_outcome(console: Console, outcome: dict[str, Any]) -> None:
         console.print(f"{vehicle}: {values} (the search tolerance)", highlight=False)
     for vehicle, params in outcome.get("own_params", {}).items():
         spans = outcome.get("own_params_interval", {}).get(vehicle, {})
-        values = ", ".join(f"{n} = {v:.4g}" + (f" ({spans[n][0]:.3g} to {spans[n][1]:.3g})" if n in spans else "")
-                           for n, v in params.items())
+        values = ", ".join(f"{n} = {v:.4g}" + (span_text(*spans[n]) if n in spans else "") for n, v in params.items())
         console.print(f"{vehicle}'s own: {values} (its flights alone" + ("; 90 % intervals)" if spans else ")"),
                       highlight=False)
     if outcome.get("param_files"):

@@ -101,9 +101,14 @@ def gains_text(gains: Gains, intervals: dict[str, dict[str, float]] | None = Non
     def interval(n: str) -> str:
         i = (intervals or {}).get(n) or {}
         known = "lo" in i and "hi" in i and math.isfinite(i["lo"]) and math.isfinite(i["hi"])
-        return f" ({i['lo']:.3g} to {i['hi']:.3g})" if known else ""
+        return span_text(i["lo"], i["hi"]) if known else ""
 
     return ", ".join(f"{n} {v:.4g}{interval(n)}" for n, v in gains.items())
+
+
+def span_text(lo: float, hi: float) -> str:
+    """An interval after its value: ' (0.33 to 0.52)' (gains in `gains_text`, parameters on the console)."""
+    return f" ({lo:.3g} to {hi:.3g})"
 
 
 def designed_after(rounds: list[Round]) -> set[str]:
@@ -1075,7 +1080,7 @@ class Tuner:
     def _vehicle_noise(self) -> NoisePool:
         """The noise of one vehicle's flights: each vehicle's repeats of a gain vector, pooled over the vehicles.
         The run's pool (`pool`) also holds how the vehicles of a round differ, which one vehicle's flights compared
-        among themselves do not (six times one vehicle's noise where one vehicle costs 30 % more); the run's where
+        among themselves do not (several times one vehicle's noise where one vehicle costs 30 % more); the run's where
         no vehicle flew a point twice."""
         pool, names = NoisePool(), list(self.settings.space)
         for r in self.rounds:
