@@ -17,7 +17,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from mavtune.errors import MavtuneError
 from mavtune.fleet import Fleet, Flight, Gains, Status
@@ -416,6 +416,20 @@ class TuningResult:
             "designs": [d.to_dict() for d in self.designs],
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
         }
+
+
+def at_levels(flights: Sequence[tuple[float, float]]) -> list[float]:
+    """The costs of one point's flights (cost, its vehicle's level) at the swarm's level: each divided by its
+    vehicle's level, so that their spread is the flights' and not the vehicles', then scaled together so that their
+    mean is the costs' sum over the levels' sum: a point flown by every vehicle alike keeps its mean (over the swarm's
+    mean level), with the costlier vehicle weighing as it flies, and one flown mostly by a costlier vehicle does not
+    inherit its offset. A failed flight's infinite cost stays infinite."""
+    levelled = [c / s for c, s in flights]
+    total = math.fsum(levelled)
+    if not (math.isfinite(total) and total > 0.0):
+        return levelled
+    return [c * len(flights) * math.fsum(c for c, _ in flights) / (math.fsum(s for _, s in flights) * total)
+            for c in levelled]
 
 
 def _flights(returned: Any, index: int, assigned: int) -> list[Flight]:
@@ -882,6 +896,7 @@ class Tuner:
         self._usable = False  # whether a flight of the run has measured a usable cost (ok, finite)
         self.flown = 0  # rounds flown (not replayed) by this process
         self.pool = NoisePool()  # the run's flight-to-flight noise, pooled over every line search
+        self._levels_at: tuple[int, dict[str, float]] = (-1, {})  # `_levels` and the rounds it was taken over
         self._active: tuple[int, str, Gains, LineSearch] | None = None  # under way: bootstrap, gain, held, search
         self._uncertainty: tuple[Any, dict[str, dict[str, float]]] = (None, {})
         self._design_answers: list[Gains] = []  # each design's answer in turn (`_surface`)
@@ -952,14 +967,14 @@ class Tuner:
         last = {rec.gain: (i, rec) for i, rec in enumerate(self.searches)}
         designed = designed_after(self.rounds)
         region = dict(zip(s.space, self._region() or [])) if self.draws and last else {}
-        start = s.start_gains()
+        start, noise = s.start_gains(), self._swarm_noise()
         out = {}
         for name, (i, rec) in last.items():
             lo, hi = s.space[name]
             a, b = rec.span or (lo, hi)  # the range the line search flew over
             interval = resample(lambda pool: s.search(a, b, pool),
                                 lambda search: rule.assign(search, int(s.vehicles), speculate=False),
-                                rec.samples, self.pool, self.gains[name], resolution(rec.bracket, s.answer),
+                                rec.samples, noise, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
             answers = [start[name], *(r.result for r in self.searches[:i + 1] if r.gain == name)]
             if surfaced and answers[-1] != self.gains[name]:  # the response surface's move counts as the last one
@@ -982,16 +997,47 @@ class Tuner:
     def _region(self) -> list[tuple[float, float]] | None:
         """Per gain the span no flight of the run rules out, every gain free (`plausible_region`): each flown gain
         vector with its costs, a failed flight's as infinite, a lost one's left out."""
-        return plausible_region(self._flown(), self.pool, list(self.settings.space.values()))
+        return plausible_region(self._flown(), self._swarm_noise(), list(self.settings.space.values()))
 
     def _flown(self, vehicle: str | None = None) -> dict[tuple[float, ...], list[float]]:
         """Every gain vector flown in the run (in the order of the space; by `vehicle` alone, if given) with its
-        flights' costs as the searches count them (`Strategy.measured`: a failed flight's as infinite, a lost one's
-        left out)."""
+        flights' costs as the searches count them (`_told`), where vehicles' levels are known (`_levels`) each at
+        the swarm's level (`at_levels`)."""
         names = list(self.settings.space)
-        flights = ([f for f in r.flights if vehicle is None or f.vehicle == vehicle] for r in self.rounds)
-        told = (pair for fs in flights for pair in zip(*Strategy.measured([f.gains for f in fs], fs)))
-        return {key: costs for key, (_, costs) in by_gains(told, names, digits=None).items()}
+        level = self._levels() if vehicle is None else {}
+        told = ((f.gains, (cost, level.get(f.vehicle, 1.0))) for f, cost in self._told(vehicle))
+        return {key: at_levels(pairs) if level else [c for c, _ in pairs]
+                for key, (_, pairs) in by_gains(told, names, digits=None).items()}
+
+    def _told(self, vehicle: str | None = None) -> Iterator[tuple[Flight, float]]:
+        """Each flight of the run (by `vehicle` alone, if given) that measured a cost, with its cost as the searches
+        count it (`Strategy.measured`: a failed flight's as infinite; a lost one is left out)."""
+        for r in self.rounds:
+            flights = [f for f in r.flights if vehicle is None or f.vehicle == vehicle]
+            yield from zip(*Strategy.measured(flights, flights))
+
+    def _levels(self) -> dict[str, float]:
+        """Averaging, where a vehicle is named (`vehicle_offsets`), each vehicle's cost level against the swarm's
+        (`VehicleOffset.scale`), which the fits over the run's flights take out (`_flown`, `_swarm_noise`); else
+        none. A design's points go to whichever vehicles a round has, so a vehicle that costs more at every gain
+        raised the points it happened to fly: six vehicles, one of them 30 % costlier, answered 0.06 of the range off
+        the optimum (benchmarks/levels.py). Where no vehicle is named, the flights as flown."""
+        if self._levels_at[0] != len(self.rounds):
+            offsets = fleet_offsets([r.flights for r in self.rounds]) if self.settings.strategy == "avg" else []
+            self._levels_at = (len(self.rounds), {o.vehicle: o.scale for o in offsets}
+                               if any(o.named for o in offsets) else {})
+        return self._levels_at[1]
+
+    def _swarm_noise(self) -> NoisePool:
+        """The noise the swarm's fits test the run's flights with: the run's pool, or where vehicles' levels are
+        known (`_levels`), the spread of the flights at each gain vector at the swarm's level (`_flown`; the run's
+        pool also holds the vehicles' offsets: in the test whose v1 costs 30 % more, 0.18 against 0.07)."""
+        if not self._levels():
+            return self.pool
+        pool = NoisePool()
+        for key, costs in self._flown().items():
+            pool.extend(key, costs)
+        return pool if math.isfinite(pool.cv) else self.pool
 
     def _flown_shares(self, vehicle: str | None = None) -> dict[tuple[float, ...], list[float]]:
         """`_flown` with each gain vector in shares of each range (what the response surface fits)."""
@@ -1083,9 +1129,8 @@ class Tuner:
         among themselves do not (several times one vehicle's noise where one vehicle costs 30 % more); the run's where
         no vehicle flew a point twice."""
         pool, names = NoisePool(), list(self.settings.space)
-        for r in self.rounds:
-            for gains, cost, f in zip(*Strategy.measured([f.gains for f in r.flights], r.flights), r.flights):
-                pool.add((f.vehicle, tuple(gains[n] for n in names)), cost)
+        for f, cost in self._told():
+            pool.add((f.vehicle, tuple(f.gains[n] for n in names)), cost)
         return pool if math.isfinite(pool.cv) else self.pool
 
     def own_answer(self, vehicle: str) -> Gains:
@@ -1172,7 +1217,7 @@ class Tuner:
         points = surface_design(centre, half, s.design_inner_at(step))
         if step == s.designs_before_passes() and s.design_log_layout and s.design_log:  # (once: from then on)
             scale = LogGains(surface_log_offsets(list(s.space.values())))
-            cv = self.pool.cv  # (judged around where this design would fly in the gains)
+            cv = self._swarm_noise().cv  # (judged around where this design would fly in the gains)
             if math.isfinite(cv) and scale.fits_better(self._flown_shares(), _span(points), s.design_log * cv * cv,
                                                        SURFACE_LAYOUT_SHARE):
                 self._log_layout = scale
@@ -1202,7 +1247,8 @@ class Tuner:
         # run's noise keeps them: the fits' tests allow for the outliers no replicate told)
         self.outliers = [{"gains": {n: a + w * u for n, a, w, u in zip(names, lo, width, k)}, "cost": c}
                          for k, costs in left.items() for c in costs]
-        ruled = surface_ruled_out(flown, self.pool)
+        noise = self._swarm_noise()
+        ruled = surface_ruled_out(flown, noise)
         before = [(self.gains[n] - a) / w for n, a, w in zip(names, lo, width)]  # the previous design's answer
         keep = before if (s.wall_keep and step + 1 == s.design_count() and self._design_answers
                           and self._design_answers[-1] == self.gains  # (not the passes' answer)
@@ -1217,7 +1263,7 @@ class Tuner:
         hold = before if self._design_answers and self._design_answers[-1] == self.gains else None  # (`design_hold`:
         # the design before's, not the passes' answer)
         options = answer_options(self.settings, half, keep, final, logged, hold) | ({"risk": None} if start else {})
-        best, fitted = surface_answer(flown, box, ruled, self.pool, **options)
+        best, fitted = surface_answer(flown, box, ruled, noise, **options)
         if final:
             self._last_fit = (box, options)
         low = far_lowest(flown, box, best, float(s.design_map_far)) if start and s.design_map_far else None
@@ -1242,7 +1288,7 @@ class Tuner:
         self._step = (box, tuple(best), rise)
         self._centre, moved = None, False
         if s.design_move and step + 1 < s.design_count():  # the design's own fit says the minimum lies beyond a face
-            self._centre, moved = surface_next_centre(flown, box, half, self.pool, s.design_move, best,
+            self._centre, moved = surface_next_centre(flown, box, half, noise, s.design_move, best,
                                                       s.design_inner_at(step + 1))
         surrounded = all(a + 1e-9 < b < c - 1e-9 or b in (0.0, 1.0) for (a, c), b in zip(box, best))
         kept = not fitted and keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))
@@ -1293,12 +1339,13 @@ class Tuner:
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None
+        noise = self._swarm_noise()
         if free is None:
-            free, _ = surface_answer(flown, box, ruled, self.pool, risk=None, **options)
+            free, _ = surface_answer(flown, box, ruled, noise, risk=None, **options)
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
         kept = keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))
-        safer = surface_answer(flown, box, ruled, self.pool, keep_bound=True, **options)[0] \
+        safer = surface_answer(flown, box, ruled, noise, keep_bound=True, **options)[0] \
             if kept and chance > RISK else best
         off = any(abs(a - b) > 1e-9 for a, b in zip(safer, best))
         return {"chance": chance, "risk": RISK, "unbounded": self._gains(free) if moved else None,

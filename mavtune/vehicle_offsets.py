@@ -48,6 +48,8 @@ class VehicleOffset:
     pairs: int
     level: float = INTERVAL
     named: bool = True
+    scale: float = 1.0  # its costs against the middle vehicle's (all vehicles' fitted offsets' median): what the
+    # tuner's fits divide them by where a vehicle is named (`Tuner._levels`)
 
     def to_dict(self) -> dict[str, object]:
         return {"vehicle": self.vehicle, "offset": self.ratio, "lo": self.lo, "hi": self.hi, "level": self.level,
@@ -117,7 +119,8 @@ def fleet_offsets(rounds: Iterable[Sequence[Flight]], level: float = LEVEL, min_
         se = math.sqrt(max(float(against @ cov @ against), 0.0))
         named = abs(mean) > z * se and abs(mean) >= math.log(1.0 + min_offset) and (k > 2 or mean > 0.0)
         out.append(VehicleOffset(v, math.exp(mean) - 1.0, math.exp(mean - z_interval * se) - 1.0,
-                                 math.exp(mean + z_interval * se) - 1.0, count[v], named=named))
+                                 math.exp(mean + z_interval * se) - 1.0, count[v], named=named,
+                                 scale=math.exp(float(b[i]) - middle)))
     return out
 
 

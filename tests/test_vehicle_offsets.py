@@ -54,6 +54,17 @@ def test_vehicles_four_percent_apart_are_seldom_named():
     assert named <= 6, named
 
 
+def test_each_vehicle_s_scale_is_its_level_against_the_middle_vehicle_s():
+    """`scale`, which the tuner divides a vehicle's costs by: of three, the costlier one's 1.3 and the others' 1; of
+    two, each one's against their geometric middle."""
+    from mavtune.vehicle_offsets import fleet_offsets
+
+    three = {o.vehicle: o.scale for o in fleet_offsets(_rounds([1.0, 1.3, 1.0], noise=0.02, seed=1))}
+    assert three["v1"] == pytest.approx(1.3, rel=0.02) and three["v0"] == pytest.approx(1.0, abs=0.02)
+    two = {o.vehicle: o.scale for o in fleet_offsets(_rounds([1.0, 1.3], noise=0.02, seed=1))}
+    assert two["v1"] / two["v0"] == pytest.approx(1.3, rel=0.02) and two["v1"] * two["v0"] == pytest.approx(1.0)
+
+
 def test_flights_that_compare_nothing_are_left_out():
     assert vehicle_offsets(_rounds([1.0])) == []  # one vehicle
     assert vehicle_offsets(_rounds([1.0, 1.5], same_gains=False)) == []  # each at its own gains ("split")
@@ -185,6 +196,51 @@ def test_one_vehicle_s_noise_leaves_out_how_the_vehicles_differ():
     tuner = Tuner(settings, CallableFleet(_unlike(0.25, 1.3), 3, seed=1), draws=0)
     tuner.run()
     assert 0.015 < tuner._vehicle_noise().cv < 0.045 and tuner.pool.cv > 5 * tuner._vehicle_noise().cv
+
+
+@settings(max_examples=50, deadline=None)
+@given(costs=st.lists(st.floats(0.5, 2.0), min_size=1, max_size=6), costlier=st.floats(1.0, 1.5))
+def test_a_point_s_flights_at_the_swarm_s_level(costs, costlier):
+    """`at_levels`: the costs of a point's flights over their vehicles' levels keep their relative spread (each
+    divided by its own level), their mean is the costs' sum over the levels' sum (flown by a vehicle 30 % costlier
+    alone, its costs over 1.3), and a failed flight stays infinite."""
+    from mavtune.tuner import at_levels
+
+    levels = [costlier if j % 2 else 1.0 for j in range(len(costs))]
+    out = at_levels(list(zip(costs, levels)))
+    assert math.fsum(out) / len(out) == pytest.approx(math.fsum(costs) / math.fsum(levels))
+    ratio = out[0] * levels[0] / costs[0]
+    assert all(o * s / c == pytest.approx(ratio) for o, c, s in zip(out, costs, levels))
+    assert at_levels([(1.3, 1.3)]) == [pytest.approx(1.0)]
+    assert at_levels([(1.0, 1.0), (math.inf, 1.3)])[1] == math.inf
+
+
+def test_a_vehicle_costlier_at_every_gain_does_not_move_the_swarm_s_answer():
+    """Averaging, a design's points go to whichever vehicles a round has, so v1 costing 30 % more at every gain raised
+    the points it flew: the answer lay 0.05 low in kd, its interval over both whole ranges. Where a vehicle is named,
+    the fits take the flights at the swarm's level (`Tuner._levels`: v1's 1.3; `at_levels`): the answer lies at the
+    optimum (0.4, 0.6) and its interval does not span the ranges, where the same run with its flights as flown
+    (`_levels` giving none, the engine before) does neither; with vehicles alike, no levels and the flights as flown."""
+    from mavtune.api import CallableFleet, default_settings
+    from mavtune.tuner import Tuner
+
+    class Swarm(Tuner):
+        def _own(self):  # (each vehicle's own answer and its refits: not what is tested)
+            return {}, {}
+
+    class AsFlown(Swarm):
+        def _levels(self):
+            return {}
+
+    space = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
+    tuners = [kind(default_settings(3, space=space, seed=1), CallableFleet(_unlike(0.0, level), 3, seed=1))
+              for kind, level in ((Swarm, 1.3), (AsFlown, 1.3), (Swarm, 1.0))]
+    levelled, flown, alike = (t.run() for t in tuners)
+    assert tuners[0]._levels()["v1"] == pytest.approx(1.3, rel=0.03) and tuners[2]._levels() == {}
+    assert abs(levelled.gains["kp"] - 0.4) < 0.02 and abs(levelled.gains["kd"] - 0.6) < 0.02
+    assert flown.gains["kd"] < 0.56
+    assert all(i["hi"] - i["lo"] < 0.6 for i in levelled.uncertainty.values())
+    assert all(i["hi"] - i["lo"] > 0.95 for i in flown.uncertainty.values())
 
 
 @pytest.mark.parametrize("strategy, shift, level", [("avg", 0.0, 1.0), ("split", 0.25, 1.3)])

@@ -28,9 +28,13 @@ def free_udp_port() -> int:
         return s.getsockname()[1]
 
 
+DURATION_S = 600.0  # mavsim's own wall-time bound, for a process a test failed to kill: past every test's timeout
+# (the 120 s before was shorter than a coordinator's run beside a benchmark, whose originals then could not be read)
+
+
 @contextmanager
 def mavsim(*args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1,
-           duration: float = 120.0, streaming: bool = True):
+           duration: float = DURATION_S, streaming: bool = True):
     """Run `mavtune mavsim` on a fresh port; yields the ground URL (udpin:127.0.0.1:PORT) once it streams positions
     (unless not `streaming`: at once); kills it afterwards."""
     port = free_udp_port()
@@ -53,7 +57,7 @@ def wait_positions(port: int, timeout_s: float = 240.0) -> None:
 
 @contextmanager
 def mavsim_on(port: int, *args: str, autopilot: str = "px4", seed: int = 0, speed: float = SPEED, sysid: int = 1,
-              duration: float = 120.0):
+              duration: float = DURATION_S):
     """Run `mavtune mavsim` sending to 127.0.0.1:port until the block ends."""
     cmd = [sys.executable, "-c", "from mavtune.__main__ import main; main()", "mavsim", "--port", str(port),
            "--autopilot", autopilot, "--seed", str(seed), "--speed", str(speed), "--sysid", str(sysid),
