@@ -220,7 +220,7 @@ def test_a_vehicle_costlier_at_every_gain_does_not_move_the_swarm_s_answer():
     the points it flew: the answer lay 0.05 low in kd, its interval over both whole ranges. Where a vehicle is named,
     the fits take the flights at the swarm's level (`Tuner._levels`: v1's 1.3; `at_levels`): the answer lies at the
     optimum (0.4, 0.6) and its interval does not span the ranges, where the same run with its flights as flown
-    (`_levels` giving none, the engine before) does neither; with vehicles alike, no levels and the flights as flown."""
+    (`_levels` giving none, the engine before) does neither; the caution says so. With vehicles alike, no levels."""
     from mavtune.api import CallableFleet, default_settings
     from mavtune.tuner import Tuner
 
@@ -241,6 +241,8 @@ def test_a_vehicle_costlier_at_every_gain_does_not_move_the_swarm_s_answer():
     assert flown.gains["kd"] < 0.56
     assert all(i["hi"] - i["lo"] < 0.6 for i in levelled.uncertainty.values())
     assert all(i["hi"] - i["lo"] > 0.95 for i in flown.uncertainty.values())
+    assert "their average (each vehicle's flights taken at the swarm's level);" in \
+        dict(levelled.caution_kinds())["vehicles differ"]
 
 
 @pytest.mark.parametrize("strategy, shift, level", [("avg", 0.0, 1.0), ("split", 0.25, 1.3)])
