@@ -105,7 +105,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
              + facts_line(facts), "",
              f"Runs 0 … {args.runs - 1} of each plant and method, each tuned twice on the same vehicles and seeds: "
              "levelled (the engine: where a vehicle is named, the fits take each flight's cost over its vehicle's "
-             "fitted level, each point's mean its costs over their levels' sum) and as flown (the engine before). Both answers flown "
+             "fitted level, each point's mean its costs over their levels' sum) and as flown (the engine before). "
+             "Both answers flown "
              f"{args.repeats} times by every vehicle of the run on the same fresh rounds; the difference is the "
              "swarm's mean cost, levelled − as flown, in % of as flown's (negative: levelled better); better / "
              "worse: by more than 2 SE; the sign test counts every run whose answers differ. Levelled: runs whose "

@@ -419,6 +419,12 @@ class TuningResult:
         }
 
 
+def tells_apart(interval: dict[str, dict[str, float]], gains: Gains) -> bool:
+    """Whether a vehicle's own interval (gain → `Interval.to_dict`) leaves `gains` (the swarm's answer) out in some
+    gain: its own flights then tell its optimum from the swarm's (an unknown bound tells nothing)."""
+    return any(i["lo"] > gains[n] or i["hi"] < gains[n] for n, i in interval.items())
+
+
 def at_levels(flights: Sequence[tuple[float, float]]) -> list[float]:
     """The costs of one point's flights (cost, its vehicle's level) at the swarm's level: each divided by its
     vehicle's level, so that their spread is the flights' and not the vehicles', then scaled together so that their
@@ -1094,20 +1100,26 @@ class Tuner:
         return self.snapshot()
 
     def _own(self) -> tuple[dict[str, Gains], dict[str, dict[str, dict[str, float]]]]:
-        """Averaging, where the run's cautions name a vehicle (`vehicle_offsets`), every vehicle's own answer
-        (`own_answer`) and its interval (`own_interval`): the swarm's answer then lies between unlike airframes,
-        which each one's own flights answer better (benchmarks/own_answers.py: with one vehicle heavier, the others'
-        own answers flew better for them too). Not where no vehicle is named (on vehicles alike, own answers are
-        noisier than the swarm's), nor where the vehicles flew different points (each flew a part of the run's), nor
-        without a design (none to refit)."""
+        """Averaging, where the run's cautions name a vehicle (`vehicle_offsets`), the named vehicles' own answers
+        (`own_answer`) with their intervals (`own_interval`), and every other vehicle's whose interval leaves the
+        swarm's answer out in some gain (`tells_apart`): the swarm's answer lies between unlike airframes, which each
+        one's own flights answer better where they can tell (benchmarks/own_answers.py); an unnamed vehicle whose own
+        interval holds the swarm's answer keeps it (of six vehicles, one heavy, such own answers flew worse for 26 of
+        71 and one 33 times as costly: benchmarks/own_given.py). Without intervals (`draws` 0) every vehicle's. Not
+        where no vehicle is named (on vehicles alike, own answers are noisier than the swarm's), nor where the
+        vehicles flew different points (each flew a part of the run's), nor without a design (none to refit)."""
         if self._last_fit is None or self.settings.strategy != "avg":
             return {}, {}
         flights = [r.flights for r in self.rounds]
-        if not vehicle_offsets(flights):
+        named = {o.vehicle for o in vehicle_offsets(flights)}
+        if not named:
             return {}, {}
         vehicles = list(dict.fromkeys(f.vehicle for fs in flights for f in fs))
-        return ({v: self.own_answer(v) for v in vehicles},
-                {v: self.own_interval(v, seed=k) for k, v in enumerate(vehicles)} if self.draws else {})
+        if not self.draws:
+            return {v: self.own_answer(v) for v in vehicles}, {}
+        spans = {v: self.own_interval(v, seed=k) for k, v in enumerate(vehicles)}
+        told = [v for v in vehicles if v in named or tells_apart(spans[v], self.gains)]
+        return {v: self.own_answer(v) for v in told}, {v: spans[v] for v in told}
 
     def _own_fit(self, vehicle: str) -> tuple[dict[tuple[float, ...], list[float]], Callable[..., Sequence[float]],
                                                NoisePool]:
