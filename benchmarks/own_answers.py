@@ -7,9 +7,10 @@ average. Averaging, every vehicle flies every point of the run, so each one's ow
 its own: `Tuner.own_answer` fits the run's last design again on one vehicle's flights (the same box, outlier rule,
 fit and bounds as the run's answer; no answer kept from the design before, which was the swarm's). This asks it for
 every vehicle and flies that vehicle at both answers on fresh rounds with common random numbers, `--repeats` each:
-the paired difference of its mean cost, own against the swarm's, with its standard error. The run hands out the own
-answers where its caution names a vehicle (`TuningResult.own`): the table gives the named vehicles apart, and the
-others of those runs.
+the paired difference of its mean cost, own against the swarm's, with its standard error. The run hands out own
+answers where its caution names a vehicle (`TuningResult.own`: the named vehicles', and the others' whose interval
+leaves the swarm's answer out, benchmarks/own_given.py): the table gives every vehicle's, the named ones apart, and
+the others of those runs.
 
     python benchmarks/own_answers.py --runs 20 --workers 2
 """
