@@ -973,8 +973,9 @@ class Tuner:
         s, rule = self.settings, self.settings.strategy_rule
         last = {rec.gain: (i, rec) for i, rec in enumerate(self.searches)}
         designed = designed_after(self.rounds)
-        region = dict(zip(s.space, self._region() or [])) if self.draws and last else {}
-        start, noise = s.start_gains(), self._swarm_noise()
+        noise = self._swarm_noise()
+        region = dict(zip(s.space, self._region(noise) or [])) if self.draws and last else {}
+        start = s.start_gains()
         out = {}
         for name, (i, rec) in last.items():
             lo, hi = s.space[name]
@@ -991,7 +992,7 @@ class Tuner:
                               edge_reach(rec.samples, (lo, hi)),
                               held_shift(rec, self.gains, s.space, designed)).to_dict()
         if surfaced and not last and self.draws:  # the designs only: the span no flight rules out, every gain free,
-            region = dict(zip(s.space, self._region() or []))  # back to the previous design's answer and on
+            region = dict(zip(s.space, self._region(noise) or []))  # back to the previous design's answer and on
             for name, (lo, hi) in s.space.items():
                 v, span = self.gains[name], region.get(name)
                 answers = [start[name], *(g[name] for g in self._design_answers)]
@@ -1001,11 +1002,11 @@ class Tuner:
         self._uncertainty = (state, out)
         return out
 
-    def _region(self) -> list[tuple[float, float]] | None:
+    def _region(self, noise: NoisePool) -> list[tuple[float, float]] | None:
         """Per gain the span no flight of the run rules out, every gain free (`plausible_region`): each flown gain
-        vector with its costs (`_flown`), a failed flight's as infinite, a lost one's left out, and the swarm's
-        noise (`_swarm_noise`)."""
-        return plausible_region(self._flown(), self._swarm_noise(), list(self.settings.space.values()))
+        vector with its costs (`_flown`), a failed flight's as infinite, a lost one's left out, tested with `noise`
+        (the swarm's, `_swarm_noise`)."""
+        return plausible_region(self._flown(), noise, list(self.settings.space.values()))
 
     def _flown(self, vehicle: str | None = None) -> dict[tuple[float, ...], list[float]]:
         """Every gain vector flown in the run (in the order of the space; by `vehicle` alone, if given) with its
@@ -1284,8 +1285,8 @@ class Tuner:
         if low is not None:  # (`design_map_far`: the passes start in the low region the fit averaged away)
             best, fitted = low, SURFACE_FAR
         self.gains = self._gains(best)
-        self.divergence = self._divergence(flown, box, ruled, best, half, keep, best if start else None, final,
-                                           logged)
+        self.divergence = self._divergence(flown, box, ruled, noise, best, half, keep, best if start else None,
+                                           final, logged)
         self.open_face = {n: self.gains[n] for n, on in zip(names, surface_open_faces(box, best)) if on}
         self.stop_reason = reason
         last = {rec.gain: rec for rec in self.searches}
@@ -1339,21 +1340,21 @@ class Tuner:
         return a, min(a + 2 * half, hi)
 
     def _divergence(self, flown: dict[tuple[float, ...], list[float]], box: list[tuple[float, float]],
-                    ruled: Any, best: tuple[float, ...], half: float,
+                    ruled: Any, noise: NoisePool, best: tuple[float, ...], half: float,
                     keep: list[float] | None = None, free: tuple[float, ...] | None = None,
                     last: bool = False, logged: bool = False) -> dict[str, Any] | None:
-        """Where flights near the design diverged: the chance a flight at its answer `best` diverges as the run's
-        flights fit it, the bound on that chance (`risk.RISK`), and the answer the same rules give without the bound
-        (the previous design's answer `keep` included; `free` when the caller already has it: a design answered
-        unbounded) and its chance when the bound moved it (None when not), whether the answer is `keep` ("kept"),
-        and where a kept answer is above the bound the nearest gains under it and their chance ("off_wall",
-        `surface.answer`'s `keep_bound`; None otherwise); None when no flight near the design failed (`last`: the
-        run's last design; no `design_hold`: it never holds where a flight near the design failed)."""
+        """Where flights near the design diverged (its flights tested with the design's `noise`): the chance a flight
+        at its answer `best` diverges as the run's flights fit it, the bound on that chance (`risk.RISK`), and the
+        answer the same rules give without the bound (the previous design's answer `keep` included; `free` when the
+        caller already has it: a design answered unbounded) and its chance when the bound moved it (None when not),
+        whether the answer is `keep` ("kept"), and where a kept answer is above the bound the nearest gains under it
+        and their chance ("off_wall", `surface.answer`'s `keep_bound`; None otherwise); None when no flight near the
+        design failed (`last`: the run's last design; no `design_hold`: it never holds where a flight near the design
+        failed)."""
         options = answer_options(self.settings, half, keep, last, logged)
         fit = surface_fly_away(flown, box, options.get("risk_reach") or options.get("reach", REACH))
         if fit is None:
             return None
-        noise = self._swarm_noise()
         if free is None:
             free, _ = surface_answer(flown, box, ruled, noise, risk=None, **options)
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
