@@ -168,6 +168,7 @@ class RoundView:
             console=console, disable=quiet, transient=False,
         )
         self.task = self.progress.add_task("tuning", total=plan.rounds)
+        self._task = ""  # the work `status` last printed a line for
 
     def __enter__(self) -> "RoundView":
         self.progress.start()
@@ -183,6 +184,15 @@ class RoundView:
                              description=f"bootstrap {rnd.bootstrap} · {rnd.gain} in [{lo:.4g}, {hi:.4g}]")
         if not self.quiet:
             self.progress.console.print(round_line(rnd), highlight=False, soft_wrap=True)  # one line a round
+
+    def status(self, task: str, done: int, total: int) -> None:
+        """What the run works out after its last flight (`Tuner.on_status`) on the bar, and each new task in a line
+        too, so that a log shows where the time after the flights went."""
+        if task != self._task and not self.quiet:
+            self.progress.console.print(f"after the flights: {task}"
+                                        + (f" ({counted(total, 'vehicle')})" if total > 1 else ""), highlight=False)
+        self._task = task
+        self.progress.update(self.task, description=task, completed=done, total=total)
 
 
 def round_line(rnd: Round) -> str:
@@ -250,7 +260,7 @@ def run(config: Config, out_dir: Path, console: Console | None = None, quiet: bo
             commits = _CountedCommits(book)
             tuner = Tuner(settings, fleet, commits, stage_rounds=stage_rounds)
             with RoundView(console, plan, quiet) as view:
-                tuner.on_round = commits.counted(view)
+                tuner.on_round, tuner.on_status = commits.counted(view), view.status
                 tuner.run()
             status = "finished"
             done = tuner.snapshot()
@@ -624,9 +634,18 @@ def _vehicles_table(rows: list[dict[str, Any]]) -> Table | None:
 def _own_line(rows: list[dict[str, Any]]) -> str:
     """Each vehicle's own gains (result.json's `vehicles`: where one differs) in a line; '' where none has them."""
     own = [v for v in rows if "own_gains" in v]
+    kept = [v["vehicle"] for v in rows if v.get("keeps_swarm_gains")]
     return ("own gains (a vehicle differs: each one's flights alone, fitted as the answer is to all): "
             + "; ".join(f"{v['vehicle']} {gains_text(v['own_gains'], v.get('own_uncertainty'))}" for v in own)
-            + (" (90 % intervals)" if any("own_uncertainty" in v for v in own) else "")) if own else ""
+            + (" (90 % intervals)" if any("own_uncertainty" in v for v in own) else "")
+            + (f"; {_listed(kept)} keep{'s' if len(kept) == 1 else ''} the swarm's gains ("
+               + ("its own interval holds" if len(kept) == 1 else "their own intervals hold") + " them)"
+               if kept else "")) if own else ""
+
+
+def _listed(vehicles: list[str]) -> str:
+    """Vehicles named in a line: each up to MANY_VEHICLES, else their number."""
+    return ", ".join(vehicles) if len(vehicles) <= MANY_VEHICLES else f"{len(vehicles)} vehicles"
 
 
 def plus_minus(value: float, se: float) -> str:

@@ -51,6 +51,8 @@ INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, 
                  "the tolerance after its last line search and no design flew after it")
 DIRECTION = "direction"  # the `gain` of a round of a line search across the gains (all gains at once)
 SURFACE = "design"  # the `gain` of a round of the response surface's design (all gains at once)
+OWN_TASK = "each vehicle's own gains and their 90 % interval"  # what a run works out after its last flight
+INTERVALS_TASK = "the gains' 90 % intervals"  # (`Tuner.on_status`)
 MAX_DESIGN_REPEATS = 100
 PAIR = 2  # the vehicles the defaults were chosen with (the zoo's): a design point gets at least their flights
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
@@ -360,8 +362,10 @@ class TuningResult:
     def vehicles(self) -> list[dict[str, Any]]:
         """Each vehicle's flights (flown, failed, lost) and its cost against the others' at the same gains
         (`fleet_offsets`: offset, interval, comparisons, named or not; absent where it was not compared), and where
-        the run gave them its own gains and their intervals (`own_gains`, `own_uncertainty`), in the order the
-        vehicles first flew: the fleet at a glance, beside the cautions that name a vehicle."""
+        the run gave them its own gains and their intervals (`own_gains`, `own_uncertainty`; where it gave some
+        vehicles theirs, the others `keeps_swarm_gains`: their own flights could not tell their optimum from the
+        swarm's answer, `Tuner._own`), in the order the vehicles first flew: the fleet at a glance, beside the
+        cautions that name a vehicle."""
         tally: dict[str, Counter] = {}
         for r in self.rounds:
             for f in r.flights:
@@ -370,7 +374,8 @@ class TuningResult:
         return [{"vehicle": v, "flights": sum(n.values()), "failed": n[Status.FAILED.value],
                  "lost": n[Status.LOST.value], **{k: x for k, x in offsets.get(v, {}).items() if k != "vehicle"},
                  **({"own_gains": dict(self.own[v])} if v in self.own else {}),
-                 **({"own_uncertainty": dict(self.own_uncertainty[v])} if v in self.own_uncertainty else {})}
+                 **({"own_uncertainty": dict(self.own_uncertainty[v])} if v in self.own_uncertainty else {}),
+                 **({"keeps_swarm_gains": True} if self.own and v not in self.own else {})}
                 for v, n in tally.items()]
 
     def _compared(self) -> list[Sequence[Flight]]:
@@ -891,6 +896,8 @@ class Tuner:
         if stage_rounds is not None and (journal is None or stage_rounds < 0):
             raise MavtuneError("tuning in stages needs a journal and a number of rounds per stage")
         self.settings, self.fleet, self.journal, self.on_round = settings, fleet, journal, on_round
+        self.on_status: Callable[[str, int, int], None] | None = None  # told what the run works out after its
+        # last flight (each vehicle's own gains, the intervals: seconds a vehicle), as (task, done, total)
         self.stage_rounds = stage_rounds
         self.draws = draws  # resampled searches behind each gain's interval (0: no interval)
         self.recorded = journal.rounds() if journal is not None else {}
@@ -1098,7 +1105,17 @@ class Tuner:
         if not self._usable:
             self._no_cost()
         self.own, self.own_uncertainty = self._own()
-        return self.snapshot()
+        if not self.draws:
+            return self.snapshot()
+        self._status(INTERVALS_TASK, 0, 1)
+        result = self.snapshot()
+        self._status(INTERVALS_TASK, 1, 1)
+        return result
+
+    def _status(self, task: str, done: int, total: int) -> None:
+        """Tell `on_status` what the run works out now, after its last flight, and how far it is."""
+        if self.on_status is not None:
+            self.on_status(task, done, total)
 
     def _own(self) -> tuple[dict[str, Gains], dict[str, dict[str, dict[str, float]]]]:
         """Averaging, where the run's cautions name a vehicle (`vehicle_offsets`), the named vehicles' own answers
@@ -1118,7 +1135,11 @@ class Tuner:
         vehicles = list(dict.fromkeys(f.vehicle for fs in flights for f in fs))
         if not self.draws:
             return {v: self.own_answer(v) for v in vehicles}, {}
-        spans = {v: self.own_interval(v, seed=k) for k, v in enumerate(vehicles)}
+        spans = {}
+        for k, v in enumerate(vehicles):
+            self._status(OWN_TASK, k, len(vehicles))
+            spans[v] = self.own_interval(v, seed=k)
+        self._status(OWN_TASK, len(vehicles), len(vehicles))
         told = [v for v in vehicles if v in named or tells_apart(spans[v], self.gains)]
         return {v: self.own_answer(v) for v in told}, {v: spans[v] for v in told}
 

@@ -184,7 +184,11 @@ def test_each_own_answer_has_an_interval_that_holds_its_vehicle_s_optimum():
     assert said in dict(result.caution_kinds())["vehicles differ"]
     rows = result.to_dict()["vehicles"]
     assert [r.get("own_uncertainty") for r in rows] == [result.own_uncertainty.get(f"v{j}") for j in range(3)]
-    assert said in "\n".join(vehicles_section(result.to_dict())) and said in _own_line(rows)
+    assert [r.get("keeps_swarm_gains", False) for r in rows] == [True, False, True]
+    section = "\n".join(vehicles_section(result.to_dict()))
+    assert said in section and said in _own_line(rows)
+    assert section.count("| the swarm's (its own interval holds them) |") == 2
+    assert _own_line(rows).endswith("; v0, v2 keep the swarm's gains (their own intervals hold them)")
 
 
 def test_an_own_interval_tells_a_vehicle_apart_where_it_leaves_the_swarm_s_answer_out():
@@ -263,6 +267,31 @@ def test_no_own_answers_where_no_vehicle_is_named_or_the_vehicles_flew_apart(str
                           strategy=strategy)
     assert result.own == {} and all("own_gains" not in v for v in result.to_dict()["vehicles"])
     assert ("vehicles differ" in dict(result.caution_kinds())) == (level > 1.0)
+
+
+def test_the_run_tells_what_it_works_out_after_its_last_flight():
+    """Each vehicle's own interval takes seconds (40 refits): `on_status` hears each vehicle's turn and the gains'
+    intervals after it, and the console prints each task once, the bar counting the vehicles."""
+    from rich.console import Console
+
+    from mavtune.api import CallableFleet, default_settings
+    from mavtune.plan import make_plan
+    from mavtune.run import RoundView
+    from mavtune.tuner import INTERVALS_TASK, OWN_TASK, Tuner
+
+    settings = default_settings(3, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1)
+    tuner = Tuner(settings, CallableFleet(_unlike(0.25, 1.3), 3, seed=1))
+    heard = []
+    tuner.on_status = lambda *told: heard.append(told)
+    tuner.run()
+    assert heard == [(OWN_TASK, k, 3) for k in range(4)] + [(INTERVALS_TASK, 0, 1), (INTERVALS_TASK, 1, 1)]
+    console = Console(record=True, width=100, force_terminal=False)
+    with RoundView(console, make_plan(settings), quiet=False) as view:
+        for told in heard:
+            view.status(*told)
+        assert view.progress.tasks[0].completed == 1 and view.progress.tasks[0].description == INTERVALS_TASK
+    lines = console.export_text().splitlines()
+    assert lines[:2] == [f"after the flights: {OWN_TASK} (3 vehicles)", f"after the flights: {INTERVALS_TASK}"]
 
 
 def test_the_console_says_each_vehicle_s_own_gains_in_a_line():

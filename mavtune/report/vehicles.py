@@ -37,7 +37,7 @@ def vehicles_section(summary: dict[str, Any]) -> list[str]:
     own = any("own_gains" in r for r in rows)
     table = [[f"`{r['vehicle']}`", r["flights"], r["failed"] or "", r["lost"] or "", _offset(r),
               r.get("comparisons", 0), "named" if r.get("named") else "",
-              *([gains_text(r.get("own_gains") or {}, r.get("own_uncertainty"))] if own else [])] for r in shown]
+              *([_own(r)] if own else [])] for r in shown]
     return ["## Vehicles", "",
             f"Each vehicle's costs at the same gains {where}, against the other vehicle's (of two) or the median "
             f"vehicle's (of more): the offset fitted on the logarithm of the cost, with its 90 % interval. A vehicle "
@@ -47,8 +47,9 @@ def vehicles_section(summary: dict[str, Any]) -> list[str]:
             + (" Where one is named, each vehicle's own gains are the last design fitted to its flights alone (every "
                "vehicle flew every point), inside the same box: where the vehicles fly unlike each other, the swarm's "
                "answer lies between them. Each with its 90 % interval: the fit again on its flights resampled, and "
-               "where those answers reach the box's face, on to where its flights no longer rule the optimum out."
-               if own else ""), "",
+               "where those answers reach the box's face, on to where its flights no longer rule the optimum out. "
+               "An unnamed vehicle whose own interval holds the swarm's answer keeps the swarm's gains: its flights "
+               "cannot tell its optimum from them." if own else ""), "",
             md.table(["vehicle", "flights", "failed", "lost", "cost against the others (90 % interval)",
                       "comparisons", "cautions", *(["own gains"] if own else [])], table,
                      ["l", "r", "r", "r", "r", "r", "l", *(["l"] if own else [])]), ""]
@@ -58,3 +59,10 @@ def _offset(row: dict[str, Any]) -> str:
     if "offset" not in row:
         return "not compared"
     return f"{row['offset']:+.1%} ({row['lo']:+.1%} to {row['hi']:+.1%})"
+
+
+def _own(row: dict[str, Any]) -> str:
+    """A vehicle's own gains with their intervals, or that it keeps the swarm's."""
+    if row.get("keeps_swarm_gains"):
+        return "the swarm's (its own interval holds them)"
+    return gains_text(row.get("own_gains") or {}, row.get("own_uncertainty"))
