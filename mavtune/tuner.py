@@ -341,7 +341,7 @@ class TuningResult:
                 f"than the other vehicles' at the same gains in the same {where} ({o.pairs} comparisons; {o.level:.0%} "
                 f"interval {o.lo:+.0%} to {o.hi:+.0%}): the vehicles fly unlike each other (a worn propeller, a "
                 f"weaker battery, a payload, another airframe) and the gains answer their average"
-                + ("" if self._spread else " (each vehicle's flights taken at the swarm's level)") + "; look at "
+                + " (each vehicle's flights taken at the swarm's level); look at "
                 f"{o.vehicle} before loading them onto it"
                 + (f": its own flights answer {gains_text(self.own[o.vehicle], self.own_uncertainty.get(o.vehicle))} "
                    "(the last design fitted to them alone, inside its box; 90 % intervals; each vehicle's own gains: "
@@ -379,11 +379,7 @@ class TuningResult:
                 for v, n in tally.items()]
 
     def _compared(self) -> list[Sequence[Flight]]:
-        """The sets of flights within which the vehicles are compared: each round's, or, where a round's vehicles
-        flew different points (split, groups), each line search's."""
-        if self._spread:
-            return line_searches(((r.bootstrap, r.gain), r.flights) for r in self.rounds)
-        return [r.flights for r in self.rounds]
+        return compared(self.rounds, self._spread)
 
     def edges(self) -> tuple[dict[str, dict[str, Any] | None], dict[str, tuple[float, float]]]:
         """Per gain, from the last line search that set it: the evidence at the end of its span flown
@@ -422,6 +418,14 @@ class TuningResult:
             "designs": [d.to_dict() for d in self.designs],
             "in_progress": self.in_progress.to_dict() if self.in_progress is not None else None,
         }
+
+
+def compared(rounds: Sequence[Round], spread: bool) -> list[Sequence[Flight]]:
+    """The sets of flights within which the vehicles are compared (`fleet_offsets`): each round's, or, where a
+    round's vehicles flew different points (`spread`: split, groups), each line search's."""
+    if spread:
+        return line_searches(((r.bootstrap, r.gain), r.flights) for r in rounds)
+    return [r.flights for r in rounds]
 
 
 def tells_apart(interval: dict[str, dict[str, float]], gains: Gains) -> bool:
@@ -1033,13 +1037,15 @@ class Tuner:
             yield from zip(*Strategy.measured(flights, flights))
 
     def _levels(self) -> dict[str, float]:
-        """Averaging, where a vehicle is named (`vehicle_offsets`), each vehicle's cost level against the swarm's
-        (`VehicleOffset.scale`), which the fits over the run's flights take out (`_flown`, `_swarm_noise`); else
+        """Where a vehicle is named (`vehicle_offsets`, compared as `_compared` does), each vehicle's cost level
+        against the swarm's (`VehicleOffset.scale`), which the fits over the run's flights take out (`_flown`,
+        `_swarm_noise`) and, where a round's vehicles flew different points, the line searches too (`_round`); else
         none. A design's points go to whichever vehicles a round has, so a vehicle that costs more at every gain
         raised the points it happened to fly: six vehicles, one of them 30 % costlier, answered 0.06 of the range off
-        the optimum (benchmarks/levels.py). Where no vehicle is named, the flights as flown."""
+        the optimum (benchmarks/levels.py); split, it also lost the line searches' comparisons of the points it flew.
+        Where no vehicle is named, the flights as flown."""
         if self._levels_at[0] != len(self.rounds):
-            offsets = fleet_offsets([r.flights for r in self.rounds]) if self.settings.strategy == "avg" else []
+            offsets = fleet_offsets(compared(self.rounds, self.settings.strategy != "avg"))
             self._levels_at = (len(self.rounds), {o.vehicle: o.scale for o in offsets}
                                if any(o.named for o in offsets) else {})
         return self._levels_at[1]
@@ -1501,6 +1507,10 @@ class Tuner:
         assignments = [place(p) if place is not None else {**gains, name: p} for p in points]
         flights = self._fly(assignments, bootstrap, name, search.bracket)
         told_points, costs = Strategy.measured(points, flights)
+        level = self._levels() if self.settings.strategy != "avg" else {}  # (averaging, every vehicle flies every
+        # point: its comparisons are the vehicles' alike)
+        if level:  # the points compared were flown by different vehicles: each at the swarm's level
+            costs = [c / level.get(f.vehicle, 1.0) for c, f in zip(costs, (f for f in flights if f.measured))]
         search.tell(told_points, costs)
 
     def _fly(self, assignments: list[Gains], bootstrap: int, name: str, bracket: tuple[float, float]) -> list[Flight]:
