@@ -1043,11 +1043,14 @@ class Tuner:
         none. A design's points go to whichever vehicles a round has, so a vehicle that costs more at every gain
         raised the points it happened to fly: six vehicles, one of them 30 % costlier, answered 0.06 of the range off
         the optimum (benchmarks/levels.py); split, it also lost the line searches' comparisons of the points it flew.
-        Where no vehicle is named, the flights as flown."""
+        Where no vehicle is named, or a vehicle that measured a cost is not yet compared (its level unknown: of
+        groups of two on four vehicles, two compared in a line search leave the others' reference at their
+        midpoint), the flights as flown."""
         if self._levels_at[0] != len(self.rounds):
             offsets = fleet_offsets(compared(self.rounds, self.settings.strategy != "avg"))
+            known = {o.vehicle for o in offsets} >= {f.vehicle for f, _ in self._told()}
             self._levels_at = (len(self.rounds), {o.vehicle: o.scale for o in offsets}
-                               if any(o.named for o in offsets) else {})
+                               if known and any(o.named for o in offsets) else {})
         return self._levels_at[1]
 
     def _swarm_noise(self) -> NoisePool:
@@ -1510,7 +1513,7 @@ class Tuner:
         level = self._levels() if self.settings.strategy != "avg" else {}  # (averaging, every vehicle flies every
         # point: its comparisons are the vehicles' alike)
         if level:  # the points compared were flown by different vehicles: each at the swarm's level
-            costs = [c / level.get(f.vehicle, 1.0) for c, f in zip(costs, (f for f in flights if f.measured))]
+            costs = [c / level[f.vehicle] for c, f in zip(costs, (f for f in flights if f.measured))]
         search.tell(told_points, costs)
 
     def _fly(self, assignments: list[Gains], bootstrap: int, name: str, bracket: tuple[float, float]) -> list[Flight]:

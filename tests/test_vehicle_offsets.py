@@ -269,6 +269,40 @@ def test_no_own_answers_where_no_vehicle_is_named_or_the_vehicles_flew_apart(str
     assert ("vehicles differ" in dict(result.caution_kinds())) == (level > 1.0)
 
 
+def test_where_the_vehicles_fly_different_points_the_line_searches_compare_them_at_the_swarm_s_level():
+    """Groups of two on four vehicles, v1 30 % costlier at every gain, no noise: once v1 is named and every vehicle
+    compared (within the line searches), every cost told to a search is its flight's over its vehicle's level, so all
+    vehicles' costs at a gain are one, where the flights differ by 30 %; before, the searches are told them as flown."""
+    from mavtune.api import CallableFleet, default_settings
+    from mavtune.tuner import Tuner
+
+    def bowl(g):
+        return (g["kp"] - 0.4) ** 2 + (g["kd"] - 0.6) ** 2 + 0.5
+
+    def evaluate(gains, context):
+        return [bowl(g) * (1.3 if c.vehicle == 1 else 1.0) for g, c in zip(gains, context)]
+
+    class Told(Tuner):
+        def _round(self, search, bootstrap, name, gains, place=None):
+            tell, told = search.tell, []
+            search.tell = lambda points, costs: (told.extend(costs), tell(points, costs))
+            super()._round(search, bootstrap, name, gains, place)
+            del search.tell
+            self.told.append((dict(self._levels()), self.rounds[-1].flights, told))
+
+    settings = default_settings(4, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1, strategy="groups",
+                                bootstraps=3, budget=None)  # (passes enough for all four vehicles to be compared)
+    tuner = Told(settings, CallableFleet(evaluate, 4, seed=1), draws=0)
+    tuner.told = []
+    tuner.run()
+    levelled = [(level, flights, told) for level, flights, told in tuner.told if level]
+    assert levelled and len(levelled) < len(tuner.told)  # (named during the line searches)
+    assert math.isclose(levelled[-1][0]["v1"] / levelled[-1][0]["v2"], 1.3)
+    for level, flights, told in tuner.told:
+        ratios = [c / bowl(f.gains) for c, f in zip(told, flights)]
+        assert max(ratios) / min(ratios) == pytest.approx(1.0 if level else 1.3)
+
+
 def test_the_run_tells_what_it_works_out_after_its_last_flight():
     """Each vehicle's own interval takes seconds (40 refits): `on_status` hears each vehicle's turn and the gains'
     intervals after it, and the console prints each task once, the bar counting the vehicles."""
