@@ -341,7 +341,8 @@ class TuningResult:
                 f"than the other vehicles' at the same gains in the same {where} ({o.pairs} comparisons; {o.level:.0%} "
                 f"interval {o.lo:+.0%} to {o.hi:+.0%}): the vehicles fly unlike each other (a worn propeller, a "
                 f"weaker battery, a payload, another airframe) and the gains answer their average"
-                + " (each vehicle's flights taken at the swarm's level); look at "
+                + ("" if self.settings.get("strategy") == "split" else " (each vehicle's flights taken at the "
+                   "swarm's level)") + "; look at "
                 f"{o.vehicle} before loading them onto it"
                 + (f": its own flights answer {gains_text(self.own[o.vehicle], self.own_uncertainty.get(o.vehicle))} "
                    "(the last design fitted to them alone, inside its box; 90 % intervals; each vehicle's own gains: "
@@ -1037,17 +1038,19 @@ class Tuner:
             yield from zip(*Strategy.measured(flights, flights))
 
     def _levels(self) -> dict[str, float]:
-        """Where a vehicle is named (`vehicle_offsets`, compared as `_compared` does), each vehicle's cost level
-        against the swarm's (`VehicleOffset.scale`), which the fits over the run's flights take out (`_flown`,
-        `_swarm_noise`) and, where a round's vehicles flew different points, the line searches too (`_round`); else
-        none. A design's points go to whichever vehicles a round has, so a vehicle that costs more at every gain
-        raised the points it happened to fly: six vehicles, one of them 30 % costlier, answered 0.06 of the range off
-        the optimum (benchmarks/levels.py); split, it also lost the line searches' comparisons of the points it flew.
-        Where no vehicle is named, or a vehicle that measured a cost is not yet compared (its level unknown: of
-        groups of two on four vehicles, two compared in a line search leave the others' reference at their
-        midpoint), the flights as flown."""
+        """Averaging or in groups, where a vehicle is named (`vehicle_offsets`, compared as `_compared` does), each
+        vehicle's cost level against the swarm's (`VehicleOffset.scale`), which the fits over the run's flights take
+        out (`_flown`, `_swarm_noise`) and, in groups, the line searches too (`_round`); else none. A design's points
+        go to whichever vehicles a round has, so a vehicle that costs more at every gain raised the points it happened
+        to fly: six vehicles, one of them 30 % costlier, answered 0.06 of the range off the optimum, and four in groups
+        of two, one carrying a payload, answered gains 26 % costlier than levelled (benchmarks/levels.py). Not split, whose every
+        point one vehicle flies: a level then stands for that vehicle's costs everywhere, which where they run
+        opposite ways (the payload: costlier at low gains, cheaper at high ones) led the fits to gains 4.7 times as
+        costly for the swarm (levels_spread.md). Nor where a vehicle that measured a cost is not yet compared (its
+        level unknown: two of four compared leave the others' reference at their midpoint)."""
         if self._levels_at[0] != len(self.rounds):
-            offsets = fleet_offsets(compared(self.rounds, self.settings.strategy != "avg"))
+            strategy = self.settings.strategy
+            offsets = fleet_offsets(compared(self.rounds, strategy != "avg")) if strategy != "split" else []
             known = {o.vehicle for o in offsets} >= {f.vehicle for f, _ in self._told()}
             self._levels_at = (len(self.rounds), {o.vehicle: o.scale for o in offsets}
                                if known and any(o.named for o in offsets) else {})
@@ -1512,7 +1515,7 @@ class Tuner:
         told_points, costs = Strategy.measured(points, flights)
         level = self._levels() if self.settings.strategy != "avg" else {}  # (averaging, every vehicle flies every
         # point: its comparisons are the vehicles' alike)
-        if level:  # the points compared were flown by different vehicles: each at the swarm's level
+        if level:  # groups: the points compared were flown by different vehicles, each at the swarm's level
             costs = [c / level[f.vehicle] for c, f in zip(costs, (f for f in flights if f.measured))]
         search.tell(told_points, costs)
 
