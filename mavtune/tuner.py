@@ -39,7 +39,7 @@ from mavtune.search.surface import (
 )
 from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
-from mavtune.vehicle_offsets import VehicleOffset, fleet_offsets, line_searches, vehicle_offsets
+from mavtune.vehicle_offsets import MIN_PAIRS, VehicleOffset, fleet_offsets, line_searches, vehicle_offsets
 
 INTERVAL_NOTE = ("each gain's interval joins its last line search's (resampled, the other gains held) with every "
                  "value the run's flights cannot rule out with all gains free (a gain vector is ruled out only when "
@@ -1046,12 +1046,14 @@ class Tuner:
         of two, one carrying a payload, answered gains 26 % costlier than levelled (benchmarks/levels.py). Not split, whose every
         point one vehicle flies: a level then stands for that vehicle's costs everywhere, which where they run
         opposite ways (the payload: costlier at low gains, cheaper at high ones) led the fits to gains 4.7 times as
-        costly for the swarm (levels_spread.md). Nor where a vehicle that measured a cost is not yet compared (its
-        level unknown: two of four compared leave the others' reference at their midpoint)."""
+        costly for the swarm (levels_spread.md). Nor while a vehicle that measured enough costs to be compared
+        (`MIN_PAIRS`) is not yet (its level unknown: two of four compared leave the others' reference at their
+        midpoint); one that measured fewer (it left early) takes the median vehicle's level."""
         if self._levels_at[0] != len(self.rounds):
             strategy = self.settings.strategy
             offsets = fleet_offsets(compared(self.rounds, strategy != "avg")) if strategy != "split" else []
-            known = {o.vehicle for o in offsets} >= {f.vehicle for f, _ in self._told()}
+            measured = Counter(f.vehicle for f, _ in self._told())
+            known = {o.vehicle for o in offsets} >= {v for v, n in measured.items() if n >= MIN_PAIRS}
             self._levels_at = (len(self.rounds), {o.vehicle: o.scale for o in offsets}
                                if known and any(o.named for o in offsets) else {})
         return self._levels_at[1]
@@ -1516,7 +1518,7 @@ class Tuner:
         level = self._levels() if self.settings.strategy != "avg" else {}  # (averaging, every vehicle flies every
         # point: its comparisons are the vehicles' alike)
         if level:  # groups: the points compared were flown by different vehicles, each at the swarm's level
-            costs = [c / level[f.vehicle] for c, f in zip(costs, (f for f in flights if f.measured))]
+            costs = [c / level.get(f.vehicle, 1.0) for c, f in zip(costs, (f for f in flights if f.measured))]
         search.tell(told_points, costs)
 
     def _fly(self, assignments: list[Gains], bootstrap: int, name: str, bracket: tuple[float, float]) -> list[Flight]:

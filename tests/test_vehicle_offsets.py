@@ -304,6 +304,25 @@ def test_where_the_vehicles_fly_different_points_the_line_searches_compare_them_
         assert max(ratios) / min(ratios) == pytest.approx(1.0 if level else 1.3)
 
 
+def test_a_vehicle_that_left_early_leaves_the_others_levelled():
+    """Averaging, three vehicles, v1 30 % costlier, v2 gone after its third flight (every later flight lost): too
+    few flights to be compared, it takes the median vehicle's level, and the others' levels still apply."""
+    from mavtune.api import CallableFleet, default_settings
+    from mavtune.tuner import Tuner
+
+    unlike = _unlike(0.0, 1.3)
+
+    def evaluate(gains, context):
+        return [None if c.vehicle == 2 and c.round >= 3 else cost
+                for cost, c in zip(unlike(gains, context), context)]
+
+    settings = default_settings(3, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1)
+    tuner = Tuner(settings, CallableFleet(evaluate, 3, seed=1), draws=0)
+    tuner.run()
+    assert set(tuner._levels()) == {"v0", "v1"}
+    assert tuner._levels()["v1"] / tuner._levels()["v0"] == pytest.approx(1.3, rel=0.05)
+
+
 def test_split_takes_no_levels():
     """Split, one vehicle flies each point: a level would stand for its costs at every gain, which where the
     vehicles' costs run opposite ways misleads the fits (benchmarks/results/levels_spread.md), so the flights count as
