@@ -1038,17 +1038,17 @@ class Tuner:
             yield from zip(*Strategy.measured(flights, flights))
 
     def _levels(self) -> dict[str, float]:
-        """Averaging or in groups, where a vehicle is named (`vehicle_offsets`, compared as `_compared` does), each
-        vehicle's cost level against the swarm's (`VehicleOffset.scale`), which the fits over the run's flights take
-        out (`_flown`, `_swarm_noise`) and, in groups, the line searches too (`_round`); else none. A design's points
-        go to whichever vehicles a round has, so a vehicle that costs more at every gain raised the points it happened
-        to fly: six vehicles, one of them 30 % costlier, answered 0.06 of the range off the optimum, and four in groups
-        of two, one carrying a payload, answered gains 26 % costlier than levelled (benchmarks/levels.py). Not split, whose every
-        point one vehicle flies: a level then stands for that vehicle's costs everywhere, which where they run
-        opposite ways (the payload: costlier at low gains, cheaper at high ones) led the fits to gains 4.7 times as
-        costly for the swarm (levels_spread.md). Nor while a vehicle that measured enough costs to be compared
-        (`MIN_PAIRS`) is not yet (its level unknown: two of four compared leave the others' reference at their
-        midpoint); one that measured fewer (it left early) takes the median vehicle's level."""
+        """Averaging or in groups, where a vehicle is named (`vehicle_offsets`, within the sets of flights `compared`),
+        each vehicle's cost level against the swarm's (`VehicleOffset.scale`), which the fits over the run's flights
+        take out (`_flown`, `_swarm_noise`) and, in groups, the line searches too (`_round`); else none. A design's
+        points go to whichever vehicles a round has, so a vehicle that costs more at every gain raised the points it
+        happened to fly: six vehicles, one of them 30 % costlier, answered 0.06 of the range off the optimum, and four
+        in groups of two, one carrying a payload, answered gains 26 % costlier than levelled (benchmarks/levels.py).
+        Not split, whose every point one vehicle flies: a level then stands for that vehicle's costs everywhere, which
+        where they run opposite ways (the payload: costlier at low gains, cheaper at high ones) led the fits to gains
+        4.7 times as costly for the swarm (levels_spread.md). Nor while a vehicle that measured enough costs to be
+        compared (`MIN_PAIRS`) is not yet (its level unknown: two of four compared leave the others' reference at
+        their midpoint); one that measured fewer (it left early) takes the median vehicle's level."""
         if self._levels_at[0] != len(self.rounds):
             strategy = self.settings.strategy
             offsets = fleet_offsets(compared(self.rounds, strategy != "avg")) if strategy != "split" else []
