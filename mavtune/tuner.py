@@ -37,7 +37,7 @@ from mavtune.search.surface import (
     inliers as surface_inliers, log_offsets as surface_log_offsets, next_centre as surface_next_centre,
     open_faces as surface_open_faces, ruled_out as surface_ruled_out, wall_rise,
 )
-from mavtune.search.risk import KEEP_RISK, RISK, UPPER
+from mavtune.search.risk import KEEP_RISK, RISK
 from mavtune.strategy import Strategy
 from mavtune.vehicle_offsets import MIN_PAIRS, VehicleOffset, fleet_offsets, line_searches, vehicle_offsets
 
@@ -316,10 +316,8 @@ class TuningResult:
         risk = self.divergence or {}
         if risk and designed:
             chance, bound, free = risk["chance"], risk["risk"], risk.get("unbounded")
-            hi = risk.get("chance_hi", math.nan)  # (a result.json from before it: none)
             said = f"fitted to the run's flights, some of which diverged, a flight at the answer diverges with " \
-                   f"chance {chance:.2%}" + (f" ({risk['level']:.0%} upper bound {hi:.2%}: a few failed flights " \
-                                             "leave the wall's steepness uncertain)" if math.isfinite(hi) else "")
+                   f"chance {chance:.2%}"
             if chance > bound and risk.get("kept"):
                 safer = risk.get("off_wall")
                 nearest = "" if not safer else (
@@ -1395,14 +1393,12 @@ class Tuner:
         if free is None:
             free, _ = surface_answer(flown, box, ruled, noise, risk=None, **options)
         chance, free_chance = (float(c) for c in fit.chance([best, free]))
-        chance_hi = float(fit.upper([best])[0])
         moved = any(abs(a - b) > 1e-9 for a, b in zip(free, best))
         kept = keep is not None and all(abs(b - k) < 1e-12 for b, k in zip(best, keep))
         safer = surface_answer(flown, box, ruled, noise, keep_bound=True, **options)[0] \
             if kept and chance > RISK else best
         off = any(abs(a - b) > 1e-9 for a, b in zip(safer, best))
-        return {"chance": chance, "chance_hi": chance_hi, "level": UPPER, "risk": RISK,
-                "unbounded": self._gains(free) if moved else None,
+        return {"chance": chance, "risk": RISK, "unbounded": self._gains(free) if moved else None,
                 "unbounded_chance": free_chance if moved else None, "kept": kept,
                 "off_wall": self._gains(safer) if off else None,
                 "off_wall_chance": float(fit.chance([safer])[0]) if off else None}

@@ -511,22 +511,6 @@ def test_no_answer_where_the_flights_make_a_fly_away_likely(seed):
     assert chance(kept) < 0.015 < chance(bare)
 
 
-@pytest.mark.parametrize("at", [(0.55, 0.3), (0.6, 0.5), (0.45, 0.2)])
-def test_the_divergence_chance_s_upper_bound_holds_the_true_chance_at_its_level(at):
-    """The wall that moves from flight to flight, 40 runs of its 7 × 7 design: the fitted chance is an estimate (about
-    half the runs put it below the truth), its 90 % upper bound (`Divergence.upper`) holds the truth in at least 85 %
-    of runs (the level, less 40 runs' noise), and lies above the fitted chance."""
-    from mavtune.search.risk import UPPER, divergence
-
-    fits = [(divergence(points, (0.6, 0.5), (0.3, 0.3), lambda u: [1.0] * len(u)), chance)
-            for points, chance in map(_stochastic_cliff, range(40))]
-    truth = fits[0][1](at)
-    fitted = [float(d.chance([at])[0]) for d, _ in fits]
-    upper = [float(d.upper([at])[0]) for d, _ in fits]
-    assert UPPER == 0.9 and all(c <= u for c, u in zip(fitted, upper))
-    assert sum(truth <= c for c in fitted) <= 30 and sum(truth <= u for u in upper) >= 34
-
-
 def test_the_divergence_bound_leaves_a_run_without_failures_alone():
     from mavtune.search.evidence import NoisePool
     from mavtune.search.risk import divergence

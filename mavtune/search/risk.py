@@ -20,7 +20,6 @@ if TYPE_CHECKING:
     import numpy as np
 
 RISK = 0.001  # the most divergence chance (by the run's flights) an answer may have
-UPPER = 0.9  # the level of the upper bound said beside a fitted chance (`Divergence.upper`)
 KEEP_RISK = 0.01  # the most chance, by the last design's own flights, at which the design before's answer still
 # stands beside a wall (`surface.answer`'s `keep`): a kept answer the run's flights put at 1 in 100 is not handed out
 SLOPE_SD = 65.0  # the slopes' prior sd, log-odds per share of a gain's range (a wall going from a 10 % to a 90 %
@@ -29,13 +28,11 @@ SLOPE_SD = 65.0  # the slopes' prior sd, log-odds per share of a gain's range (a
 
 @dataclass(frozen=True)
 class Divergence:
-    """A fitted divergence chance: log-odds `coef` · (1, u), u = (x − `centre`) / `half` (x in shares of ranges),
-    `cov` the coefficients' covariance (the posterior's curvature at the fit: Laplace's approximation)."""
+    """A fitted divergence chance: log-odds `coef` · (1, u), u = (x − `centre`) / `half` (x in shares of ranges)."""
 
     centre: np.ndarray
     half: np.ndarray
     coef: np.ndarray
-    cov: np.ndarray | None = None
 
     def chance(self, x: np.ndarray) -> np.ndarray:
         """The fitted divergence chance at each gain vector (rows of `x`, in shares of each range)."""
@@ -43,20 +40,6 @@ class Divergence:
         from scipy.special import expit
 
         return expit(_design(np.atleast_2d(x), self.centre, self.half) @ self.coef)
-
-    def upper(self, x: np.ndarray, level: float = UPPER) -> np.ndarray:
-        """The chance's upper bound at `level` (one-sided) at each gain vector: the log-odds' fit plus its standard
-        error times the normal quantile. A few failed flights fit a steep wall, whose fitted chance falls off fast
-        away from it; the bound says how far the flights leave it uncertain (benchmarks/divergence_bound.py)."""
-        import numpy as np
-        from scipy.special import expit
-        from scipy.stats import norm
-
-        d = _design(np.atleast_2d(x), self.centre, self.half)
-        if self.cov is None:
-            return np.full(len(d), np.nan)
-        se = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", d, self.cov, d), 0.0))
-        return expit(d @ self.coef + norm.ppf(level) * se)
 
 
 def _design(x: np.ndarray, centre: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -87,7 +70,6 @@ def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequ
     flights' costs, a failed flight's inf), each point weighted by `weight(u)` (the surface fit's kernel at
     u = (x − centre) / half); None when no flight the kernel reaches failed (no wall to keep off)."""
     import numpy as np
-    from scipy.special import expit
 
     centre, half = np.asarray(centre, float), np.asarray(half, float)
     counted = weighted_flights(points, centre, half, weight)
@@ -95,13 +77,8 @@ def divergence(points: Mapping[tuple[float, ...], Sequence[float]], centre: Sequ
         return None
     x, n, f = counted
     precision = np.concatenate([[0.0], 1.0 / (SLOPE_SD * half) ** 2])  # (per half-width; the intercept is free)
-    design = _design(x, centre, half)
-    coef = logistic(design, n, f, precision)
-    if not np.all(np.isfinite(coef)):
-        return None
-    p = expit(design @ coef)
-    curvature = design.T @ (design * (n * p * (1.0 - p))[:, None]) + np.diag(precision)
-    return Divergence(centre, half, coef, np.linalg.pinv(curvature))
+    coef = logistic(_design(x, centre, half), n, f, precision)
+    return Divergence(centre, half, coef) if np.all(np.isfinite(coef)) else None
 
 
 def logistic(design: np.ndarray, n: np.ndarray, f: np.ndarray, precision: np.ndarray) -> np.ndarray:
