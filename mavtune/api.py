@@ -114,6 +114,7 @@ def tune(
     design_hold: float = DEFAULT,
     design_map_far: float = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
+    on_status: Callable[[str, int, int], None] | None = None,
     draws: int = DRAWS,
     max_rounds: int = MAX_ROUNDS,
     resume: bool = False,
@@ -137,7 +138,8 @@ def tune(
     the `design_*` options say how wide it is, how often each point flies, and how several designs narrow or move in
     turn (each described in `mavtune.config.Tuning` and the configuration reference). `budget` gives the run's flights
     exactly (the passes share what the designs leave; "auto": 42 a gain; None: as many as the stages ask), `on_round`
-    sees every round as it ends, `draws` resampled searches give each gain's interval (0: none). Settings that need
+    sees every round as it ends, `on_status(task, done, total)` what the run works out after its last flight
+    (each vehicle's own gains, the intervals: seconds a vehicle, a silence otherwise), `draws` resampled searches give each gain's interval (0: none). Settings that need
     more than `max_rounds` rounds are refused before anything flies, as `mavtune tune` refuses them.
     `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle, seed). A `journal`
     holding rounds is resumed: a cost function must give its first round the recorded costs again (another
@@ -145,8 +147,9 @@ def tune(
     """
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED):
         raise MavtuneError(f"seed must be a whole number from 0 to {MAX_SEED}, got {seed!r}")
-    if on_round is not None and not callable(on_round):
-        raise MavtuneError(f"on_round must be a function of the round, got {type(on_round).__name__}")
+    for name, hook, of in (("on_round", on_round, "the round"), ("on_status", on_status, "(task, done, total)")):
+        if hook is not None and not callable(hook):
+            raise MavtuneError(f"{name} must be a function of {of}, got {type(hook).__name__}")
     if evaluate is None:
         from mavtune.sim import SimFleet
 
@@ -176,4 +179,4 @@ def tune(
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "
                            "raise max_rounds to fly them anyway")
-    return run_tuning(settings, fleet, journal, on_round, draws=draws, resume=resume)
+    return run_tuning(settings, fleet, journal, on_round, draws=draws, resume=resume, on_status=on_status)

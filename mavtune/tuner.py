@@ -897,11 +897,11 @@ class Tuner:
 
     def __init__(self, settings: Settings, fleet: Fleet, journal: Journal | None = None,
                  on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None,
-                 draws: int = DRAWS):
+                 draws: int = DRAWS, on_status: Callable[[str, int, int], None] | None = None):
         if stage_rounds is not None and (journal is None or stage_rounds < 0):
             raise MavtuneError("tuning in stages needs a journal and a number of rounds per stage")
         self.settings, self.fleet, self.journal, self.on_round = settings, fleet, journal, on_round
-        self.on_status: Callable[[str, int, int], None] | None = None  # told what the run works out after its
+        self.on_status = on_status  # told what the run works out after its
         # last flight (each vehicle's own gains, the intervals: seconds a vehicle), as (task, done, total)
         self.stage_rounds = stage_rounds
         self.draws = draws  # resampled searches behind each gain's interval (0: no interval)
@@ -1564,9 +1564,10 @@ class Tuner:
 
 def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = None,
                on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None,
-               draws: int = DRAWS, resume: bool = False) -> TuningResult:
+               draws: int = DRAWS, resume: bool = False,
+               on_status: Callable[[str, int, int], None] | None = None) -> TuningResult:
     """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds); with
-    `stage_rounds`, StageDone ends the call after that many newly flown rounds. A fleet that can evaluate a round
+    `stage_rounds`, StageDone ends the call after that many newly flown rounds; `on_status` as `Tuner`'s. A fleet that can evaluate a round
     again (a user's cost function: `same_costs`) must give the journal's first round its recorded costs, unless
     `resume` says to continue without that check."""
     book = Journal(journal) if journal is not None else None
@@ -1576,7 +1577,7 @@ def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = No
             if not resume and len(book) and hasattr(fleet, "same_costs"):
                 first = book.rounds()[0]
                 fleet.same_costs(first.flights, first.assignments, 0, f"journal {book.path}")
-        return Tuner(settings, fleet, book, on_round, stage_rounds, draws).run()
+        return Tuner(settings, fleet, book, on_round, stage_rounds, draws, on_status).run()
     finally:
         if book is not None:
             book.close()

@@ -135,6 +135,7 @@ def test_nan_cost_is_recorded_and_counts_as_worst():
     (dict(design_width=math.nan), "design_width must be a finite number, got nan"),
     (dict(cap=True), "cap must be a whole number, got True"),
     (dict(on_round=3), "on_round must be a function of the round, got int"),
+    (dict(on_status="bar"), r"on_status must be a function of \(task, done, total\), got str"),
     (dict(seed=2**70), "seed must be a whole number from 0 to"),  # as the config's limit: vehicle seeds stay distinct
 ])
 def test_bad_input_is_one_line_naming_the_problem(kwargs, message):

@@ -339,20 +339,20 @@ def test_split_takes_no_levels():
 
 
 def test_the_run_tells_what_it_works_out_after_its_last_flight():
-    """Each vehicle's own interval takes seconds (40 refits): `on_status` hears each vehicle's turn and the gains'
-    intervals after it, and the console prints each task once, the bar counting the vehicles."""
+    """Each vehicle's own interval takes seconds (40 refits): `on_status` (the API's, as the CLI's) hears each
+    vehicle's turn and the gains' intervals after it, and the console prints each task once, the bar counting the
+    vehicles."""
     from rich.console import Console
 
-    from mavtune.api import CallableFleet, default_settings
+    from mavtune.api import default_settings
     from mavtune.plan import make_plan
     from mavtune.run import RoundView
-    from mavtune.tuner import INTERVALS_TASK, OWN_TASK, Tuner
+    from mavtune.tuner import INTERVALS_TASK, OWN_TASK
 
-    settings = default_settings(3, space={"kp": (0.0, 1.0), "kd": (0.0, 1.0)}, seed=1)
-    tuner = Tuner(settings, CallableFleet(_unlike(0.25, 1.3), 3, seed=1))
+    space = {"kp": (0.0, 1.0), "kd": (0.0, 1.0)}
+    settings = default_settings(3, space=space, seed=1)
     heard = []
-    tuner.on_status = lambda *told: heard.append(told)
-    tuner.run()
+    mavtune.tune(_unlike(0.25, 1.3), space, vehicles=3, seed=1, on_status=lambda *told: heard.append(told))
     assert heard == [(OWN_TASK, k, 3) for k in range(4)] + [(INTERVALS_TASK, 0, 1), (INTERVALS_TASK, 1, 1)]
     console = Console(record=True, width=100, force_terminal=False)
     with RoundView(console, make_plan(settings), quiet=False) as view:
