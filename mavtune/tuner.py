@@ -33,7 +33,7 @@ from mavtune.search.model import beside_failure, flown_span
 from mavtune.search.surface import (
     FAR as SURFACE_FAR, LAYOUT_SHARE as SURFACE_LAYOUT_SHARE, LOGGED as SURFACE_LOGGED, REACH, LogGains,
     answer as surface_answer, beside_wall, coefficients as surface_coefficients, design as surface_design,
-    far_lowest, fly_away as surface_fly_away,
+    far_lowest, fly_away as surface_fly_away, minimiser_region,
     inliers as surface_inliers, log_offsets as surface_log_offsets, next_centre as surface_next_centre,
     open_faces as surface_open_faces, ruled_out as surface_ruled_out, wall_rise,
 )
@@ -1017,8 +1017,20 @@ class Tuner:
     def _region(self, noise: NoisePool) -> list[tuple[float, float]] | None:
         """Per gain the span no flight of the run rules out, every gain free (`plausible_region`): each flown gain
         vector with its costs (`_flown`), a failed flight's as infinite, a lost one's left out, tested with `noise`
-        (the swarm's, `_swarm_noise`)."""
-        return plausible_region(self._flown(), noise, list(self.settings.space.values()))
+        (the swarm's, `_swarm_noise`); joined, after a design, with the span where the last design's quadratic
+        cannot tell its slope from zero (`minimiser_region`: a valley flat along its floor, between design points
+        on its sides)."""
+        ranges = list(self.settings.space.values())
+        spans = plausible_region(self._flown(), noise, ranges)
+        if spans is None or self._last_fit is None:
+            return spans
+        box = self._last_fit[0]
+        flown, _ = surface_inliers(self._flown_shares(), box, float(self.settings.design_outliers))
+        band = minimiser_region(flown, box, noise.cv)
+        if band is None:
+            return spans
+        return [(min(a, lo + (hi - lo) * p), max(b, lo + (hi - lo) * q))
+                for (a, b), (p, q), (lo, hi) in zip(spans, band, ranges)]
 
     def _flown(self, vehicle: str | None = None) -> dict[tuple[float, ...], list[float]]:
         """Every gain vector flown in the run (in the order of the space; by `vehicle` alone, if given) with its

@@ -562,6 +562,72 @@ def held_on_bound(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequ
     return tuple(float(v) for v in x) if better else held
 
 
+def minimiser_region(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
+                     cv: float, level: float = 0.9, reach: float = REACH) -> list[tuple[float, float]] | None:
+    """Per gain the span (shares of each range) where the minimiser of the quadratic through the flights within
+    `reach` half-widths of the design of `box` may lie at `level`: each gain vector of the kernel's reach inside the
+    ranges whose fitted slope the flights do not tell from zero (Box and Hunter's confidence region of a stationary
+    point: a χ² test of the fitted gradient with its covariance, each point's mean of variance (cv·cost)² over its
+    flights) and whose fitted cost is not significantly above the fit's lowest in that reach (a maximum's flat top
+    is no minimiser; each test at half of 1 − `level`, so that both hold the minimiser at `level`). A valley flat along its floor leaves a long band, which the flown points' own test
+    (`interval.plausible_region`: ruled out where the nearest flown point is worse) cuts where the design's points lie
+    on the valley's steep sides (the unseen banana valley: its optimum between them). None where the noise is
+    unknown or nil, where a flight that near failed (the walls' rules hold), or with too few points to fit."""
+    import numpy as np
+    from scipy.stats import chi2, norm
+
+    near = _near_means(points, box, reach)
+    if near is None or not (math.isfinite(cv) and cv > 0 and 0 < level < 1):
+        return None
+    x, y, flights, kernel = near
+    d = x.shape[1]
+    square = _terms(d, 2)
+    if len(x) < len(square) + 1:
+        return None
+    weights = _test_weights(x, y, flights * kernel)  # (inverse variances over cv², times the kernel)
+    columns = _columns(x, square)
+    try:
+        beta, _ = _fit(x, y, weights, square)
+        bread = np.linalg.pinv(columns.T @ (columns * weights[:, None]))
+    except np.linalg.LinAlgError:
+        return None
+    covariance = cv * cv * bread @ (columns.T @ (columns * (weights * kernel)[:, None])) @ bread  # (a kernel's
+    # weights are not the points' precisions: the sandwich)
+    lo, hi, centre, half = _frame(box)
+    axis = np.linspace(-reach, reach, max(3, int(GRID_POINTS ** (1.0 / d))))
+    u = np.stack([a.ravel() for a in np.meshgrid(*[axis] * d, indexing="ij")], axis=1)
+    u = u[np.all((u * half + centre >= -1e-12) & (u * half + centre <= 1.0 + 1e-12), axis=1)]
+    slopes = _slope_columns(u, square)  # (candidate, gain, monomial): d(monomial)/d(gain)
+    gradient = slopes @ beta
+    spread = slopes @ covariance @ slopes.transpose(0, 2, 1)
+    try:
+        stat = np.einsum("ni,ni->n", gradient, np.linalg.solve(spread, gradient[..., None])[..., 0])
+    except np.linalg.LinAlgError:
+        return None
+    each = 1.0 - 0.5 * (1.0 - level)  # (Bonferroni: the slope's test and the cost's)
+    values = _columns(u, square)
+    step = values - values[np.argmin(values @ beta)]  # (against the fit's lowest in the kernel's reach)
+    above = step @ beta > norm.ppf(each) * np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", step, covariance, step), 0))
+    kept = (stat <= chi2.ppf(each, d)) & ~above
+    if not np.any(kept):
+        return None
+    shares = u[kept] * half + centre
+    return [(float(a), float(b)) for a, b in zip(shares.min(axis=0), shares.max(axis=0))]
+
+
+def _slope_columns(u, which: list[tuple[int, ...]]):
+    """The derivative of each monomial of `which` by each gain at each row of `u`: (rows, gains, monomials)."""
+    import numpy as np
+
+    out = np.zeros((len(u), u.shape[1], len(which)))
+    for j, m in enumerate(which):
+        for i in set(m):
+            rest = list(m)
+            rest.remove(i)
+            out[:, i, j] = m.count(i) * np.prod(u[:, rest], axis=1)
+    return out
+
+
 def far_lowest(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
                fitted: Sequence[float], far: float, gap: float = FAR_GAP) -> tuple[float, ...] | None:
     """The flown point of `box` with the lowest mean cost among those none of whose flights failed, where it lies
