@@ -588,7 +588,8 @@ def _result_table(result: TuningResult) -> Table:
                if math.isfinite(cv) else "noise unknown: no point was flown twice")
     caption += ("; ± se: the spread of the gain's last line search's result with the other gains held; each "
                 "interval is that line search's (the other gains held), widened by what the run's flights cannot "
-                "rule out with every gain free and by its last move between bootstraps, to a bound where the cost "
+                "rule out with every gain free (after a design, also where its fit's slope is not told from zero) "
+                "and by its last move between bootstraps, to a bound where the cost "
                 "still falls at the last point flown, and to both when the other gains moved on after it and no "
                 "design followed; p ≥ 0.9: comparisons whose kept point was the best with that probability (not the "
                 "answer's accuracy)")
