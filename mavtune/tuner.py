@@ -1089,6 +1089,15 @@ class Tuner:
                 for key, c in self._flown(vehicle).items()}
 
     def run(self) -> TuningResult:
+        """Fly the run (or replay its journal) to its answer, with one BLAS thread: the fits' linear algebra is a
+        few dozen rows, on which OpenBLAS's threads only wait for each other — on a busy machine for up to a second
+        a call (benchmarks/blas_threads.py)."""
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._run()
+
+    def _run(self) -> TuningResult:
         s = self.settings
         found: list[Gains] = []
         limit = s.bootstraps if s.bootstraps is not None else s.max_bootstraps
