@@ -121,30 +121,29 @@ def tune(
 ) -> TuningResult:
     """Tune the gains in `space` (in order) by line searches flown on a fleet; see the README for each option.
 
-    Every option left out takes the default of `mavtune tune` (`mavtune.config.Tuning`); `**paper_options()`
-    gives the paper's setting. `evaluate` is a function (one round: list of assignments → one cost per
-    vehicle), a `Fleet`, or None for the built-in simulator (`vehicles` simulated vehicles, default scenario,
-    `seed`). `bootstraps=None` is the paper's stop rule (capped at `max_bootstraps`), `replicates` is r of the
-    groups strategy, `points` the points per iteration of nsection (None: one per slot), `adaptive` flies close
-    comparisons again until the kept point is right with probability `confidence` or each point has `cap`
-    flights (None: 4 rounds' worth; `stop_undecided`: a comparison still undecided there stops the search),
-    `refly` flies a point carried into the next comparison again there, `answer` is each line search's answer
-    ("search" or "model": a local fit of all its flights), `edges` whether a line search ending against an edge of
-    its range flies the edge (an optimum there can be the answer), `answer="valley"` a fit with one curvature each
-    side of the minimum, `directions` whether a line search across the gains follows every pass but the first (a
-    valley across the gains), `design`
-    whether a designed set of gain vectors follows the passes (or, with `bootstraps=0`, replaces them) and the answer
-    is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights reject the quadratic);
-    the `design_*` options say how wide it is, how often each point flies, and how several designs narrow or move in
-    turn (each described in `mavtune.config.Tuning` and the configuration reference). `budget` gives the run's flights
-    exactly (the passes share what the designs leave; "auto": 42 a gain; None: as many as the stages ask), `on_round`
-    sees every round as it ends, `on_status(task, done, total)` what the run works out after its last flight
-    (each vehicle's own gains, the intervals: seconds a vehicle, a silence otherwise), `draws` resampled searches give each gain's interval (0: none). Settings that need
-    more than `max_rounds` rounds are refused before anything flies, as `mavtune tune` refuses them.
-    `evaluate(assignments, context)` receives each flight's `FlightContext` (round, vehicle, seed). A `journal`
-    holding rounds is resumed: a cost function must give its first round the recorded costs again (another
-    function is refused), unless `resume=True` (a cost noisy by design).
-    """
+    Every option left out takes the default of `mavtune tune` (`mavtune.config.Tuning`); `**paper_options()` gives
+    the paper's setting. `evaluate` is a function (one round: list of assignments → one cost per vehicle), a
+    `Fleet`, or None for the built-in simulator (`vehicles` simulated vehicles, default scenario, `seed`).
+    `bootstraps=None` is the paper's stop rule (capped at `max_bootstraps`), `replicates` is r of the groups
+    strategy, `points` the points per iteration of nsection (None: one per slot), `adaptive` flies close comparisons
+    again until the kept point is right with probability `confidence` or each point has `cap` flights (None: 4
+    rounds' worth; `stop_undecided`: a comparison still undecided there stops the search), `refly` flies a point
+    carried into the next comparison again there, `answer` is each line search's answer ("search" or "model": a
+    local fit of all its flights), `edges` whether a line search ending against an edge of its range flies the edge
+    (an optimum there can be the answer), `answer="valley"` a fit with one curvature each side of the minimum,
+    `directions` whether a line search across the gains follows every pass but the first (a valley across the
+    gains), `design` whether a designed set of gain vectors follows the passes (or, with `bootstraps=0`, replaces
+    them) and the answer is the minimiser of one quadratic fitted to the flights near it (a cubic where the flights
+    reject the quadratic); the `design_*` options say how wide it is, how often each point flies, and how several
+    designs narrow or move in turn (each described in `mavtune.config.Tuning` and the configuration reference).
+    `budget` gives the run's flights exactly (the passes share what the designs leave; "auto": 42 a gain; None: as
+    many as the stages ask), `on_round` sees every round as it ends, `on_status(task, done, total)` what the run
+    works out after its last flight (each vehicle's own gains, the intervals: seconds a vehicle, a silence
+    otherwise), `draws` resampled searches give each gain's interval (0: none). Settings that need more than
+    `max_rounds` rounds are refused before anything flies, as `mavtune tune` refuses them. `evaluate(assignments,
+    context)` receives each flight's `FlightContext` (round, vehicle, seed). A `journal` holding rounds is resumed:
+    a cost function must give its first round the recorded costs again (another function is refused), unless
+    `resume=True` (a cost noisy by design)."""
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED):
         raise MavtuneError(f"seed must be a whole number from 0 to {MAX_SEED}, got {seed!r}")
     for name, hook, of in (("on_round", on_round, "the round"), ("on_status", on_status, "(task, done, total)")):

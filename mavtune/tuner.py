@@ -1588,10 +1588,10 @@ def run_tuning(settings: Settings, fleet: Fleet, journal: str | Path | None = No
                on_round: Callable[[Round], None] | None = None, stage_rounds: int | None = None,
                draws: int = DRAWS, resume: bool = False,
                on_status: Callable[[str, int, int], None] | None = None) -> TuningResult:
-    """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds); with
-    `stage_rounds`, StageDone ends the call after that many newly flown rounds; `on_status` as `Tuner`'s. A fleet that can evaluate a round
-    again (a user's cost function: `same_costs`) must give the journal's first round its recorded costs, unless
-    `resume` says to continue without that check."""
+    """Run validated settings on a fleet, with an optional journal (resumed when it holds rounds); with `stage_rounds`,
+    StageDone ends the call after that many newly flown rounds; `on_status` as `Tuner`'s. A fleet that can evaluate
+    a round again (a user's cost function: `same_costs`) must give the journal's first round its recorded costs,
+    unless `resume` says to continue without that check."""
     book = Journal(journal) if journal is not None else None
     try:
         if book is not None:

@@ -564,15 +564,16 @@ def held_on_bound(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequ
 
 def minimiser_region(points: Mapping[tuple[float, ...], Sequence[float]], box: Sequence[tuple[float, float]],
                      cv: float, level: float = 0.9, reach: float = REACH) -> list[tuple[float, float]] | None:
-    """Per gain the span (shares of each range) where the minimiser of the quadratic through the flights within
-    `reach` half-widths of the design of `box` may lie at `level`: each gain vector of the kernel's reach inside the
-    ranges whose fitted slope the flights do not tell from zero (Box and Hunter's confidence region of a stationary
-    point: a χ² test of the fitted gradient with its covariance, each point's mean of variance (cv·cost)² over its
-    flights) and whose fitted cost is not significantly above the fit's lowest in that reach (a maximum's flat top
-    is no minimiser; each test at half of 1 − `level`, so that both hold the minimiser at `level`). A valley flat along its floor leaves a long band, which the flown points' own test
-    (`interval.plausible_region`: ruled out where the nearest flown point is worse) cuts where the design's points lie
-    on the valley's steep sides (the unseen banana valley: its optimum between them). None where the noise is
-    unknown or nil, where a flight that near failed (the walls' rules hold), or with too few points to fit."""
+    """Per gain the span (shares of each range) where the minimiser of the quadratic through the flights within `reach`
+    half-widths of the design of `box` may lie at `level`: each gain vector of the kernel's reach inside the ranges
+    whose fitted slope the flights do not tell from zero (Box and Hunter's confidence region of a stationary point:
+    a χ² test of the fitted gradient with its covariance, each point's mean of variance (cv·cost)² over its flights)
+    and whose fitted cost is not significantly above the fit's lowest in that reach (a maximum's flat top is no
+    minimiser; each test at half of 1 − `level`, so that both hold the minimiser at `level`). A valley flat along
+    its floor leaves a long band, which the flown points' own test (`interval.plausible_region`: ruled out where the
+    nearest flown point is worse) cuts where the design's points lie on the valley's steep sides (the unseen banana
+    valley: its optimum between them). None where the noise is unknown or nil, where a flight that near failed (the
+    walls' rules hold), or with too few points to fit."""
     import numpy as np
     from scipy.stats import chi2, norm
 
