@@ -1090,8 +1090,8 @@ class Tuner:
 
     def run(self) -> TuningResult:
         """Fly the run (or replay its journal) to its answer, with one BLAS thread: the fits' linear algebra is a
-        few dozen rows, on which OpenBLAS's threads only wait for each other: its default threads cost 1.4-1.8x the
-        CPU, and beside two busy processes 1.1-1.5x the wall time (benchmarks/results/blas_threads.md)."""
+        few dozen rows, on which OpenBLAS's threads only wait for each other, costing CPU and, on a busy machine, wall
+        time (measured: benchmarks/results/blas_threads.md)."""
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=1, user_api="blas"):
