@@ -12,7 +12,9 @@ plant's truth (`zoo.truth`: paired common-random-number repeats, doubled near th
 A run whose best flown point is not within 2 % is the flying's fault (nothing good was flown); one whose best
 flown point is within 2 % but whose answer is not, the answer's. Every surface answer's inputs (the flown points,
 the design's box, the run's noise) are kept in benchmarks/.cache/answer/ so that other answer rules can be
-replayed offline on the same flights (`--replay`).
+replayed offline on the same flights (`--replay`), or the same points with other costs: each point's truth mean,
+or each flight drawn afresh from the truth's repeats or with symmetric noise of their size (what the flights' noise
+costs the answer).
 
     python benchmarks/answer_diagnostic.py --runs 20 [--plants ...] [--methods ...] [--workers 2]
 
@@ -112,6 +114,11 @@ VARIANTS.update({  # a fly-away weighed as a crash: the divergence bounds lowere
     "today's answer with the divergence chance <= 0.01 % and a kept answer's <= 0.01 % (session 32)": {
         "risk": 1e-4, "keep_risk": 1e-4},
     "today's answer never keeping the answer before beside a wall (session 32)": {"keep": None}})
+VARIANTS.update({  # the same flown points with other costs: what the flights' noise costs the answer (session 46)
+    "the same points at their truth's mean cost (noise-free)": {"costs": "truth"},
+    "each flight redrawn from its point's truth repeats (the plant's own noise afresh)": {"costs": "redrawn"},
+    "each flight redrawn about its point's truth mean with normal noise of the same sd (symmetric noise)": {
+        "costs": "normal"}})
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
 
@@ -254,14 +261,42 @@ def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) ->
     (exact for a configuration with one design, whose answer flies nothing after it; with more designs only
     the last is replayed, the earlier ones' answers having chosen what was flown after them)."""
     out = []
+    given = dict(options)
+    costs = given.pop("costs", None)
     for row in rows:
         calls = answer_calls(row)
-        x = replay_call(row, calls[-1], options) if calls else row["x"]
+        call = recosted(t, calls[-1], costs, row["run"]) if calls and costs else calls[-1] if calls else None
+        x = replay_call(row, call, given) if calls else row["x"]
         out.append({"plant": row["plant"], "run": row["run"], "x": x})
     judged(t, [tuple(r["x"]) for r in out], pm)
     for r in out:
         r["excess_pct"], r["fly_away"] = t.excess(r["x"])[0], t.fly_away(r["x"])
     return out
+
+
+def recosted(t: Truth, call: dict[str, Any], costs: str, seed: int) -> dict[str, Any]:
+    """A recorded surface answer's inputs with every safe flight's cost replaced (`costs`): "truth", its point's mean
+    over the truth's repeats (every flown point is judged: 64 or more); "redrawn", a repeat of its point drawn at
+    random (the plant's own noise, skew and all, drawn afresh: a failed repeat fails); "normal", the point's mean
+    plus normal noise of its repeats' sd (the same size, symmetric). A failed flight stays failed."""
+    rng = np.random.default_rng(seed)
+    points = []
+    for k, flights in call["points"]:
+        reps, failed = t.costs[key(tuple(k))], t.failed[key(tuple(k))]
+        safe = reps[~failed]
+        new = []
+        for c in flights:
+            if c == "inf" or not safe.size:
+                new.append(c)
+            elif costs == "truth":
+                new.append(float(safe.mean()))
+            elif costs == "redrawn":
+                i = int(rng.integers(reps.size))
+                new.append("inf" if failed[i] else float(reps[i]))
+            else:
+                new.append(float(safe.mean() + safe.std(ddof=1) * rng.standard_normal()))
+        points.append([k, new])
+    return call | {"points": points}
 
 
 def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, Any]) -> list[float]:

@@ -111,6 +111,7 @@ def tune(
     design_log_layout: bool = DEFAULT,
     design_two_sided: float = DEFAULT,
     design_reach: float = DEFAULT,
+    design_final_reach: float = DEFAULT,
     design_hold: float = DEFAULT,
     design_map_far: float = DEFAULT,
     on_round: Callable[[Round], None] | None = None,
@@ -173,7 +174,8 @@ def tune(
         design_pass_box=design_pass_box, wall_span=wall_span, wall_keep=wall_keep,
         composite_reach=composite_reach, design_widen=design_widen, design_widen_bound=design_widen_bound,
         design_outliers=design_outliers, design_log=design_log, design_log_layout=design_log_layout,
-        design_two_sided=design_two_sided, design_reach=design_reach, design_hold=design_hold,
+        design_two_sided=design_two_sided, design_reach=design_reach,
+        design_final_reach=design_final_reach, design_hold=design_hold,
         design_map_far=design_map_far, budget=budget)
     if (fewest := settings.fewest_rounds()) > max_rounds:
         raise MavtuneError(f"these settings need at least {fewest} rounds, more than max_rounds = {max_rounds}; "

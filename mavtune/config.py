@@ -66,7 +66,7 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
     "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0,
     "tuning.design_log_layout": False, "tuning.design_two_sided": 0.0,
-    "tuning.design_reach": 0.0, "tuning.design_hold": 0.0, "tuning.design_shrink_wall": 0.0,
+    "tuning.design_reach": 0.0, "tuning.design_final_reach": 0.0, "tuning.design_hold": 0.0, "tuning.design_shrink_wall": 0.0,
     "tuning.design_map_far": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
@@ -154,8 +154,8 @@ SETTINGS_FIELDS = ("space", "method", "epsilon", "bootstraps", "vehicles", "stra
                    "design_steps", "design_shrink", "design_split", "design_inner", "design_move", "design_first",
                    "design_trust", "design_shrink_wall", "design_wall_rise", "design_shrink_fit", "design_pass_box",
                    "wall_span", "wall_keep", "composite_reach", "design_widen", "design_widen_bound", "design_outliers",
-                   "design_log", "design_log_layout", "design_two_sided", "design_reach", "design_hold",
-                   "design_map_far", "budget")
+                   "design_log", "design_log_layout", "design_two_sided", "design_reach", "design_final_reach",
+                   "design_hold", "design_map_far", "budget")
 
 
 
@@ -361,6 +361,11 @@ class Tuning(_Section):
                                 "the answer that centres the next design, fitted to more of the wider designs' "
                                 "flights around it, so the last design is laid nearer the optimum (3 chosen on the "
                                 "zoo's select half, selection_reach.md)")
+    design_final_reach: float = Field(0.0, ge=0.0, le=10.0, description="design: the half-widths of the last "
+                                      "design that the fit of the run's answer reaches (0: the answer's own, 2): "
+                                      "wider averages more of the flights' noise and more of a lopsided cost's "
+                                      "asymmetry (3, 4 and 5 each worse over the zoo's select half, "
+                                      "selection_final_reach.md)")
     design_hold: float = Field(0.05, ge=0.0, lt=1.0, description="design: where the design before answered a gain "
                                "on a bound of its range and the last design's fitted answer moves it off, the gain "
                                "stays on the bound unless the last design's flights tell the move better at this "

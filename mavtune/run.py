@@ -41,13 +41,15 @@ MANY_VEHICLES = 8  # above this the per-round line summarises the vehicles inste
 
 ADDED_FIELDS = {"budget": "none", "design_widen": 0.0, "design_outliers": 0.0, "design_widen_bound": 0.0,
                 "design_log": 0.0, "design_log_layout": False, "design_two_sided": 0.0,
-                "design_reach": 0.0, "design_hold": 0.0, "design_wall_rise": 0.0, "design_map_far": 0.0}  # [tuning]
+                "design_reach": 0.0, "design_final_reach": 0.0, "design_hold": 0.0, "design_wall_rise": 0.0,
+                "design_map_far": 0.0}  # [tuning]
 # fields added since runs were first saved, each with the value a run folder without it flew (no budget; no refit of
 # a face answer before session 19; no outlier flights left out before session 20; the refit inside the box before
 # session 22; no fit in the logarithm of the gains before session 23; no design laid out in it before session 24;
 # no two-sided quadratic before session 25; each answer fitted over 2 half-widths of its design before session 26;
 # no gain held on its range's bound before session 28; every design beside a failed flight narrowed alike before
-# session 30; the passes started at the map's fitted minimum before session 33), so that it resumes
+# session 30; the passes started at the map's fitted minimum before session 33; the last answer over its own 2
+# half-widths, as today's default, before session 46), so that it resumes
 
 
 def saved_config(out_dir: Path) -> dict[str, Any] | None:

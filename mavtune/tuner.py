@@ -515,6 +515,7 @@ class Settings:
     design_log_layout: bool = False
     design_two_sided: float = 0.0
     design_reach: float = 0.0
+    design_final_reach: float = 0.0
     design_hold: float = 0.0
     design_map_far: float = 0.0
     budget: int | None = None
@@ -618,6 +619,9 @@ class Settings:
         if not (self.design_reach == 0.0 or 1.0 <= float(self.design_reach) <= 10.0):
             raise MavtuneError(f"design_reach {self.design_reach} is outside [1, 10]: half-widths of a design the fit "
                                "of each answer but the last reaches (0: the answer's own, 2)")
+        if not (self.design_final_reach == 0.0 or 1.0 <= float(self.design_final_reach) <= 10.0):
+            raise MavtuneError(f"design_final_reach {self.design_final_reach} is outside [1, 10]: half-widths of the "
+                               "last design the fit of the run's answer reaches (0: the answer's own, 2)")
         if not 0.0 <= float(self.design_hold) < 1.0:
             raise MavtuneError(f"design_hold {self.design_hold} is outside [0, 1): the level at which the last "
                                "design's flights must tell a move off a range's bound better than the bound the "
@@ -648,7 +652,8 @@ class Settings:
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
                   "design_wall_rise", "wall_span", "composite_reach", "design_widen", "design_widen_bound",
-                  "design_outliers", "design_log", "design_two_sided", "design_reach", "design_hold", "design_map_far")
+                  "design_outliers", "design_log", "design_two_sided", "design_reach", "design_final_reach", "design_hold",
+                  "design_map_far")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -838,6 +843,7 @@ class Settings:
                         | ({"log_layout": True} if self.design_log_layout and self.design_log else {})
                         | ({"two_sided": float(self.design_two_sided)} if self.design_two_sided else {})
                         | ({"reach": float(self.design_reach)} if self.design_reach else {})
+                        | ({"final_reach": float(self.design_final_reach)} if self.design_final_reach else {})
                         | ({"hold": float(self.design_hold)} if self.design_hold else {})
                         | ({"first": True} if self.designs_before_passes() == 1 else
                            {"first": self.designs_before_passes()} if self.designs_before_passes() else {})
@@ -858,12 +864,13 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
     quadratic there must fit better to answer there (`design_log`); for the `last` design, unless laid out in the
     logarithm (whose scale is already steep on one side and shallow on the other), the level at which a quadratic
     steeper on one side of its minimum must fit better (`design_two_sided`); for every design but the `last`, the
-    kernel's reach (`design_reach`, where no composite design's applies); for the `last` design the design
-    before's answer `hold` and the level at which a move off a range's bound where it lay must tell better
+    kernel's reach (`design_reach`, where no composite design's applies), for the `last` design
+    `design_final_reach`'s; for the `last` design the design before's answer `hold` and the level at which a move off a range's bound where it lay must tell better
     (`design_hold`).
     (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
     reach = (float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else
-             float(s.design_reach) if s.design_reach and not last else REACH)
+             float(s.design_reach) if s.design_reach and not last else
+             float(s.design_final_reach) if s.design_final_reach and last else REACH)
     return ({"risk_reach": max(reach, float(s.wall_span) / half)} if s.wall_span else {}) | (
         {"keep": keep} if keep is not None else {}) | ({"reach": reach} if reach != REACH else {}) | {
         "widen": float(s.design_widen)} | (

@@ -1137,6 +1137,22 @@ def test_the_reach_of_each_answer_but_the_last_is_fingerprinted_and_checked():
             Settings(space=SPACE, design=True, design_reach=bad)
 
 
+def test_the_reach_of_the_last_answer_is_its_own_option_fingerprinted_and_checked():
+    """`design_final_reach`: the last design's answer (the run's) is fitted over that many half-widths of its design,
+    the designs before it keep `design_reach`; 0 is the answer's own 2 and leaves the fingerprint as before."""
+    from mavtune.config import Tuning
+    from mavtune.tuner import answer_options
+
+    s = Tuning(design_final_reach=4).settings(space=SPACE)
+    assert answer_options(s, 0.08, last=True)["reach"] == 4.0 and answer_options(s, 0.2)["reach"] == 3.0
+    assert s.fingerprint()["design"]["final_reach"] == 4.0
+    off = Tuning(design_final_reach=0).settings(space=SPACE)
+    assert "final_reach" not in off.fingerprint()["design"] and "reach" not in answer_options(off, 0.08, last=True)
+    for bad in (0.5, 11.0):
+        with pytest.raises(MavtuneError, match=f"design_final_reach {bad} is outside"):
+            Settings(space=SPACE, design=True, design_final_reach=bad)
+
+
 def test_a_run_whose_middle_answer_reaches_wider_lays_its_last_design_nearer_the_optimum():
     """On a bowl with 15 % noise a flight, the answer that centres the last design (`design_reach` 3: the wider
     designs' flights around it too) lies nearer the optimum, over 12 seeds, than the one fitted over 2 half-widths

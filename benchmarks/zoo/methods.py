@@ -180,7 +180,8 @@ def candidates() -> list[Method]:
     where the cost rises into the failed flight 1.4-fold (`design_wall_rise`, session 30; 0.25 that way is the
     default since), or narrowing to 0.25 where it rises 1.2-fold or twofold, and with the passes starting at the
     map's fitted minimum however far from it the map flew lower (`design_map_far`, before session 33), and today's
-    default on 1 and 4 vehicles (`swarms`, session 35: not a choice of the default, the swarm a user has). The
+    default on 1 and 4 vehicles (`swarms`, session 35: not a choice of the default, the swarm a user has), and with the
+    last answer fitted over 3, 4 or 5 half-widths of its design, not 2 (`design_final_reach`, session 46). The
     paper's setting (PAPER_TUNING) flies twice the flights' goal: it is no candidate."""
     today, *older = _candidates()
     base = previous_default()
@@ -219,7 +220,9 @@ def candidates() -> list[Method]:
             *(Method(f"default, a design beside a failed flight into which the cost rises {r:g}-fold narrowing to {w:g} "
                      f"of it (design_shrink_wall = {w:g}, design_wall_rise = {r:g})",
                      {"design_shrink_wall": w, "design_wall_rise": r} | NO_MAP_FAR)
-              for w, r in ((0.15, 1.4), (0.25, 1.2), (0.25, 2.0)))]
+              for w, r in ((0.15, 1.4), (0.25, 1.2), (0.25, 2.0))),
+            *(Method(f"default, the last answer fitted over {r:g} half-widths of its design (design_final_reach = {r:g})",
+                     {"design_final_reach": r}) for r in (3.0, 4.0, 5.0))]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
