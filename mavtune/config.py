@@ -66,8 +66,8 @@ PASSES_TUNING: dict[str, Any] = {  # the default until session 13 (issue 20)
     "tuning.design_shrink_fit": False, "tuning.wall_keep": False, "tuning.design_widen": 0.0,
     "tuning.design_widen_bound": 0.0, "tuning.design_outliers": 0.0, "tuning.design_log": 0.0,
     "tuning.design_log_layout": False, "tuning.design_two_sided": 0.0,
-    "tuning.design_reach": 0.0, "tuning.design_final_reach": 0.0, "tuning.design_hold": 0.0, "tuning.design_shrink_wall": 0.0,
-    "tuning.design_map_far": 0.0}
+    "tuning.design_reach": 0.0, "tuning.design_final_reach": 0.0, "tuning.design_hold": 0.0,
+    "tuning.design_shrink_wall": 0.0, "tuning.design_map_far": 0.0}
 """The passes first: two passes of line searches over the gains, then one design of ±0.15 around their answer, in the
 same budget of 42 flights a gain: the default until session 13 (without session 19's refit of a face answer). On the
 zoo's report half (quality.md) it is more often within 2 % of the optimum on the analytic valley and the nominal

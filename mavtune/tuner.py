@@ -652,8 +652,8 @@ class Settings:
                 raise MavtuneError(f"{name} must be a whole number, got {v!r}")
         shares = ("epsilon", "confidence", "design_width", "design_shrink", "design_move", "design_shrink_wall",
                   "design_wall_rise", "wall_span", "composite_reach", "design_widen", "design_widen_bound",
-                  "design_outliers", "design_log", "design_two_sided", "design_reach", "design_final_reach", "design_hold",
-                  "design_map_far")
+                  "design_outliers", "design_log", "design_two_sided", "design_reach", "design_final_reach",
+                  "design_hold", "design_map_far")
         values = [(name, getattr(self, name)) for name in shares]
         values += [(f"initial {gain}", v) for gain, v in dict(self.initial).items()]
         for name, v in values:
@@ -865,8 +865,8 @@ def answer_options(s: Settings, half: float, keep: list[float] | None = None,
     logarithm (whose scale is already steep on one side and shallow on the other), the level at which a quadratic
     steeper on one side of its minimum must fit better (`design_two_sided`); for every design but the `last`, the
     kernel's reach (`design_reach`, where no composite design's applies), for the `last` design
-    `design_final_reach`'s; for the `last` design the design before's answer `hold` and the level at which a move off a range's bound where it lay must tell better
-    (`design_hold`).
+    `design_final_reach`'s; for the `last` design the design before's answer `hold` and the level at which a move
+    off a range's bound where it lay must tell better (`design_hold`).
     (benchmarks/answer_diagnostic.py replays recorded answers with them.)"""
     reach = (float(s.composite_reach) if s.composite_reach and len(s.space) > 3 else
              float(s.design_reach) if s.design_reach and not last else

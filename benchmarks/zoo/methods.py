@@ -221,8 +221,8 @@ def candidates() -> list[Method]:
                      f"of it (design_shrink_wall = {w:g}, design_wall_rise = {r:g})",
                      {"design_shrink_wall": w, "design_wall_rise": r} | NO_MAP_FAR)
               for w, r in ((0.15, 1.4), (0.25, 1.2), (0.25, 2.0))),
-            *(Method(f"default, the last answer fitted over {r:g} half-widths of its design (design_final_reach = {r:g})",
-                     {"design_final_reach": r}) for r in (3.0, 4.0, 5.0))]
+            *(Method(f"default, the last answer fitted over {r:g} half-widths of its design "
+                     f"(design_final_reach = {r:g})", {"design_final_reach": r}) for r in (3.0, 4.0, 5.0))]
 
 
 BEFORE_BOUND = "default before session 22 (the last design's refit inside its box: design_widen_bound = 0)"
