@@ -119,6 +119,9 @@ VARIANTS.update({  # the same flown points with other costs: what the flights' n
     "each flight redrawn from its point's truth repeats (the plant's own noise afresh)": {"costs": "redrawn"},
     "each flight redrawn about its point's truth mean with normal noise of the same sd (symmetric noise)": {
         "costs": "normal"}})
+VARIANTS.update({  # where the flights reject the last fit's quadratic, the flown point they find lowest (session 46)
+    f"the lowest-mean point flown twice in the box where the flights within 4 half-widths reject the quadratic at "
+    f"the {p:g} % level": {"lowest_rejected": p / 100} for p in (5, 20)})
 FAILING = ["sim latency +60 ms", "sim gusts x2.5", "analytic valley", "sim heavy +30 %", "mavsim PX4 cascade"]
 METHODS = ["default (config.Tuning())", "fixed budget: 3 designs from a map of the box (BUDGET_TUNING)"]
 
@@ -315,6 +318,7 @@ def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, An
         calls = answer_calls(row)
         given["keep"] = calls[-2]["answer"] if len(calls) > 1 else None
     bag = given.pop("bag", 0)
+    rejected = given.pop("lowest_rejected", 0.0)
     reach = given.pop("two_sided_reach", None)
     if reach is not None:  # (the engine's two-sided quadratic over another kernel: `surface.answer`'s last step)
         if given.get("log_gains"):
@@ -331,7 +335,32 @@ def replay_call(row: dict[str, Any], call: dict[str, Any], options: dict[str, An
     worse = surface.ruled_out(points, pool or NoisePool())
     if bag:
         return list(bagged(points, box, worse, pool, bag, given))
-    return list(surface.answer(points, box, worse, pool, **given)[0])
+    x = list(surface.answer(points, box, worse, pool, **given)[0])
+    return list(lowest_if_rejected(points, box, pool, rejected) or x) if rejected else x
+
+
+def lowest_if_rejected(points, box, pool, level: float, reach: float = 4.0) -> tuple[float, ...] | None:
+    """Where the safe flights within `reach` half-widths of the box reject its quadratic for a cubic at `level`
+    (`surface._rejects`), the point flown twice or more in the box, none of its flights failed, with the lowest mean
+    cost; None where they do not (or no such point): a lopsided cost whose quadratic answers off the flights' best."""
+    from mavtune.search import surface
+
+    if pool is None:
+        return None
+    lo, hi, centre, half = surface._frame(box)
+    keys = [k for k, c in points.items() if c and all(map(math.isfinite, c))]
+    every = np.array(keys, float).reshape(len(keys), len(box))
+    means = np.array([math.fsum(points[k]) / len(points[k]) for k in keys])
+    n = np.array([len(points[k]) for k in keys], float)
+    x, y = (every - centre) / half, means / np.max(np.abs(means))
+    w = n * surface._tricube(reach)(x)
+    use = w > 0
+    d = len(box)
+    if not surface._rejects(x[use], y[use], w[use], pool.cv, surface._terms(d, 2), surface._terms(d, 3), level):
+        return None
+    inside = [i for i, k in enumerate(keys) if n[i] >= 2 and all(a - 1e-9 <= v <= b + 1e-9 for v, (a, b) in
+                                                                     zip(k, box))]
+    return tuple(keys[min(inside, key=lambda i: means[i])]) if inside else None
 
 
 def bagged(points, box, worse, pool, draws: int, options: dict[str, Any]) -> tuple[float, ...]:
