@@ -268,8 +268,10 @@ def replay(t: Truth, rows: list[dict[str, Any]], options: dict[str, Any], pm) ->
     costs = given.pop("costs", None)
     for row in rows:
         calls = answer_calls(row)
-        call = recosted(t, calls[-1], costs, row["run"]) if calls and costs else calls[-1] if calls else None
-        x = replay_call(row, call, given) if calls else row["x"]
+        x = row["x"]
+        if calls:
+            call = recosted(t, calls[-1], costs, row["run"]) if costs else calls[-1]
+            x = replay_call(row, call, given)
         out.append({"plant": row["plant"], "run": row["run"], "x": x})
     judged(t, [tuple(r["x"]) for r in out], pm)
     for r in out:
