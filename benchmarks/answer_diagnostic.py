@@ -137,17 +137,26 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
     settings = method.settings(plant, run)
     fleet = ZooFleet(plant, settings.vehicles, tune_seed(run))
     calls: list[dict[str, Any]] = []
-    original, clean = tuner.surface_answer, tuner.surface_inliers
+    original, clean, intervals = tuner.surface_answer, tuner.surface_inliers, tuner.Tuner.uncertainty
     raw: dict[str, Any] = {}  # the flights before the engine left out their outliers (`surface.inliers`)
+    busy: list[bool] = []  # while the engine works out the intervals, whose refits are not the run's answers
+
+    def uncertainty(self):
+        busy.append(True)
+        try:
+            return intervals(self)
+        finally:
+            busy.pop()
 
     def inliers(points, box, sds, *args):
-        raw.update(points=points, sds=sds)
+        if not busy:
+            raw.update(points=points, sds=sds)
         return clean(points, box, sds, *args)
 
     def recorded(points, box, worse=(), pool=None, **options):
         out = original(points, box, worse, pool, **options)
-        if ("risk" in options and options["risk"] is None) or options.get("keep_bound"):  # the divergence
-            return out  # caution's unbounded answer and its safer gains: not the run's answer
+        if busy or ("risk" in options and options["risk"] is None) or options.get("keep_bound"):  # the
+            return out  # divergence caution's unbounded answer and its safer gains: not the run's answer
         if raw:  # the flights as flown, before `inliers` left outliers out: a replay leaves them out again
             points, options = raw.pop("points"), options | {"outliers": raw.pop("sds")}
         calls.append({"keep": list(options["keep"]) if options.get("keep") is not None else None,
@@ -157,11 +166,11 @@ def tune_flights(plant_name: str, method: Method, run: int) -> dict[str, Any]:
                       "dof": pool.dof if pool is not None else 0.0, "answer": list(out[0]), "fitted": out[1]})
         return out
 
-    tuner.surface_answer, tuner.surface_inliers = recorded, inliers
+    tuner.surface_answer, tuner.surface_inliers, tuner.Tuner.uncertainty = recorded, inliers, uncertainty
     try:
         result = tuner.run_tuning(settings, fleet)
     finally:
-        tuner.surface_answer, tuner.surface_inliers = original, clean
+        tuner.surface_answer, tuner.surface_inliers, tuner.Tuner.uncertainty = original, clean, intervals
     told = (pair for r in result.rounds for pair in zip(*Strategy.measured([f.gains for f in r.flights], r.flights)))
     flown = {k: c for k, (_, c) in by_gains(told, list(plant.gains), digits=None).items()}
     return {"plant": plant_name, "method": method.label, "run": run,

@@ -588,15 +588,21 @@ def _result_table(result: TuningResult) -> Table:
     cv = result.noise.get("cv", math.nan)
     caption = (f"noise: {cv:.0%} of the cost per flight ({result.noise.get('dof', 0):g} repeats)"
                if math.isfinite(cv) else "noise unknown: no point was flown twice")
-    caption += ("; ± se: the spread of the gain's last line search's result with the other gains held; each "
+    caption += ("; ± se: the spread of the last design's fit on the run's flights resampled, every gain free; each "
+                "interval is where those fits answer, widened by the last design's half-width, joined with every "
+                "flown point the flights cannot tell from the best and where the fit's slope is not told from zero"
+                if result.fitted_intervals else
+                "; ± se: the spread of the gain's last line search's result with the other gains held; each "
                 "interval is that line search's (the other gains held), widened by what the run's flights cannot "
                 "rule out with every gain free (after a design, also where its fit's slope is not told from zero) "
                 "and by its last move between bootstraps, to a bound where the cost "
                 "still falls at the last point flown, and to both when the other gains moved on after it and no "
-                "design followed; p ≥ 0.9: comparisons whose kept point was the best with that probability (not the "
-                "answer's accuracy)")
+                "design followed")
+    caption += ("; p ≥ 0.9: comparisons whose kept point was the best with that probability (not the answer's "
+                "accuracy)")
     table = Table(caption=caption, caption_justify="left")
-    for column in ("gain", "value ± se (others held)", "interval (joint)", "comparisons p ≥ 0.9"):
+    value = "value ± se" if result.fitted_intervals else "value ± se (others held)"
+    for column in ("gain", value, "interval (joint)", "comparisons p ≥ 0.9"):
         table.add_column(column, justify="left" if column == "gain" else "right")
     last = {s.gain: s for s in result.searches}
     for name, value in result.gains.items():

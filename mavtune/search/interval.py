@@ -92,7 +92,8 @@ class _Curve:
 
 
 def plausible_region(points: dict[tuple[float, ...], list[float]], pool: NoisePool,
-                     bounds: list[tuple[float, float]], level: float = LEVEL) -> list[tuple[float, float]] | None:
+                     bounds: list[tuple[float, float]], level: float = LEVEL, cells: bool = True
+                     ) -> list[tuple[float, float]] | None:
     """Where the minimiser may lie by all the run's flights, every gain free: each flown point (a gain vector →
     its costs; a failed flight's cost is infinite) whose mean cost is not worse than the best point's by z
     standard errors of their difference could be the minimiser: z the one-sided 1 − (1 − `level`)/r quantile, r
@@ -101,8 +102,9 @@ def plausible_region(points: dict[tuple[float, ...], list[float]], pool: NoisePo
     two-sided `level` quantile; and so could any gain vector whose nearest flown point (in shares of each gain's
     range) could — flights rule out only what lies nearer to a worse point than to a plausible one, so
     what a coordinate search never flew (a coupled optimum off its lines) stays in. Per gain, the span of that
-    region in its `bounds`, searched on a grid of the box; None when the noise is unknown or fewer than two
-    points were flown without failure."""
+    region in its `bounds`, searched on a grid of the box; without `cells`, of the flown points alone that could
+    be (a fitted answer's interval joins them: `Tuner._fit_uncertainty`). None when the noise is unknown or fewer
+    than two points were flown without failure."""
     from statistics import NormalDist
 
     import numpy as np  # see _Curve._at
@@ -115,6 +117,9 @@ def plausible_region(points: dict[tuple[float, ...], list[float]], pool: NoisePo
     near = within_noise({x: (s.mean, s.se) for x, s in finite.items()}, NormalDist().inv_cdf(0.5 + 0.5 * level),
                         level)  # Bonferroni over the rivals kept beside the best: more of them, a stricter test
     xs = list(stats)
+    if not cells:
+        flown = np.asarray([x for x in xs if x in near], float)
+        return [(float(a), float(b)) for a, b in zip(flown.min(axis=0), flown.max(axis=0))]
     ok = np.array([x in near for x in xs])
     lo, hi = np.array([b[0] for b in bounds], float), np.array([b[1] for b in bounds], float)
     scale = np.where(hi > lo, hi - lo, 1.0)
