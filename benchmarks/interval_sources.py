@@ -164,14 +164,10 @@ def refit_variants(row: dict[str, Any]) -> dict[str, list[tuple[float, float]]]:
     box, value, band = row["box"], row["answer"], row["band"]
     answers = row["design_answers"]
     out = {}
-    for label in ("refit", "refit free") if LAST_BOX else ():
-        for r in REFIT_WIDEN:
+    for label in (*(("refit", "refit free") if LAST_BOX else ()), *row["wide boxes"]):
+        for r in REFIT_WIDEN:  # (widened by the last design's half-width, whatever box the refit answered in)
             out[f"{label} {r}"] = [(max(a - r * 0.5 * (q - p), 0.0), min(b + r * 0.5 * (q - p), 1.0))
                                    for (a, b), (p, q) in zip(row[label], box)]
-    for label, wbox in row["wide boxes"].items():
-        for r in REFIT_WIDEN:
-            out[f"{label} {r}"] = [(max(a - r * 0.5 * (q - p), 0.0), min(b + r * 0.5 * (q - p), 1.0))
-                                   for (a, b), (p, q) in zip(row[label], box)]  # (widened by the last box's)
     bounds = [row["parts"][n]["bounds"] for n in row["names"]] if all(n in row["parts"] for n in row["names"]) \
         else [(0.0, 1.0)] * len(value)
     flown = region(row["flown"], row["pool"], bounds, 0.0)  # the flown points the flights cannot tell from the best
@@ -192,7 +188,8 @@ def refit_variants(row: dict[str, Any]) -> dict[str, list[tuple[float, float]]]:
 def smooth_region(points, pool, bounds, h: float, level: float = 0.9) -> list[tuple[float, float]] | None:
     """Where the minimiser may lie by a local-linear smooth of the flown means (Gaussian kernel of `h` shares of
     the ranges), evaluated on the grid of `plausible_region`: a grid point is ruled out where its smoothed cost
-    lies above the grid's lowest by more than z standard errors of their difference (each smooth's variance from
+    lies above the reference's (the grid point with the lowest upper bound, not a far extrapolation's low mean) by
+    more than z standard errors of their difference (each smooth's variance from
     the points' own standard errors, their covariance left out: wider), z the Bonferroni of `within_noise` over
     the flown points' smooths; a grid point whose nearest flown point failed is ruled out (a wall)."""
     from statistics import NormalDist
@@ -236,8 +233,7 @@ def smooth_region(points, pool, bounds, h: float, level: float = 0.9) -> list[tu
     failed = np.array([not math.isfinite(stats[x].mean) for x in xs])
     _, nearest = cKDTree(flown).query(grid)
     safe = ~failed[nearest]
-    b = int(np.argmin(np.where(safe, gm + z * gse, np.inf)))  # the reference: the lowest upper bound (not a far
-    # extrapolation's low mean)
+    b = int(np.argmin(np.where(safe, gm + z * gse, np.inf)))  # the reference
     ok = safe & (gm - gm[b] <= z * np.hypot(gse, gse[b]))
     region = grid[ok] * scale + lo
     return [(float(a), float(b)) for a, b in zip(region.min(axis=0), region.max(axis=0))]
