@@ -1061,20 +1061,18 @@ class Tuner:
         value = [(self.gains[n] - a) / (b - a) if b > a else 0.5 for n, (a, b) in zip(names, ranges)]
         wide = [(max(v - FIT_BOX * 0.5 * (hi - lo), 0.0), min(v + FIT_BOX * 0.5 * (hi - lo), 1.0))
                 for v, (lo, hi) in zip(value, box)]
-        noise = self._swarm_noise()
-        flown, _ = surface_inliers(self._flown_shares(), wide, float(self.settings.design_outliers))
+        noise, everywhere, shares = self._swarm_noise(), self._flown_shares(), [(0.0, 1.0)] * len(ranges)
+        flown, _ = surface_inliers(everywhere, wide, float(self.settings.design_outliers))
         options = {**options, "keep": None, "hold": None}  # (the design before's answers are no part of the fit)
 
         def fit(points: dict[tuple[float, ...], list[float]]) -> Sequence[float]:
             return surface_answer(points, wide, surface_ruled_out(points, noise), noise, **options)[0]
 
-        everywhere, shares = self._flown_shares(), [(0.0, 1.0)] * len(ranges)
         region = plausible_region(everywhere, noise, shares)
         fitted = refitted(fit, flown, noise, value, wide, region, draws=min(self.draws, REFITS),
                           seed=(self.settings.seed or 0) * 1000, resolution=0.0)
         points = plausible_region(everywhere, noise, shares, cells=False) or [(v, v) for v in value]
-        band = minimiser_region(surface_inliers(everywhere, box, float(self.settings.design_outliers))[0], box,
-                                noise.cv) or points
+        band = self._slope_band(everywhere, noise) or points
         return self._in_units([replace(i, lo=max(min(i.lo - FIT_WIDEN * 0.5 * (hi - lo), p, r), 0.0),
                                        hi=min(max(i.hi + FIT_WIDEN * 0.5 * (hi - lo), q, t), 1.0))
                                for i, (lo, hi), (p, q), (r, t) in zip(fitted, box, points, band)])
@@ -1094,13 +1092,19 @@ class Tuner:
         spans = plausible_region(self._flown(), noise, ranges)
         if spans is None or self._last_fit is None:
             return spans
-        box = self._last_fit[0]
-        flown, _ = surface_inliers(self._flown_shares(), box, float(self.settings.design_outliers))
-        band = minimiser_region(flown, box, noise.cv)
+        band = self._slope_band(self._flown_shares(), noise)
         if band is None:
             return spans
         return [(min(a, lo + (hi - lo) * p), max(b, lo + (hi - lo) * q))
                 for (a, b), (p, q), (lo, hi) in zip(spans, band, ranges)]
+
+    def _slope_band(self, flown: dict[tuple[float, ...], list[float]], noise: NoisePool
+                    ) -> list[tuple[float, float]] | None:
+        """Per gain, in shares of its range, the span where the last design's quadratic cannot tell its slope from
+        zero (`minimiser_region`) on the run's `flown` points (`_flown_shares`) in its box, less the outliers its
+        fit left out; None where it tells none."""
+        box = self._last_fit[0]
+        return minimiser_region(surface_inliers(flown, box, float(self.settings.design_outliers))[0], box, noise.cv)
 
     def _flown(self, vehicle: str | None = None) -> dict[tuple[float, ...], list[float]]:
         """Every gain vector flown in the run (in the order of the space; by `vehicle` alone, if given) with its
